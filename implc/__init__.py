@@ -1,0 +1,9 @@
+"""implc: a symbolic surface compiler. SymPy surface in, sound native interval kernels and voxels out."""
+
+from . import shapes
+from .errors import CompileError
+from .surface import Surface, compile
+from .symbols import phi, r, theta, x, y, z
+
+__all__ = ["CompileError", "Surface", "compile", "shapes", "x", "y", "z", "r", "theta", "phi"]
+__version__ = "0.1.0"

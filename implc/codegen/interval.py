@@ -1,0 +1,278 @@
+"""Interval emitter: a tape becomes vector code enclosing its first output over W boxes at once.
+
+Mirrors :mod:`implc.interval` rule for rule, with the same widening constants, so that the compiled
+bounds equal the reference bounds wherever both call the same functions.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .. import rounding as R
+from .point import powi
+from .vector import VectorBuilder
+
+INF = math.inf
+NAN = math.nan
+
+
+class IntervalEmitter:
+    """One method per op: ``i_<op>(args, attr) -> (lo, hi)``; args are (lo, hi) pairs of vectors."""
+
+    def __init__(self, vb: VectorBuilder):
+        self.v = vb
+
+    # helpers ------------------------------------------------------------------------------------
+    def monotone(self, f, a, c=R.LIBM, increasing=True):
+        v = self.v
+        lo_arg, hi_arg = (a[0], a[1]) if increasing else (a[1], a[0])
+        return v.widen_down(f(lo_arg), c), v.widen_up(f(hi_arg), c)
+
+    def libm(self, name):
+        return lambda arg: self.v.libm(name, arg)
+
+    def nan_where(self, mask, pair):
+        v = self.v
+        nan = v.splat(NAN)
+        return v.select(mask, nan, pair[0]), v.select(mask, nan, pair[1])
+
+    def min4(self, p):
+        v = self.v
+        return v.minimum(v.minimum(p[0], p[1]), v.minimum(p[2], p[3]))
+
+    def max4(self, p):
+        v = self.v
+        return v.maximum(v.maximum(p[0], p[1]), v.maximum(p[2], p[3]))
+
+    def lt0(self, a):
+        return self.v.cmp("<", a, self.v.splat(0.0))
+
+    def contains_zero(self, a):
+        v = self.v
+        return v.and_(v.cmp("<=", a[0], v.splat(0.0)), v.cmp(">=", a[1], v.splat(0.0)))
+
+    # rules -------------------------------------------------------------------------------------
+    def i_neg(self, a, attr):
+        return self.v.neg(a[0][1]), self.v.neg(a[0][0])
+
+    def i_add(self, a, nonnegative):
+        v = self.v
+        (alo, ahi), (blo, bhi) = a
+        lo = v.widen_down(v.add(alo, blo), R.ARITH)
+        if nonnegative:
+            lo = v.maximum(lo, v.splat(0.0))
+        return lo, v.widen_up(v.add(ahi, bhi), R.ARITH)
+
+    def i_scale(self, a, c):
+        v = self.v
+        lo, hi = (a[0][0], a[0][1]) if c >= 0 else (a[0][1], a[0][0])
+        return v.widen_down(v.mul(v.splat(c), lo), R.ARITH), v.widen_up(v.mul(v.splat(c), hi), R.ARITH)
+
+    def i_sub(self, a, attr):
+        v = self.v
+        (alo, ahi), (blo, bhi) = a
+        return v.widen_down(v.sub(alo, bhi), R.ARITH), v.widen_up(v.sub(ahi, blo), R.ARITH)
+
+    def i_mul(self, a, attr):
+        v = self.v
+        (alo, ahi), (blo, bhi) = a
+        p = (v.mul(alo, blo), v.mul(alo, bhi), v.mul(ahi, blo), v.mul(ahi, bhi))
+        return v.widen_down(self.min4(p), R.ARITH), v.widen_up(self.max4(p), R.ARITH)
+
+    def i_div(self, a, attr):
+        v = self.v
+        (alo, ahi), (blo, bhi) = a
+        q = (v.div(alo, blo), v.div(alo, bhi), v.div(ahi, blo), v.div(ahi, bhi))
+        lo = v.widen_down(self.min4(q), R.ARITH)
+        hi = v.widen_up(self.max4(q), R.ARITH)
+        across_zero = self.contains_zero((blo, bhi))
+        keep_nan = v.mul(v.add(alo, ahi), v.splat(0.0))
+        return (v.select(across_zero, v.add(v.splat(-INF), keep_nan), lo),
+                v.select(across_zero, v.add(v.splat(INF), keep_nan), hi))
+
+    def i_powi(self, a, n):
+        v = self.v
+        c = R.powi_slack(n)
+        alo, ahi = a[0]
+        plo, phi = powi(v, alo, n), powi(v, ahi, n)
+        if n % 2:
+            return v.widen_down(plo, c), v.widen_up(phi, c)
+        lo = v.maximum(v.widen_down(v.minimum(plo, phi), c), v.splat(0.0))
+        lo = v.select(self.contains_zero(a[0]), v.splat(0.0), lo)
+        return lo, v.widen_up(v.maximum(plo, phi), c)
+
+    def i_powf(self, a, e):
+        v = self.v
+        lo, hi = self.monotone(lambda t: v.libm("pow", t, v.splat(e)), a[0], R.POWF, increasing=e > 0)
+        return self.nan_where(self.lt0(a[0][0]), (v.maximum(lo, v.splat(0.0)), hi))
+
+    def i_sqrt(self, a, attr):
+        v = self.v
+        lo, hi = self.monotone(v.sqrt, a[0], R.ARITH)
+        return self.nan_where(self.lt0(a[0][0]), (v.maximum(lo, v.splat(0.0)), hi))
+
+    def i_cbrt(self, a, attr):
+        v = self.v
+        lo, hi = self.monotone(self.libm("cbrt"), a[0])
+        return self.nan_where(self.lt0(a[0][0]), (v.maximum(lo, v.splat(0.0)), hi))
+
+    def i_exp(self, a, attr):
+        lo, hi = self.monotone(self.libm("exp"), a[0])
+        return self.v.maximum(lo, self.v.splat(0.0)), hi
+
+    def i_log(self, a, attr):
+        return self.nan_where(self.lt0(a[0][0]), self.monotone(self.libm("log"), a[0]))
+
+    def contains_peak(self, lo, hi, offset, period=2 * math.pi):
+        v = self.v
+        m = v.mul(v.splat(1e-12), v.add(v.add(v.splat(1.0), v.fabs(lo)), v.fabs(hi)))
+        k = v.ceil(v.div(v.sub(lo, v.splat(offset)), v.splat(period)))
+        lo_m, hi_m = v.sub(lo, m), v.add(hi, m)
+        found = None
+        for j in (-1.0, 0.0, 1.0):
+            p = v.add(v.splat(offset), v.mul(v.splat(period), v.add(k, v.splat(j))))
+            here = v.and_(v.cmp(">=", p, lo_m), v.cmp("<=", p, hi_m))
+            found = here if found is None else v.or_(found, here)
+        return found
+
+    def too_wide(self, lo, hi, width):
+        v = self.v
+        big = v.splat(R.TRIG_MAX_ARG)
+        return v.or_(v.or_(v.cmp(">=", v.sub(hi, lo), v.splat(width)), v.cmp(">", v.fabs(lo), big)),
+                     v.cmp(">", v.fabs(hi), big))
+
+    def sin_like(self, name, a, max_offset, min_offset):
+        v = self.v
+        lo0, hi0 = a[0]
+        fa, fb = v.libm(name, lo0), v.libm(name, hi0)
+        lo = v.widen_down(v.minimum(fa, fb), R.LIBM)
+        hi = v.widen_up(v.maximum(fa, fb), R.LIBM)
+        one, minus_one = v.splat(1.0), v.splat(-1.0)
+        hi = v.select(self.contains_peak(lo0, hi0, max_offset), one, v.minimum(hi, one))
+        lo = v.select(self.contains_peak(lo0, hi0, min_offset), minus_one, v.maximum(lo, minus_one))
+        full = self.too_wide(lo0, hi0, 2 * math.pi)
+        return v.select(full, minus_one, lo), v.select(full, one, hi)
+
+    def i_sin(self, a, attr):
+        return self.sin_like("sin", a, math.pi / 2, -math.pi / 2)
+
+    def i_cos(self, a, attr):
+        return self.sin_like("cos", a, 0.0, math.pi)
+
+    def i_tan(self, a, attr):
+        v = self.v
+        lo, hi = self.monotone(self.libm("tan"), a[0])
+        lo0, hi0 = a[0]
+        pole = v.or_(self.contains_peak(lo0, hi0, math.pi / 2, math.pi), self.too_wide(lo0, hi0, math.pi))
+        return v.select(pole, v.splat(-INF), lo), v.select(pole, v.splat(INF), hi)
+
+    def outside_unit(self, a):
+        v = self.v
+        return v.or_(v.cmp("<", a[0], v.splat(-1.0)), v.cmp(">", a[1], v.splat(1.0)))
+
+    def i_asin(self, a, attr):
+        return self.nan_where(self.outside_unit(a[0]), self.monotone(self.libm("asin"), a[0]))
+
+    def i_acos(self, a, attr):
+        v = self.v
+        lo, hi = self.monotone(self.libm("acos"), a[0], increasing=False)
+        return self.nan_where(self.outside_unit(a[0]), (v.maximum(lo, v.splat(0.0)), hi))
+
+    def i_atan(self, a, attr):
+        return self.monotone(self.libm("atan"), a[0])
+
+    def i_sinh(self, a, attr):
+        return self.monotone(self.libm("sinh"), a[0])
+
+    def i_tanh(self, a, attr):
+        v = self.v
+        lo, hi = self.monotone(self.libm("tanh"), a[0])
+        return v.maximum(lo, v.splat(-1.0)), v.minimum(hi, v.splat(1.0))
+
+    def i_cosh(self, a, attr):
+        v = self.v
+        ca, cb = v.libm("cosh", a[0][0]), v.libm("cosh", a[0][1])
+        lo = v.maximum(v.widen_down(v.minimum(ca, cb), R.LIBM), v.splat(1.0))
+        lo = v.select(self.contains_zero(a[0]), v.splat(1.0), lo)
+        return lo, v.widen_up(v.maximum(ca, cb), R.LIBM)
+
+    def i_abs(self, a, attr):
+        v = self.v
+        alo, ahi = a[0]
+        zero = v.splat(0.0)
+        lo = v.select(v.cmp(">=", alo, zero), alo, v.select(v.cmp("<=", ahi, zero), v.neg(ahi), zero))
+        return lo, v.maximum(v.neg(alo), ahi)
+
+    def i_min(self, a, attr):
+        v = self.v
+        return v.minimum(a[0][0], a[1][0]), v.minimum(a[0][1], a[1][1])
+
+    def i_max(self, a, attr):
+        v = self.v
+        return v.maximum(a[0][0], a[1][0]), v.maximum(a[0][1], a[1][1])
+
+    def select(self, true_for_sure, false_for_sure, a, b):
+        v = self.v
+        lo = v.select(true_for_sure, a[0], v.select(false_for_sure, b[0], v.minimum(a[0], b[0])))
+        hi = v.select(true_for_sure, a[1], v.select(false_for_sure, b[1], v.maximum(a[1], b[1])))
+        return lo, hi
+
+    def i_select_lt(self, a, attr):
+        v = self.v
+        g, t, f = a
+        zero = v.splat(0.0)
+        return self.select(v.cmp("<", g[1], zero), v.cmp(">=", g[0], zero), t, f)
+
+    def i_select_le(self, a, attr):
+        v = self.v
+        g, t, f = a
+        zero = v.splat(0.0)
+        return self.select(v.cmp("<=", g[1], zero), v.cmp(">", g[0], zero), t, f)
+
+    def atan2(self, a, wrapped):
+        v = self.v
+        zero = v.splat(0.0)
+        (y0, y1), (x0, x1) = a
+        y0, y1 = v.add(y0, zero), v.add(y1, zero)
+        corners = [v.libm("atan2", yv, xv) for yv in (y0, y1) for xv in (x0, x1)]
+        pi_hi = v.splat(R.PI_HI)
+        lo = v.maximum(v.widen_down(self.min4(corners), R.LIBM), v.neg(pi_hi))
+        hi = v.minimum(v.widen_up(self.max4(corners), R.LIBM), pi_hi)
+        origin = v.and_(self.contains_zero((x0, x1)), self.contains_zero((y0, y1)))
+        cut = v.and_(v.and_(v.cmp("<", x1, zero), v.cmp("<", y0, zero)), v.cmp(">=", y1, zero))
+        if wrapped:
+            cut_lo = v.widen_down(v.libm("atan2", y1, x1), R.LIBM)
+            cut_hi = v.widen_up(v.add(v.splat(R.TWO_PI_HI), v.widen_up(v.libm("atan2", y0, x1), R.LIBM)),
+                                R.ARITH)
+        else:
+            cut_lo, cut_hi = v.neg(pi_hi), pi_hi
+        lo = v.select(cut, cut_lo, lo)
+        hi = v.select(cut, cut_hi, hi)
+        lo = v.select(origin, v.select(v.cmp(">=", y0, zero), zero, v.neg(pi_hi)), lo)
+        hi = v.select(origin, pi_hi, hi)
+        return lo, hi
+
+    def i_atan2(self, a, attr):
+        return self.atan2(a, wrapped=False)
+
+    def i_atan2_wrapped(self, a, attr):
+        return self.atan2(a, wrapped=True)
+
+
+def emit_interval(vb: VectorBuilder, tape, lo_coords, hi_coords):
+    """Emit the enclosure of the tape's first output over boxes [lo_coords, hi_coords].
+
+    Returns (lo, hi) vectors; a possibly undefined (NaN) result comes out as the whole line.
+    """
+    em = IntervalEmitter(vb)
+    vals: list = []
+    for op, args, attr in tape.nodes:
+        if op == "const":
+            vals.append((vb.splat(attr[1]), vb.splat(attr[2])))
+        elif op == "var":
+            vals.append((lo_coords[attr], hi_coords[attr]))
+        else:
+            vals.append(getattr(em, f"i_{op}")([vals[i] for i in args], attr))
+    lo, hi = vals[tape.outputs[0]]
+    undefined = vb.or_(vb.isnan(lo), vb.isnan(hi))
+    return vb.select(undefined, vb.splat(-INF), lo), vb.select(undefined, vb.splat(INF), hi)

@@ -1,0 +1,123 @@
+"""Kernel assembly: the exported, batched C-ABI functions of one surface's LLVM module.
+
+Every kernel walks ``n`` items (``n`` a multiple of :data:`WIDTH`) in vectors of WIDTH lanes, reading
+points and boxes as row-major (n, 3) float64 arrays:
+
+- ``implc_point(pts, out, n)``: F at each point.
+- ``implc_gradient(pts, out_value, out_grad, n)``: F and its analytic gradient (n, 3).
+- ``implc_interval(lo, hi, out_lo, out_hi, n)``: an enclosure of F over each box [lo, hi].
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+from llvmlite import ir
+
+from ..ir import Tape
+from .interval import emit_interval
+from .point import emit_point
+from .vector import DOUBLE, I64, VectorBuilder
+
+WIDTH = 8
+"""Lanes per vector: eight boxes (an octant's children) per kernel step."""
+
+KERNELS = {
+    "implc_point": 2,       # pointer arguments before n
+    "implc_gradient": 3,
+    "implc_interval": 4,
+}
+
+_PTR = ir.PointerType(DOUBLE)
+
+
+@contextmanager
+def for_range(builder: ir.IRBuilder, count):
+    """``for i in range(count)`` in IR; yields the i64 loop index."""
+    entry = builder.block
+    header = builder.append_basic_block("loop.header")
+    body = builder.append_basic_block("loop.body")
+    done = builder.append_basic_block("loop.done")
+    builder.branch(header)
+    builder.position_at_end(header)
+    index = builder.phi(I64, name="i")
+    index.add_incoming(ir.Constant(I64, 0), entry)
+    builder.cbranch(builder.icmp_signed("<", index, count), body, done)
+    builder.position_at_end(body)
+    yield index
+    index.add_incoming(builder.add(index, ir.Constant(I64, 1)), builder.block)
+    builder.branch(header)
+    builder.position_at_end(done)
+
+
+def _vector_ptr(builder, base, offset, lanes):
+    ptr = builder.gep(base, [offset])
+    return builder.bitcast(ptr, ir.PointerType(ir.VectorType(DOUBLE, lanes)))
+
+
+def _load_xyz(builder, base, block):
+    """Three WIDTH-vectors (x, y, z) from WIDTH consecutive rows of an (n, 3) array."""
+    offset = builder.mul(block, ir.Constant(I64, 3 * WIDTH))
+    rows = builder.load(_vector_ptr(builder, base, offset, 3 * WIDTH), align=8)
+    return [builder.shuffle_vector(rows, ir.Constant(rows.type, ir.Undefined),
+                                   ir.Constant(ir.VectorType(ir.IntType(32), WIDTH),
+                                               [3 * lane + axis for lane in range(WIDTH)]))
+            for axis in range(3)]
+
+
+def _store_xyz(builder, base, block, vectors):
+    """Interleave three WIDTH-vectors back into WIDTH rows of an (n, 3) array."""
+    i32 = ir.IntType(32)
+    pair = builder.shuffle_vector(vectors[0], vectors[1], ir.Constant(ir.VectorType(i32, 2 * WIDTH),
+                                                                      list(range(2 * WIDTH))))
+    third = builder.shuffle_vector(vectors[2], ir.Constant(vectors[2].type, ir.Undefined),
+                                   ir.Constant(ir.VectorType(i32, 2 * WIDTH),
+                                               list(range(WIDTH)) + [0] * WIDTH))
+    order = [axis * WIDTH + lane if axis < 2 else 2 * WIDTH + lane
+             for lane in range(WIDTH) for axis in range(3)]
+    rows = builder.shuffle_vector(pair, third, ir.Constant(ir.VectorType(i32, 3 * WIDTH), order))
+    offset = builder.mul(block, ir.Constant(I64, 3 * WIDTH))
+    builder.store(rows, _vector_ptr(builder, base, offset, 3 * WIDTH), align=8)
+
+
+def _store(builder, base, block, vector):
+    offset = builder.mul(block, ir.Constant(I64, WIDTH))
+    builder.store(vector, _vector_ptr(builder, base, offset, WIDTH), align=8)
+
+
+def _kernel(module, name):
+    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_PTR] * KERNELS[name] + [I64]), name=name)
+    for arg in fn.args[:-1]:
+        arg.add_attribute("noalias")
+    builder = ir.IRBuilder(fn.append_basic_block("entry"))
+    blocks = builder.sdiv(fn.args[-1], ir.Constant(I64, WIDTH))
+    return fn, builder, blocks
+
+
+def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface") -> str:
+    """The LLVM IR text of the three kernels for a surface."""
+    module = ir.Module(name=name)
+
+    fn, b, blocks = _kernel(module, "implc_point")
+    pts, out, _ = fn.args
+    with for_range(b, blocks) as i:
+        (value,) = emit_point(VectorBuilder(b, WIDTH), value_tape, _load_xyz(b, pts, i))
+        _store(b, out, i, value)
+    b.ret_void()
+
+    fn, b, blocks = _kernel(module, "implc_gradient")
+    pts, out_value, out_grad, _ = fn.args
+    with for_range(b, blocks) as i:
+        value, *grad = emit_point(VectorBuilder(b, WIDTH), gradient_tape, _load_xyz(b, pts, i))
+        _store(b, out_value, i, value)
+        _store_xyz(b, out_grad, i, grad)
+    b.ret_void()
+
+    fn, b, blocks = _kernel(module, "implc_interval")
+    lo, hi, out_lo, out_hi, _ = fn.args
+    with for_range(b, blocks) as i:
+        f_lo, f_hi = emit_interval(VectorBuilder(b, WIDTH), value_tape, _load_xyz(b, lo, i), _load_xyz(b, hi, i))
+        _store(b, out_lo, i, f_lo)
+        _store(b, out_hi, i, f_hi)
+    b.ret_void()
+    return str(module)

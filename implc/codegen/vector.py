@@ -1,0 +1,103 @@
+"""Vector arithmetic on ``<W x double>`` for the emitters: splats, NaN-propagating min/max, selects,
+element-wise libm calls and the outward widening of :mod:`implc.rounding`."""
+
+from __future__ import annotations
+
+import math
+
+from llvmlite import ir
+
+from ..rounding import TINY
+
+DOUBLE = ir.DoubleType()
+I64 = ir.IntType(64)
+
+
+class VectorBuilder:
+    """Wraps an IRBuilder with the vector operations the point and interval emitters need."""
+
+    def __init__(self, builder: ir.IRBuilder, width: int):
+        self.b = builder
+        self.width = width
+        self.vtype = ir.VectorType(DOUBLE, width)
+        self.module = builder.module
+
+    # -- declarations ----------------------------------------------------------------------------
+    def _function(self, name: str, ret, args):
+        fn = self.module.globals.get(name)
+        if fn is None:
+            fn = ir.Function(self.module, ir.FunctionType(ret, args), name=name)
+        return fn
+
+    def _intrinsic(self, name: str, arity: int):
+        return self._function(f"llvm.{name}.v{self.width}f64", self.vtype, [self.vtype] * arity)
+
+    # -- values ------------------------------------------------------------------------------------
+    def splat(self, value: float):
+        if math.isnan(value):
+            value = float("nan")
+        return ir.Constant(self.vtype, [ir.Constant(DOUBLE, float(value))] * self.width)
+
+    def add(self, a, b):
+        return self.b.fadd(a, b)
+
+    def sub(self, a, b):
+        return self.b.fsub(a, b)
+
+    def mul(self, a, b):
+        return self.b.fmul(a, b)
+
+    def div(self, a, b):
+        return self.b.fdiv(a, b)
+
+    def neg(self, a):
+        return self.b.fneg(a)
+
+    def fabs(self, a):
+        return self.b.call(self._intrinsic("fabs", 1), [a])
+
+    def sqrt(self, a):
+        return self.b.call(self._intrinsic("sqrt", 1), [a])
+
+    def ceil(self, a):
+        return self.b.call(self._intrinsic("ceil", 1), [a])
+
+    def minimum(self, a, b):
+        """min that propagates NaN (the sign of zero may go either way: bounds do not care)."""
+        return self.b.call(self._intrinsic("minimum", 2), [a, b], fastmath=("nsz",))
+
+    def maximum(self, a, b):
+        return self.b.call(self._intrinsic("maximum", 2), [a, b], fastmath=("nsz",))
+
+    def cmp(self, op: str, a, b):
+        """Ordered comparison: false where either side is NaN."""
+        return self.b.fcmp_ordered(op, a, b)
+
+    def select(self, mask, a, b):
+        return self.b.select(mask, a, b)
+
+    def and_(self, a, b):
+        return self.b.and_(a, b)
+
+    def or_(self, a, b):
+        return self.b.or_(a, b)
+
+    def isnan(self, a):
+        return self.b.fcmp_unordered("uno", a, a)
+
+    # -- the C math library, one lane at a time ------------------------------------------------------
+    def libm(self, name: str, *args):
+        fn = self._function(name, DOUBLE, [DOUBLE] * len(args))
+        out = ir.Constant(self.vtype, ir.Undefined)
+        for lane in range(self.width):
+            idx = ir.Constant(ir.IntType(32), lane)
+            scalars = [self.b.extract_element(a, idx) for a in args]
+            out = self.b.insert_element(out, self.b.call(fn, scalars), idx)
+        return out
+
+    # -- outward rounding (see implc.rounding) -------------------------------------------------------
+    def widen_down(self, v, c: float):
+        return self.sub(self.sub(v, self.mul(self.fabs(v), self.splat(c))), self.splat(TINY))
+
+    def widen_up(self, v, c: float):
+        return self.add(self.add(v, self.mul(self.fabs(v), self.splat(c))), self.splat(TINY))

@@ -1,0 +1,235 @@
+"""The SymPy front end: lowers an expression in x, y, z, r, theta, phi to a :class:`~implc.ir.Tape`.
+
+Spherical symbols become their exact Cartesian forms on the tape: r = sqrt(x²+y²+z²) (tight because
+even powers are tight), theta = atan2(sqrt(x²+y²), z) and phi = atan2(y, x). When the whole expression is
+2π-periodic in phi, phi uses the ``atan2_wrapped`` op, whose interval may wrap past π instead of covering
+[−π, π] on boxes that straddle the branch cut. Anything the tape cannot express raises CompileError.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import mpmath
+import sympy
+
+from .errors import CompileError
+from .ir import Tape, const_attr_from_fraction
+from .symbols import NAMES
+
+_UNARY = {
+    sympy.exp: "exp", sympy.sin: "sin", sympy.cos: "cos", sympy.tan: "tan", sympy.asin: "asin",
+    sympy.acos: "acos", sympy.atan: "atan", sympy.sinh: "sinh", sympy.cosh: "cosh", sympy.tanh: "tanh",
+    sympy.Abs: "abs",
+}
+
+
+def is_periodic_in_phi(expr: sympy.Expr) -> bool:
+    """True when replacing phi by phi + 2π provably leaves ``expr`` unchanged."""
+    phis = [s for s in expr.free_symbols if s.name == "phi"]
+    if not phis:
+        return False
+    p = phis[0]
+    shifted = expr.xreplace({p: p + 2 * sympy.pi})
+    if shifted == expr:
+        return True
+    try:
+        return sympy.expand_trig(sympy.expand(shifted - expr)) == 0
+    except Exception:  # pragma: no cover - SymPy simplification failures only cost tightness
+        return False
+
+
+def _fraction_of_float(value: sympy.Float) -> Fraction:
+    man_sign, man, exp, _ = value._mpf_
+    f = Fraction(int(man)) * (Fraction(2) ** int(exp))
+    return -f if man_sign else f
+
+
+def number_bounds(expr: sympy.Expr) -> tuple[float, float, float]:
+    """(nearest, lo, hi) doubles enclosing a real SymPy number; CompileError for complex or infinite."""
+    if expr.is_Integer or expr.is_Rational:
+        return const_attr_from_fraction(Fraction(int(expr.p), int(expr.q)))
+    if expr.is_Float:
+        if not expr.is_finite:
+            raise CompileError(f"unsupported non-finite number {expr}")
+        return const_attr_from_fraction(_fraction_of_float(expr))
+    if expr.has(sympy.zoo, sympy.oo, -sympy.oo, sympy.nan):
+        raise CompileError(f"unsupported non-finite number {expr}")
+    value = expr.evalf(60)
+    if not value.is_real or value.has(sympy.I):
+        raise CompileError(f"complex number {expr} is not supported (surfaces are real)")
+    if not value.is_Float:
+        raise CompileError(f"cannot evaluate the number {expr}")
+    approx = _fraction_of_float(value)
+    err = abs(approx) * Fraction(1, 10**50) + Fraction(1, 10**300)
+    _, lo, _ = const_attr_from_fraction(approx - err)
+    _, _, hi = const_attr_from_fraction(approx + err)
+    with mpmath.workdps(60):
+        nearest = float(mpmath.mpf(value._mpf_))
+    return (nearest, lo, hi)
+
+
+class _Lowerer:
+    def __init__(self, tape: Tape, wrap_phi: bool):
+        self.tape = tape
+        self.wrap_phi = wrap_phi
+        self.memo: dict[sympy.Basic, int] = {}
+
+    # spherical coordinates, built once and shared
+    def _symbol(self, name: str) -> int:
+        t = self.tape
+        x, y, z = t.var(0), t.var(1), t.var(2)
+        if name in ("x", "y", "z"):
+            return t.var("xyz".index(name))
+        rho2 = t.add(t.powi(x, 2), t.powi(y, 2))
+        if name == "r":
+            return t.unary("sqrt", t.add(rho2, t.powi(z, 2)))
+        if name == "theta":
+            return t.node("atan2", (t.unary("sqrt", rho2), z))
+        if name == "phi":
+            return t.node("atan2_wrapped" if self.wrap_phi else "atan2", (y, x))
+        raise CompileError(f"unknown symbol {name} (use x, y, z, r, theta, phi)")
+
+    def lower(self, e: sympy.Basic) -> int:
+        found = self.memo.get(e)
+        if found is None:
+            found = self.memo[e] = self._lower(e)
+        return found
+
+    def _lower(self, e: sympy.Basic) -> int:
+        t = self.tape
+        if e.is_Symbol:
+            if e.name not in NAMES:
+                raise CompileError(f"unknown symbol {e.name} (use x, y, z, r, theta, phi)")
+            return self._symbol(e.name)
+        if e.is_number:
+            return t.const_bounds(*number_bounds(e))
+        if e.is_Add:
+            terms = [self.lower(a) for a in e.args]
+            acc = terms[0]
+            for term in terms[1:]:
+                acc = t.add(acc, term)
+            return acc
+        if e.is_Mul:
+            return self._lower_mul(e)
+        if e.is_Pow:
+            return self._lower_pow(e.base, e.exp)
+        if isinstance(e, sympy.log):
+            return t.unary("log", self.lower(e.args[0]))
+        if isinstance(e, sympy.atan2):
+            return t.node("atan2", (self.lower(e.args[0]), self.lower(e.args[1])))
+        if isinstance(e, (sympy.Min, sympy.Max)):
+            op = "min" if isinstance(e, sympy.Min) else "max"
+            args = [self.lower(a) for a in e.args]
+            acc = args[0]
+            for a in args[1:]:
+                acc = t.node(op, (acc, a))
+            return acc
+        if isinstance(e, sympy.Piecewise):
+            return self._lower_piecewise(list(e.args))
+        for cls, op in _UNARY.items():
+            if isinstance(e, cls):
+                return t.unary(op, self.lower(e.args[0]))
+        if isinstance(e, sympy.Function):
+            raise CompileError(f"unsupported function {e}")
+        raise CompileError(f"unsupported expression {e} ({type(e).__name__})")
+
+    def _lower_mul(self, e: sympy.Mul) -> int:
+        t = self.tape
+        coeff, rest = e.as_coeff_mul()
+        numer, denom = [], []
+        for factor in rest:
+            if factor.is_Pow and factor.exp.is_number and factor.exp.is_negative and factor.exp.is_Rational:
+                denom.append(self._lower_pow(factor.base, -factor.exp))
+            else:
+                numer.append(self.lower(factor))
+        acc = numer[0] if numer else None
+        for f in numer[1:]:
+            acc = t.mul(acc, f)
+        if denom:
+            d = denom[0]
+            for f in denom[1:]:
+                d = t.mul(d, f)
+            acc = t.div(acc if acc is not None else t.const(1), d)
+        if coeff == -1:
+            return t.neg(acc)
+        if coeff != 1:
+            return t.mul(t.const_bounds(*number_bounds(coeff)), acc)
+        return acc
+
+    def _lower_pow(self, base: sympy.Expr, exp: sympy.Expr) -> int:
+        t = self.tape
+        if base == sympy.E:
+            return t.unary("exp", self.lower(exp))
+        if exp.is_Integer:
+            return t.powi(self.lower(base), int(exp))
+        b = self.lower(base)
+        if exp.is_Rational:
+            p, q = int(exp.p), int(exp.q)
+            root = {2: "sqrt", 3: "cbrt"}.get(q)
+            if root is not None:
+                return t.powi(t.unary(root, b), p)
+            if p > 0:
+                return t.node("powf", (b,), float(exp))
+            return t.div(t.const(1), t.node("powf", (b,), float(-exp)))
+        if exp.is_number:
+            nearest, lo, hi = number_bounds(exp)
+            if lo == hi and lo > 0:
+                return t.node("powf", (b,), lo)
+        # general power b ** e = exp(e * log b), defined for b >= 0
+        return t.unary("exp", t.mul(self.lower(exp), t.unary("log", b)))
+
+    def _lower_piecewise(self, pieces: list) -> int:
+        t = self.tape
+        if not pieces:
+            return t.const_bounds(float("nan"), float("nan"), float("nan"))
+        value, cond = pieces[0]
+        if cond == sympy.true:
+            return self.lower(value)
+        then = self.lower(value)
+        otherwise = self._lower_piecewise(pieces[1:])
+        return self._lower_condition(cond, then, otherwise)
+
+    def _lower_condition(self, cond, then: int, otherwise: int) -> int:
+        t = self.tape
+        if cond == sympy.true:
+            return then
+        if cond == sympy.false:
+            return otherwise
+        if isinstance(cond, sympy.And):
+            first, *rest = cond.args
+            return self._lower_condition(first, self._lower_condition(sympy.And(*rest), then, otherwise),
+                                         otherwise)
+        if isinstance(cond, sympy.Or):
+            first, *rest = cond.args
+            return self._lower_condition(first, then, self._lower_condition(sympy.Or(*rest), then, otherwise))
+        if isinstance(cond, sympy.Not):
+            return self._lower_condition(cond.args[0], otherwise, then)
+        if isinstance(cond, sympy.core.relational.Relational):
+            # g = lhs - rhs as a SymPy Add, so that g shares its terms with the branches (the blend's
+            # condition d² <= R² and its value (d² - R²)⁴ then share one d² - R² node)
+            g = self.lower(cond.lhs - cond.rhs)
+            if isinstance(cond, sympy.StrictLessThan):
+                return t.node("select_lt", (g, then, otherwise))
+            if isinstance(cond, sympy.LessThan):
+                return t.node("select_le", (g, then, otherwise))
+            if isinstance(cond, sympy.StrictGreaterThan):
+                return t.node("select_lt", (t.neg(g), then, otherwise))
+            if isinstance(cond, sympy.GreaterThan):
+                return t.node("select_le", (t.neg(g), then, otherwise))
+            gap = t.unary("abs", g)
+            if isinstance(cond, sympy.Equality):
+                return t.node("select_le", (gap, then, otherwise))
+            if isinstance(cond, sympy.Unequality):
+                return t.node("select_le", (gap, otherwise, then))
+        raise CompileError(f"unsupported Piecewise condition {cond}")
+
+
+def lower(expr: sympy.Expr) -> Tape:
+    """Lower ``expr`` to a tape whose single output is F."""
+    tape = Tape()
+    lowerer = _Lowerer(tape, is_periodic_in_phi(expr))
+    tape.outputs = [lowerer.lower(expr)]
+    tape = tape.compacted()
+    tape.verify()
+    return tape

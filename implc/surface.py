@@ -1,0 +1,141 @@
+"""``implc.compile``: a SymPy expression becomes a :class:`Surface` with native kernels.
+
+A Surface owns its tapes, its :class:`~implc.jit.NativeModule` and batched entry points that validate
+their arrays, run the compiled code over whole vectors and handle the ragged tail.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+
+import numpy as np
+import sympy
+
+from .codegen.kernels import WIDTH, build_module
+from .errors import CompileError
+from .gradient import with_gradient
+from .ir import Tape
+from .jit import NativeModule
+from .lower import lower
+
+_P = ctypes.c_void_p
+_N = ctypes.c_int64
+
+DEFAULT_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
+
+
+def check_bounds(bounds) -> tuple[tuple[float, float], ...]:
+    """Three finite (lo, hi) pairs with lo < hi, as floats; CompileError naming the bad part otherwise."""
+    try:
+        pairs = [tuple(pair) for pair in bounds]
+    except TypeError:
+        raise CompileError(f"bounds must be three (lo, hi) pairs, got {bounds!r}") from None
+    if len(pairs) != 3 or any(len(p) != 2 for p in pairs):
+        raise CompileError(f"bounds must be three (lo, hi) pairs, got {bounds!r}")
+    out = []
+    for axis, (lo, hi) in zip("xyz", pairs):
+        try:
+            lo_f, hi_f = float(lo), float(hi)
+        except (TypeError, ValueError):
+            raise CompileError(f"{axis} bounds ({lo!r}, {hi!r}) are not numbers") from None
+        if not (math.isfinite(lo_f) and math.isfinite(hi_f)):
+            raise CompileError(f"{axis} bounds ({lo!r}, {hi!r}) are not finite")
+        if not lo_f < hi_f:
+            raise CompileError(f"{axis} bounds ({lo!r}, {hi!r}) need lo < hi")
+        out.append((lo_f, hi_f))
+    return tuple(out)
+
+
+def _rows(name: str, array) -> np.ndarray:
+    a = np.ascontiguousarray(array, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name} must be an (N, 3) array, got shape {a.shape}")
+    return a
+
+
+class Surface:
+    """A compiled implicit surface F(x, y, z) = 0 (F < 0 inside) over a bounding box."""
+
+    def __init__(self, expr: sympy.Expr, bounds, tape: Tape):
+        self.expr = expr
+        self.bounds = bounds
+        self.tape = tape
+        self.gradient_tape = with_gradient(tape)
+        self.native = NativeModule(lambda: build_module(self.tape, self.gradient_tape),
+                                   source_key=self.tape.fingerprint() + self.gradient_tape.fingerprint())
+        self._point = self.native.function("implc_point", [_P, _P, _N])
+        self._gradient = self.native.function("implc_gradient", [_P, _P, _P, _N])
+        self._interval = self.native.function("implc_interval", [_P, _P, _P, _P, _N])
+
+    # -- inspection ----------------------------------------------------------------------------
+    @property
+    def ir(self) -> str:
+        """The value tape, printed."""
+        return str(self.tape)
+
+    @property
+    def llvm_ir(self) -> str:
+        """The LLVM IR of the kernels as generated (before optimisation)."""
+        return build_module(self.tape, self.gradient_tape)
+
+    def __repr__(self) -> str:
+        return f"Surface({self.expr}, bounds={self.bounds}, {len(self.tape)} ops)"
+
+    # -- batched evaluation -----------------------------------------------------------------------
+    def _run(self, kernel, inputs: list[np.ndarray], out_shapes: list[tuple]) -> list[np.ndarray]:
+        """Run ``kernel`` over whole vectors, then once more over the zero-padded tail."""
+        n = len(inputs[0])
+        outs = [np.empty((n, *shape), dtype=np.float64) for shape in out_shapes]
+        main = n - n % WIDTH
+        if main:
+            kernel(*[a.ctypes.data for a in inputs], *[o.ctypes.data for o in outs], main)
+        if main < n:
+            tail_in = [np.zeros((WIDTH, 3)) for _ in inputs]
+            for pad, a in zip(tail_in, inputs):
+                pad[: n - main] = a[main:]
+            tail_out = [np.empty((WIDTH, *shape)) for shape in out_shapes]
+            kernel(*[a.ctypes.data for a in tail_in], *[o.ctypes.data for o in tail_out], WIDTH)
+            for o, t in zip(outs, tail_out):
+                o[main:] = t[: n - main]
+        return outs
+
+    def eval(self, points) -> np.ndarray:
+        """F at each row of an (N, 3) array of points."""
+        (values,) = self._run(self._point, [_rows("points", points)], [()])
+        return values
+
+    def gradient(self, points) -> np.ndarray:
+        """The analytic gradient of F at each point: (N, 3)."""
+        _, grad = self._run(self._gradient, [_rows("points", points)], [(), (3,)])
+        return grad
+
+    def value_and_gradient(self, points) -> tuple[np.ndarray, np.ndarray]:
+        return tuple(self._run(self._gradient, [_rows("points", points)], [(), (3,)]))
+
+    def interval(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+        """(f_lo, f_hi): an enclosure of F over each box [lo[i], hi[i]] ((N, 3) corners each).
+
+        Boxes where F may be undefined (NaN) get the whole line (-inf, inf): they never prune.
+        """
+        lo, hi = _rows("lo", lo), _rows("hi", hi)
+        if lo.shape != hi.shape:
+            raise ValueError(f"lo and hi differ in shape: {lo.shape} vs {hi.shape}")
+        if not np.all(lo <= hi):
+            bad = int(np.argmin(np.all(lo <= hi, axis=1)))
+            raise ValueError(f"box {bad} has lo > hi (or NaN): {lo[bad]} .. {hi[bad]}")
+        f_lo, f_hi = self._run(self._interval, [lo, hi], [(), ()])
+        return f_lo, f_hi
+
+
+def compile(expr, bounds=DEFAULT_BOUNDS) -> Surface:  # noqa: A001 - the public name the API promises
+    """Compile the surface ``expr = 0`` (a SymPy expression in x, y, z, r, theta, phi) over ``bounds``."""
+    if not isinstance(expr, sympy.Basic):
+        raise TypeError(f"implc.compile expects a SymPy expression, got {type(expr).__name__}")
+    if isinstance(expr, sympy.Equality):
+        expr = expr.lhs - expr.rhs
+    if isinstance(expr, (sympy.core.relational.Relational, sympy.logic.boolalg.BooleanFunction,
+                         sympy.logic.boolalg.BooleanAtom)):
+        raise CompileError(f"expected a real-valued expression F (the surface is F = 0), got {expr}")
+    checked = check_bounds(bounds)
+    return Surface(expr, checked, lower(expr))

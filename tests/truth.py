@@ -1,0 +1,108 @@
+"""Ground truth for the tests: exact-enough values of an expression (mpmath at 40 digits) and test boxes."""
+
+from __future__ import annotations
+
+import mpmath
+import numpy as np
+import sympy
+
+from implc.symbols import cartesian_form, x, y, z
+
+DPS = 40
+
+
+class TrueValues:
+    """F evaluated in high precision at float64 points; None where F is undefined (complex, NaN)."""
+
+    def __init__(self, expr):
+        self.cart = cartesian_form(expr)
+        self.fn = sympy.lambdify((x, y, z), self.cart, modules="mpmath")
+
+    def at(self, point):
+        with mpmath.workdps(DPS):
+            try:
+                v = self.fn(*[mpmath.mpf(float(c)) for c in point])
+            except ZeroDivisionError:
+                return "pole"
+            if isinstance(v, mpmath.mpc):
+                if abs(v.imag) > mpmath.mpf(10) ** (-DPS + 5) * (1 + abs(v.real)):
+                    return None
+                v = v.real
+            v = mpmath.mpf(v)
+            if mpmath.isnan(v):
+                return None
+            return v
+
+    def gradient(self, point, h=mpmath.mpf(10) ** -18):
+        """Central differences at 40 digits (accurate to ~1e-20 away from kinks); None where undefined."""
+        out = []
+        with mpmath.workdps(DPS):
+            base = [mpmath.mpf(float(c)) for c in point]
+            for axis in range(3):
+                up, down = list(base), list(base)
+                up[axis] += h
+                down[axis] -= h
+                f_up, f_down = self.fn(*up), self.fn(*down)
+                if isinstance(f_up, mpmath.mpc) or isinstance(f_down, mpmath.mpc):
+                    return None
+                out.append(float((mpmath.mpf(f_up) - mpmath.mpf(f_down)) / (2 * h)))
+        return np.array(out)
+
+
+def adversarial_boxes(rng, n):
+    """(lo, hi) arrays of n boxes: ordinary ones plus boxes touching or straddling the axes, the origin and
+    the phi branch cut (x < 0, y across 0), tiny (1e-9) and large ones."""
+    kinds = rng.integers(0, 7, n)
+    center = rng.uniform(-1.5, 1.5, (n, 3))
+    width = 10.0 ** rng.uniform(-3, 0.3, (n, 3))
+    lo, hi = center - width / 2, center + width / 2
+    for i, kind in enumerate(kinds):
+        if kind == 1:  # touches an axis plane from one side
+            axis = rng.integers(0, 3)
+            if rng.random() < 0.5:
+                lo[i, axis], hi[i, axis] = 0.0, width[i, axis]
+            else:
+                lo[i, axis], hi[i, axis] = -width[i, axis], 0.0
+        elif kind == 2:  # contains the origin
+            lo[i], hi[i] = -width[i] * rng.uniform(0.1, 0.9, 3), width[i] * rng.uniform(0.1, 0.9, 3)
+        elif kind == 3:  # straddles the phi cut: x < 0, y across 0 (or touching it from below)
+            lo[i, 0], hi[i, 0] = -1.2, -rng.uniform(0.01, 0.5)
+            lo[i, 1] = -rng.uniform(0.01, 0.5)
+            hi[i, 1] = 0.0 if rng.random() < 0.3 else rng.uniform(0.01, 0.5)
+        elif kind == 4:  # tiny
+            hi[i] = lo[i] + 1e-9
+        elif kind == 5:  # large
+            lo[i], hi[i] = center[i] * 100 - 300, center[i] * 100 + 300
+        elif kind == 6:  # straddles the z axis (theta's singular line)
+            lo[i, :2], hi[i, :2] = -width[i, :2] / 2, width[i, :2] / 2
+    return lo, hi
+
+
+def sample_points(rng, lo, hi, per_box):
+    """Corners and random points of each box: (n, per_box + 8, 3)."""
+    n = len(lo)
+    corners = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], dtype=float)
+    t = np.concatenate([np.broadcast_to(corners, (n, 8, 3)), rng.random((n, per_box, 3))], axis=1)
+    pts = lo[:, None, :] + t * (hi - lo)[:, None, :]
+    return np.minimum(np.maximum(pts, lo[:, None, :]), hi[:, None, :])
+
+
+def assert_encloses(surface, expr, lo, hi, rng, per_box=6):
+    """Every true value of expr at sampled points of each box lies in surface.interval of that box;
+    where the true value is undefined, the enclosure must be the whole line."""
+    f_lo, f_hi = surface.interval(lo, hi)
+    truth = TrueValues(expr)
+    pts = sample_points(rng, lo, hi, per_box)
+    for i in range(len(lo)):
+        for p in pts[i]:
+            v = truth.at(p)
+            if v == "pole":
+                continue
+            if v is None:
+                assert f_lo[i] == -np.inf and f_hi[i] == np.inf, (
+                    f"{expr}: undefined at {p.tolist()} but box {lo[i].tolist()}..{hi[i].tolist()} "
+                    f"gives [{f_lo[i]!r}, {f_hi[i]!r}]")
+                continue
+            assert mpmath.mpf(f_lo[i]) <= v <= mpmath.mpf(f_hi[i]), (
+                f"{expr}: F({p.tolist()}) = {mpmath.nstr(v, 20)} outside [{f_lo[i]!r}, {f_hi[i]!r}] "
+                f"for box {lo[i].tolist()}..{hi[i].tolist()}")
