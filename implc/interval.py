@@ -154,7 +154,8 @@ def _sin_like(f, a, max_offset, min_offset):
     hi = np.where(_contains_peak(lo0, hi0, max_offset), 1.0, np.minimum(hi, 1.0))
     lo = np.where(_contains_peak(lo0, hi0, min_offset), -1.0, np.maximum(lo, -1.0))
     full = (hi0 - lo0 >= 2 * np.pi) | (np.abs(lo0) > R.TRIG_MAX_ARG) | (np.abs(hi0) > R.TRIG_MAX_ARG)
-    return np.where(full, -1.0, lo), np.where(full, 1.0, hi)
+    lo, hi = np.where(full, -1.0, lo), np.where(full, 1.0, hi)
+    return _nan_where(np.isinf(lo0) | np.isinf(hi0), (lo, hi))  # sin(±inf) is undefined
 
 
 def i_sin(args, attr):
@@ -173,7 +174,8 @@ def i_tan(args, attr):
         lo, hi = _monotone(np.tan, a[0], a[1])
     pole = _contains_peak(a[0], a[1], np.pi / 2, np.pi)
     pole |= (a[1] - a[0] >= np.pi) | (np.abs(a[0]) > R.TRIG_MAX_ARG) | (np.abs(a[1]) > R.TRIG_MAX_ARG)
-    return np.where(pole, -INF, lo), np.where(pole, INF, hi)
+    lo, hi = np.where(pole, -INF, lo), np.where(pole, INF, hi)
+    return _nan_where(np.isinf(a[0]) | np.isinf(a[1]), (lo, hi))  # tan(±inf) is undefined
 
 
 def i_asin(args, attr):

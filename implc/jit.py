@@ -4,7 +4,8 @@
 new pass manager, emits a host object file (or loads one from the cache), and hands out ctypes function
 pointers that stay valid as long as the NativeModule lives. Calls through those pointers release the GIL.
 
-The cache lives in ``$IMPLC_CACHE_DIR`` (default ``~/.cache/implc``), one object file per key; the key
+The cache lives in ``$IMPLC_CACHE_DIR`` (default ``~/.cache/implc``), one object file per key, stored
+behind its SHA-256 so that a damaged entry is recompiled rather than loaded; the key
 covers the kernel source, the code generator's own source, llvmlite's version and the host CPU, so a
 stale entry cannot be loaded. Set ``IMPLC_CACHE_DIR=off`` to disable it.
 """
@@ -95,13 +96,18 @@ class NativeModule:
         return None if directory is None else directory / f"{self.key}.o"
 
     def _load_cached(self) -> bytes | None:
+        """The cached object, or None when absent or damaged (LLVM would crash on a bad object file)."""
         path = self._path()
         if path is None:
             return None
         try:
-            return path.read_bytes()
+            data = path.read_bytes()
         except OSError:
             return None
+        digest, obj = data[:32], data[32:]
+        if len(data) <= 32 or hashlib.sha256(obj).digest() != digest:
+            return None
+        return obj
 
     def _store_cached(self, obj: bytes) -> None:
         path = self._path()
@@ -110,7 +116,7 @@ class NativeModule:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             with tempfile.NamedTemporaryFile(dir=path.parent, delete=False) as tmp:
-                tmp.write(obj)
+                tmp.write(hashlib.sha256(obj).digest() + obj)
             os.replace(tmp.name, path)  # atomic: a concurrent reader sees the old file or the whole new one
         except OSError:
             pass  # a read-only or full disk only costs the next process a compile

@@ -203,6 +203,10 @@ class _Lowerer:
         if isinstance(cond, sympy.Or):
             first, *rest = cond.args
             return self._lower_condition(first, then, self._lower_condition(sympy.Or(*rest), then, otherwise))
+        if isinstance(cond, sympy.ITE):
+            test, if_true, if_false = cond.args
+            return self._lower_condition(test, self._lower_condition(if_true, then, otherwise),
+                                         self._lower_condition(if_false, then, otherwise))
         if isinstance(cond, sympy.Not):
             return self._lower_condition(cond.args[0], otherwise, then)
         if isinstance(cond, sympy.core.relational.Relational):

@@ -24,6 +24,8 @@ class TrueValues:
                 v = self.fn(*[mpmath.mpf(float(c)) for c in point])
             except ZeroDivisionError:
                 return "pole"
+            except (TypeError, ValueError, AttributeError):
+                return None  # a complex intermediate reached a real-only function or comparison
             if isinstance(v, mpmath.mpc):
                 if abs(v.imag) > mpmath.mpf(10) ** (-DPS + 5) * (1 + abs(v.real)):
                     return None

@@ -47,6 +47,11 @@ class IntervalEmitter:
     def lt0(self, a):
         return self.v.cmp("<", a, self.v.splat(0.0))
 
+    def unbounded(self, a):
+        v = self.v
+        inf = v.splat(INF)
+        return v.or_(v.cmp("==", v.fabs(a[0]), inf), v.cmp("==", v.fabs(a[1]), inf))
+
     def contains_zero(self, a):
         v = self.v
         return v.and_(v.cmp("<=", a[0], v.splat(0.0)), v.cmp(">=", a[1], v.splat(0.0)))
@@ -151,7 +156,8 @@ class IntervalEmitter:
         hi = v.select(self.contains_peak(lo0, hi0, max_offset), one, v.minimum(hi, one))
         lo = v.select(self.contains_peak(lo0, hi0, min_offset), minus_one, v.maximum(lo, minus_one))
         full = self.too_wide(lo0, hi0, 2 * math.pi)
-        return v.select(full, minus_one, lo), v.select(full, one, hi)
+        lo, hi = v.select(full, minus_one, lo), v.select(full, one, hi)
+        return self.nan_where(self.unbounded((lo0, hi0)), (lo, hi))  # sin(±inf) is undefined
 
     def i_sin(self, a, attr):
         return self.sin_like("sin", a, math.pi / 2, -math.pi / 2)
@@ -164,7 +170,8 @@ class IntervalEmitter:
         lo, hi = self.monotone(self.libm("tan"), a[0])
         lo0, hi0 = a[0]
         pole = v.or_(self.contains_peak(lo0, hi0, math.pi / 2, math.pi), self.too_wide(lo0, hi0, math.pi))
-        return v.select(pole, v.splat(-INF), lo), v.select(pole, v.splat(INF), hi)
+        lo, hi = v.select(pole, v.splat(-INF), lo), v.select(pole, v.splat(INF), hi)
+        return self.nan_where(self.unbounded(a[0]), (lo, hi))  # tan(±inf) is undefined
 
     def outside_unit(self, a):
         v = self.v

@@ -1,0 +1,87 @@
+"""The tape: sharing on insert, exact folding, printing, verification, the gradient's reuse of nodes."""
+
+import pytest
+import sympy
+
+from implc.gradient import with_gradient
+from implc.ir import Tape
+from implc.lower import is_periodic_in_phi, lower
+from implc.symbols import phi, r, theta, x, y, z
+
+
+def ops(tape):
+    return [op for op, _, _ in tape.nodes]
+
+
+def test_common_subexpressions_are_shared():
+    t = lower(sympy.sin(x * y) + sympy.sin(x * y) ** 2 + sympy.cos(y * x))
+    assert ops(t).count("mul") == 1
+    assert ops(t).count("sin") == 1
+
+
+def test_commutative_operands_share_a_node():
+    t = Tape()
+    a, b = t.var(0), t.var(1)
+    assert t.add(a, b) == t.add(b, a)
+    assert t.node("min", (a, b)) == t.node("min", (b, a))
+    assert t.sub(a, b) != t.sub(b, a)
+
+
+def test_exact_folding_only():
+    t = Tape()
+    a = t.var(0)
+    assert t.add(a, t.const(0)) == a
+    assert t.mul(a, t.const(1)) == a
+    assert t.exact_value(t.add(t.const(1), t.const(2))) == 3
+    third = t.const_bounds(1 / 3, 0.333333333333333314829616256247, 0.33333333333333337034076748750521801412105560302734375)
+    assert t.exact_value(third) is None  # an inexact constant is never folded
+    square = t.mul(a, a)
+    assert t.nodes[square][0] == "powi"  # x * x is a (tight) square
+
+
+def test_spherical_symbols_share_their_pieces():
+    t = lower(r + theta + phi)
+    assert ops(t).count("sqrt") == 2  # r and rho
+    assert ops(t).count("powi") == 3  # x², y², z² once each
+    assert ops(t).count("atan2") == 2  # theta and phi (not periodic here)
+
+
+def test_phi_wraps_only_when_periodic():
+    assert is_periodic_in_phi(sympy.sin(8 * phi) * sympy.sin(4 * theta) - r)
+    assert is_periodic_in_phi(sympy.cos(3 * phi + 1) + sympy.sin(phi) ** 2)
+    assert not is_periodic_in_phi(phi - 1)
+    assert not is_periodic_in_phi(sympy.sin(phi / 2))
+    assert "atan2_wrapped" in ops(lower(sympy.sin(8 * phi) - r))
+    assert "atan2_wrapped" not in ops(lower(phi * x - r))
+
+
+def test_printer_and_verifier():
+    t = lower(sympy.exp(x) - sympy.Rational(1, 3) * y)
+    text = str(t)
+    assert "%0 = x" in text and "exp" in text and "return" in text
+    assert "in [-0.33333333333333337, -0.3333333333333333]" in text  # inexact constants print with their enclosure
+    t.verify()
+    t.nodes.append(("add", (0, 99), None))
+    with pytest.raises(AssertionError, match="defined before use"):
+        t.verify()
+
+
+def test_gradient_shares_the_value_nodes():
+    value = lower(sympy.sin(x * y) * z)
+    grad = with_gradient(value)
+    assert ops(grad).count("sin") == 1 and ops(grad).count("cos") == 1
+    assert len(grad.outputs) == 4
+
+
+def test_nonnegative_analysis():
+    t = lower(x**2 + y**2 + z**2)
+    assert t.is_nonnegative(t.outputs[0])
+    add_node = t.nodes[t.outputs[0]]
+    assert add_node[0] == "add" and add_node[2] is True
+    t2 = lower(x**2 - y**2)
+    assert not t2.is_nonnegative(t2.outputs[0])
+
+
+def test_fingerprint_is_stable_and_distinguishes():
+    assert lower(x + y).fingerprint() == lower(y + x).fingerprint()
+    assert lower(x + y).fingerprint() != lower(x - y).fingerprint()

@@ -1,0 +1,87 @@
+"""Property tests: random expressions over random (and adversarial) boxes never escape their enclosure."""
+
+from fractions import Fraction
+
+import numpy as np
+import sympy
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import implc
+from implc.symbols import phi, r, theta, x, y, z
+
+from .truth import adversarial_boxes, assert_encloses
+
+LEAVES = st.sampled_from([x, y, z, r, theta, phi, sympy.Rational(1, 3), sympy.Integer(2), sympy.pi,
+                          sympy.Rational(-5, 4), sympy.Float(0.1)])
+UNARY = [sympy.sin, sympy.cos, sympy.atan, sympy.tanh, sympy.Abs, sympy.exp, sympy.sqrt, sympy.log,
+         lambda a: a**2, lambda a: a**3, lambda a: -a, sympy.cbrt, sympy.asin]
+BINARY = [sympy.Add, sympy.Mul, lambda a, b: a - b, lambda a, b: a / b, sympy.Min, sympy.Max, sympy.atan2,
+          lambda a, b: sympy.Piecewise((a, b < 0), (b, True)),
+          lambda a, b: sympy.Piecewise((a, a <= b), (b * 2, True))]
+
+
+def _apply(fn, *args):
+    """fn(*args), or x where SymPy refuses to build it (Min of complex numbers, comparing non-reals)."""
+    if any(not isinstance(a, sympy.Expr) for a in args):
+        return x
+    try:
+        return fn(*args)
+    except (TypeError, ValueError):
+        return x
+
+
+def _expressions():
+    def extend(children):
+        unary = st.tuples(st.sampled_from(UNARY), children).map(lambda t: _apply(t[0], t[1]))
+        binary = st.tuples(st.sampled_from(BINARY), children, children).map(lambda t: _apply(*t))
+        return unary | binary
+    return st.recursive(LEAVES, extend, max_leaves=8).filter(
+        lambda e: isinstance(e, sympy.Expr) and not e.is_number and e.is_real is not False)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(expr=_expressions(), seed=st.integers(0, 2**32 - 1))
+def test_random_expressions_are_enclosed(expr, seed):
+    try:
+        surface = implc.compile(expr)
+    except implc.CompileError as exc:  # only the documented rejections may happen
+        assert "complex" in str(exc) or "non-finite" in str(exc), str(exc)
+        return
+    rng = np.random.default_rng(seed)
+    lo, hi = adversarial_boxes(rng, 24)
+    assert_encloses(surface, expr, lo, hi, rng, per_box=4)
+
+
+RATIONAL_BINARY = [sympy.Add, sympy.Mul, lambda a, b: a - b, lambda a, b: a / b]
+
+
+def _rational_expressions():
+    leaves = st.sampled_from([x, y, z, sympy.Rational(1, 3), sympy.Rational(-7, 5), sympy.Integer(3)])
+
+    def extend(children):
+        binary = st.tuples(st.sampled_from(RATIONAL_BINARY), children, children).map(lambda t: t[0](t[1], t[2]))
+        power = st.tuples(children, st.integers(2, 5)).map(lambda t: t[0] ** t[1])
+        return binary | power
+    return st.recursive(leaves, extend, max_leaves=6).filter(
+        lambda e: not e.is_number and not e.has(sympy.zoo, sympy.nan, sympy.oo))
+
+
+finite_doubles = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=150, deadline=None)
+@given(expr=_rational_expressions(), point=st.tuples(finite_doubles, finite_doubles, finite_doubles))
+def test_point_boxes_enclose_the_exact_rational_value(expr, point):
+    """Degenerate boxes (lo == hi) leave only rounding: the exact rational value must lie inside."""
+    surface = implc.compile(expr)
+    exact = expr.xreplace({s: sympy.Rational(Fraction(v)) for s, v in zip((x, y, z), point)})
+    if exact.has(sympy.zoo, sympy.nan, sympy.oo, -sympy.oo):
+        return  # a pole at this point: nothing finite to enclose
+    pts = np.array([point])
+    f_lo, f_hi = surface.interval(pts, pts)
+    value = Fraction(int(exact.p), int(exact.q))
+    if np.isfinite(f_lo[0]):
+        assert Fraction(f_lo[0]) <= value, (expr, point, f_lo[0], float(value))
+    if np.isfinite(f_hi[0]):
+        assert value <= Fraction(f_hi[0]), (expr, point, f_hi[0], float(value))
