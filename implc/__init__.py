@@ -4,6 +4,8 @@ from . import shapes
 from .errors import CompileError
 from .surface import Surface, compile
 from .symbols import phi, r, theta, x, y, z
+from .voxelize import Voxels, voxelize
 
-__all__ = ["CompileError", "Surface", "compile", "shapes", "x", "y", "z", "r", "theta", "phi"]
+__all__ = ["CompileError", "Surface", "Voxels", "compile", "shapes", "voxelize", "x", "y", "z", "r", "theta",
+           "phi"]
 __version__ = "0.1.0"

@@ -121,9 +121,13 @@ class NativeModule:
         except OSError:
             pass  # a read-only or full disk only costs the next process a compile
 
-    def function(self, name: str, argtypes: list):
-        """A ctypes function for the exported symbol ``name`` (void return)."""
+    def address(self, name: str) -> int:
+        """The address of the exported function ``name`` (valid while this object lives)."""
         address = self._engine.get_function_address(name)
         if not address:
             raise LookupError(f"no function {name} in the compiled module")
-        return ctypes.CFUNCTYPE(None, *argtypes)(address)
+        return address
+
+    def function(self, name: str, argtypes: list, restype=None):
+        """A ctypes function for the exported symbol ``name``."""
+        return ctypes.CFUNCTYPE(restype, *argtypes)(self.address(name))

@@ -1,0 +1,94 @@
+"""Structured control flow for hand-written IR: counted loops, while loops, ifs and local variables.
+
+Locals live in allocas (the optimiser's SROA pass turns them into registers), which keeps imperative
+routines such as the subdivider readable.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+from llvmlite import ir
+
+I1 = ir.IntType(1)
+I32 = ir.IntType(32)
+I64 = ir.IntType(64)
+
+
+def const(type_, value):
+    return ir.Constant(type_, value)
+
+
+class Local:
+    """A mutable local variable: ``v.get()``, ``v.set(x)``."""
+
+    def __init__(self, builder: ir.IRBuilder, type_, initial=None, name=""):
+        self.b = builder
+        with builder.goto_entry_block():
+            self.ptr = builder.alloca(type_, name=name)
+        if initial is not None:
+            self.set(initial if isinstance(initial, ir.Value) else ir.Constant(type_, initial))
+
+    def get(self):
+        return self.b.load(self.ptr)
+
+    def set(self, value):
+        self.b.store(value, self.ptr)
+
+
+def local_array(builder: ir.IRBuilder, type_, count: int, name=""):
+    """A fixed-size array on the stack frame; returns a pointer to its first element."""
+    with builder.goto_entry_block():
+        arr = builder.alloca(ir.ArrayType(type_, count), name=name)
+    return builder.gep(arr, [const(I32, 0), const(I32, 0)], inbounds=True)
+
+
+@contextmanager
+def for_range(builder: ir.IRBuilder, count, start=None, step=1):
+    """``for i in range(start, count, step)`` (i64, step > 0); yields the loop index."""
+    entry = builder.block
+    header = builder.append_basic_block("for.header")
+    body = builder.append_basic_block("for.body")
+    done = builder.append_basic_block("for.done")
+    builder.branch(header)
+    builder.position_at_end(header)
+    index = builder.phi(count.type, name="i")
+    index.add_incoming(start if start is not None else const(count.type, 0), entry)
+    builder.cbranch(builder.icmp_signed("<", index, count), body, done)
+    builder.position_at_end(body)
+    yield index
+    index.add_incoming(builder.add(index, const(count.type, step)), builder.block)
+    builder.branch(header)
+    builder.position_at_end(done)
+
+
+class _While:
+    def __init__(self, builder, exit_block):
+        self.b = builder
+        self.exit = exit_block
+
+    def break_if(self, condition):
+        """Leave the loop when ``condition`` holds; code after this runs otherwise."""
+        cont = self.b.append_basic_block("while.cont")
+        self.b.cbranch(condition, self.exit, cont)
+        self.b.position_at_end(cont)
+
+
+@contextmanager
+def while_true(builder: ir.IRBuilder):
+    """``while True:`` whose body leaves through ``loop.break_if(cond)``."""
+    body = builder.append_basic_block("while.body")
+    done = builder.append_basic_block("while.done")
+    builder.branch(body)
+    builder.position_at_end(body)
+    loop = _While(builder, done)
+    yield loop
+    if not builder.block.is_terminated:
+        builder.branch(body)
+    builder.position_at_end(done)
+
+
+@contextmanager
+def if_(builder: ir.IRBuilder, condition):
+    with builder.if_then(condition):
+        yield

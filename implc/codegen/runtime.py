@@ -1,0 +1,336 @@
+"""The generic native routines, one LLVM module shared by every surface.
+
+- ``implc_subdivide``: Fig. 1 of the paper as a loop over an explicit stack. It calls a surface's
+  interval kernel through a function pointer on the eight children of each octant (one vector step),
+  prunes children whose enclosure excludes 0, pushes the rest in reverse so that leaves come out in
+  Morton order, and writes leaf coordinates. It is resumable: when the output buffer is full or the
+  cancel flag is raised it returns with its stack intact.
+- ``implc_normals``: unit normals at voxel centres from a surface's gradient kernel, with central
+  differences and then a fixed direction as fallbacks (never NaN, never zero).
+- ``implc_octree_insert``: Fig. 2, insertion of Morton-ordered voxels into an index-based octree that
+  starts from the previous voxel's path and ascends only to the common parent.
+- ``implc_octree_traverse``: Fig. 6, depth-first traversal yielding the nodes of one level in order.
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from .control import I32, I64, Local, const, for_range, if_, local_array, while_true
+
+DOUBLE = ir.DoubleType()
+FLOAT = ir.FloatType()
+VOID = ir.VoidType()
+I8P = ir.PointerType(ir.IntType(8))
+PD = ir.PointerType(DOUBLE)
+PF = ir.PointerType(FLOAT)
+PI32 = ir.PointerType(I32)
+PI64 = ir.PointerType(I64)
+
+MAX_DEPTH = 21
+STACK_ENTRIES = 7 * (MAX_DEPTH + 1) + 8
+"""Depth-first stack bound: at most 7 pending siblings per level plus one octant's 8 children."""
+
+GEOMETRY_DOUBLES = 6 + 3 * (MAX_DEPTH + 1)
+"""Subdivision geometry: origin (3), outward pad (3), then cell size per level (3 per level)."""
+
+# octree state layout (i64 words)
+NODE_COUNT, DEPTH, STARTED, PREV = 0, 1, 2, 3
+LEVEL_COUNTS = 8
+PATH = LEVEL_COUNTS + MAX_DEPTH + 2
+OCTREE_STATE_WORDS = PATH + MAX_DEPTH + 2
+
+BOX_FN = ir.FunctionType(VOID, [PD, PD, PD, PD, I64])
+GRADIENT_FN = ir.FunctionType(VOID, [PD, PD, PD, I64])
+POINT_FN = ir.FunctionType(VOID, [PD, PD, I64])
+
+SIGNATURES = {
+    "implc_subdivide": (I64, [I8P, PD, PI32, PI64, PI32, I64, PI64, PI32]),
+    "implc_normals": (VOID, [I8P, I8P, PD, PI32, I64, PF]),
+    "implc_octree_insert": (I64, [PI32, I64, PI64, PI32, I64, I64]),
+    "implc_octree_traverse": (I64, [PI32, I64, I64, PI32, PI64]),
+}
+
+
+def _function(module, name):
+    ret, args = SIGNATURES[name]
+    fn = ir.Function(module, ir.FunctionType(ret, args), name=name)
+    return fn, ir.IRBuilder(fn.append_basic_block("entry"))
+
+
+def _at(b, ptr, index):
+    return b.gep(ptr, [index if isinstance(index, ir.Value) else const(I64, index)], inbounds=True)
+
+
+def _load(b, ptr, index):
+    return b.load(_at(b, ptr, index))
+
+
+def _store(b, value, ptr, index):
+    b.store(value, _at(b, ptr, index))
+
+
+def _bump(b, ptr, index, amount=1):
+    slot = _at(b, ptr, index)
+    b.store(b.add(b.load(slot), const(I64, amount)), slot)
+
+
+def _subdivide(module):
+    fn, b = _function(module, "implc_subdivide")
+    box_ptr, geom, stack, state, out, cap, stats, cancel = fn.args
+    box = b.bitcast(box_ptr, ir.PointerType(BOX_FN))
+    depth = b.trunc(_load(b, state, 1), I32)
+    size = Local(b, I64, _load(b, state, 0), "size")
+    count = Local(b, I64, 0, "count")
+    lo, hi = local_array(b, DOUBLE, 24, "lo"), local_array(b, DOUBLE, 24, "hi")
+    flo, fhi = local_array(b, DOUBLE, 8, "flo"), local_array(b, DOUBLE, 8, "fhi")
+    origin = [_load(b, geom, a) for a in range(3)]
+    pad = [_load(b, geom, 3 + a) for a in range(3)]
+    zero = const(DOUBLE, 0.0)
+
+    with while_true(b) as loop:
+        s = size.get()
+        loop.break_if(b.icmp_signed("==", s, const(I64, 0)))
+        flag = b.load_atomic(cancel, "monotonic", 4)
+        loop.break_if(b.icmp_signed("!=", flag, const(I32, 0)))
+        top = b.mul(b.sub(s, const(I64, 1)), const(I64, 4))
+        cell = [_load(b, stack, b.add(top, const(I64, a))) for a in range(3)]
+        child_level = b.add(_load(b, stack, b.add(top, const(I64, 3))), const(I32, 1))
+        leaf = b.icmp_signed("==", child_level, depth)
+        no_room = b.icmp_signed(">", b.add(count.get(), const(I64, 8)), cap)
+        loop.break_if(b.and_(leaf, no_room))
+        size.set(b.sub(s, const(I64, 1)))
+
+        level64 = b.zext(child_level, I64)
+        h = [_load(b, geom, b.add(b.mul(level64, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
+        children = []
+        for c in range(8):
+            coords = [b.add(b.shl(cell[a], const(I32, 1)), const(I32, (c >> a) & 1)) for a in range(3)]
+            children.append(coords)
+            for a in range(3):
+                i_lo = b.uitofp(coords[a], DOUBLE)
+                i_hi = b.uitofp(b.add(coords[a], const(I32, 1)), DOUBLE)
+                _store(b, b.fsub(b.fadd(origin[a], b.fmul(i_lo, h[a])), pad[a]), lo, 3 * c + a)
+                _store(b, b.fadd(b.fadd(origin[a], b.fmul(i_hi, h[a])), pad[a]), hi, 3 * c + a)
+        b.call(box, [lo, hi, flo, fhi, const(I64, 8)])
+        _bump(b, stats, 0, 8)
+        stat_slot = b.add(level64, const(I64, 1))
+
+        def keep(c):
+            return b.and_(b.fcmp_ordered("<=", _load(b, flo, c), zero), b.fcmp_ordered(">=", _load(b, fhi, c), zero))
+
+        with b.if_else(leaf) as (then, otherwise):
+            with then:  # emit kept leaves in Morton order
+                for c in range(8):
+                    with if_(b, keep(c)):
+                        n = count.get()
+                        for a in range(3):
+                            _store(b, children[c][a], out, b.add(b.mul(n, const(I64, 3)), const(I64, a)))
+                        count.set(b.add(n, const(I64, 1)))
+                        _bump(b, stats, stat_slot)
+            with otherwise:  # push kept octants in reverse, so child 0 is popped first
+                for c in reversed(range(8)):
+                    with if_(b, keep(c)):
+                        t = size.get()
+                        base = b.mul(t, const(I64, 4))
+                        for a in range(3):
+                            _store(b, children[c][a], stack, b.add(base, const(I64, a)))
+                        _store(b, child_level, stack, b.add(base, const(I64, 3)))
+                        size.set(b.add(t, const(I64, 1)))
+                        _bump(b, stats, stat_slot)
+    _store(b, size.get(), state, 0)
+    b.ret(count.get())
+
+
+def _normals(module):
+    fn, b = _function(module, "implc_normals")
+    grad_ptr, point_ptr, geom, coords, n, out = fn.args
+    grad_fn = b.bitcast(grad_ptr, ir.PointerType(GRADIENT_FN))
+    point_fn = b.bitcast(point_ptr, ir.PointerType(POINT_FN))
+    origin = [_load(b, geom, a) for a in range(3)]
+    h = [_load(b, geom, 3 + a) for a in range(3)]
+    hmax = b.call(_intrinsic(module, "llvm.maxnum.f64", 2), [b.call(_intrinsic(module, "llvm.maxnum.f64", 2), h[:2]), h[2]])
+    near_origin = b.fmul(b.fmul(hmax, hmax), const(DOUBLE, 4.0))  # r < 2 voxels: the 1/r blow-up zone
+    sqrt = _intrinsic(module, "llvm.sqrt.f64", 1)
+    pts = local_array(b, DOUBLE, 24, "pts")
+    values = local_array(b, DOUBLE, 8, "values")
+    grad = local_array(b, DOUBLE, 24, "grad")
+    probe = local_array(b, DOUBLE, 48 * 3, "probe")
+    probe_values = local_array(b, DOUBLE, 48, "probe_values")
+    need = Local(b, ir.IntType(1), 0, "need")
+    zero, inf = const(DOUBLE, 0.0), const(DOUBLE, float("inf"))
+    last = b.sub(n, const(I64, 1))
+    blocks = b.sdiv(b.add(n, const(I64, 7)), const(I64, 8))
+
+    def usable(n2):
+        return b.and_(b.fcmp_ordered(">", n2, zero), b.fcmp_ordered("<", n2, inf))
+
+    def norm2(v):
+        return b.fadd(b.fadd(b.fmul(v[0], v[0]), b.fmul(v[1], v[1])), b.fmul(v[2], v[2]))
+
+    with for_range(b, blocks) as block:
+        for j in range(8):  # voxel centres; lanes past the end repeat the last voxel
+            idx = b.select(b.icmp_signed(">", b.add(b.mul(block, const(I64, 8)), const(I64, j)), last), last,
+                           b.add(b.mul(block, const(I64, 8)), const(I64, j)))
+            for a in range(3):
+                c = b.uitofp(_load(b, coords, b.add(b.mul(idx, const(I64, 3)), const(I64, a))), DOUBLE)
+                centre = b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 0.5)), h[a]))
+                _store(b, centre, pts, 3 * j + a)
+        b.call(grad_fn, [pts, values, grad, const(I64, 8)])
+        need.set(const(ir.IntType(1), 0))
+        for j in range(8):
+            g = [_load(b, grad, 3 * j + a) for a in range(3)]
+            centre = [_load(b, pts, 3 * j + a) for a in range(3)]
+            bad = b.or_(b.not_(usable(norm2(g))), b.fcmp_ordered("<", norm2(centre), near_origin))
+            need.set(b.or_(need.get(), bad))
+        with if_(b, need.get()):  # central differences, half a voxel each way, for the whole block
+            for a in range(3):
+                for s, sign in enumerate((1.0, -1.0)):
+                    for j in range(8):
+                        for k in range(3):
+                            v = _load(b, pts, 3 * j + k)
+                            if k == a:
+                                v = b.fadd(v, b.fmul(h[a], const(DOUBLE, 0.5 * sign)))
+                            _store(b, v, probe, ((2 * a + s) * 8 + j) * 3 + k)
+            b.call(point_fn, [probe, probe_values, const(I64, 48)])
+        for j in range(8):
+            g = [Local(b, DOUBLE, _load(b, grad, 3 * j + a)) for a in range(3)]
+            centre = [_load(b, pts, 3 * j + a) for a in range(3)]
+            r2 = norm2(centre)
+            bad = b.or_(b.not_(usable(norm2([v.get() for v in g]))), b.fcmp_ordered("<", r2, near_origin))
+            with if_(b, bad):
+                for a in range(3):
+                    up = _load(b, probe_values, (2 * a) * 8 + j)
+                    down = _load(b, probe_values, (2 * a + 1) * 8 + j)
+                    g[a].set(b.fdiv(b.fsub(up, down), h[a]))
+            with if_(b, b.not_(usable(norm2([v.get() for v in g])))):  # flat or undefined: point outward
+                radial = usable(r2)
+                for a in range(3):
+                    g[a].set(b.select(radial, centre[a], const(DOUBLE, 1.0 if a == 2 else 0.0)))
+            length = b.call(sqrt, [norm2([v.get() for v in g])])
+            index = b.add(b.mul(block, const(I64, 8)), const(I64, j))
+            with if_(b, b.icmp_signed("<", index, n)):
+                for a in range(3):
+                    unit = b.fptrunc(b.fdiv(g[a].get(), length), FLOAT)
+                    _store(b, unit, out, b.add(b.mul(index, const(I64, 3)), const(I64, a)))
+    b.ret_void()
+
+
+def _intrinsic(module, name, arity, type_=DOUBLE):
+    fn = module.globals.get(name)
+    if fn is None:
+        fn = ir.Function(module, ir.FunctionType(type_, [type_] * arity), name=name)
+    return fn
+
+
+def _child_index(b, xyz, bit):
+    """Child slot (x bit | y bit << 1 | z bit << 2) of coordinates xyz at bit position ``bit``."""
+    slot = const(I32, 0)
+    for a in range(3):
+        slot = b.or_(slot, b.shl(b.and_(b.lshr(xyz[a], bit), const(I32, 1)), const(I32, a)))
+    return b.zext(slot, I64)
+
+
+def _octree_insert(module):
+    fn, b = _function(module, "implc_octree_insert")
+    nodes, node_cap, state, coords, n, first_index = fn.args
+    ctlz = module.globals.get("llvm.ctlz.i32") or ir.Function(
+        module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.ctlz.i32")
+    depth = _load(b, state, DEPTH)
+    depth32 = b.trunc(depth, I32)
+    node_count = Local(b, I64, _load(b, state, NODE_COUNT), "node_count")
+    inserted = Local(b, I64, 0, "inserted")
+    with while_true(b) as loop:
+        v = inserted.get()
+        loop.break_if(b.icmp_signed(">=", v, n))
+        xyz = [_load(b, coords, b.add(b.mul(v, const(I64, 3)), const(I64, a))) for a in range(3)]
+        prev = [b.trunc(_load(b, state, PREV + a), I32) for a in range(3)]
+        diff = b.or_(b.or_(b.xor(xyz[0], prev[0]), b.xor(xyz[1], prev[1])), b.xor(xyz[2], prev[2]))
+        started = b.icmp_signed("!=", _load(b, state, STARTED), const(I64, 0))
+        # the deepest level whose node is shared with the previous voxel (Fig. 2's ascent)
+        top_bit = b.sub(const(I32, 31), b.call(ctlz, [diff, const(ir.IntType(1), 0)]))
+        shared = b.select(b.icmp_signed("==", diff, const(I32, 0)), b.sub(depth32, const(I32, 1)),
+                          b.sub(b.sub(depth32, const(I32, 1)), top_bit))
+        start = b.zext(b.select(started, shared, const(I32, 0)), I64)
+        # room for the nodes this voxel may create (levels start+1 .. depth-1)
+        needed = b.sub(b.sub(depth, const(I64, 1)), start)
+        loop.break_if(b.icmp_signed(">", b.add(node_count.get(), needed), node_cap))
+        with for_range(b, b.sub(depth, const(I64, 1)), start=start) as level:  # descend, creating nodes
+            bit = b.trunc(b.sub(b.sub(depth, const(I64, 1)), level), I32)
+            slot = b.add(b.mul(b.sext(_load(b, state, b.add(level, const(I64, PATH))), I64), const(I64, 8)),
+                         _child_index(b, xyz, bit))
+            entry = Local(b, I32, _load(b, nodes, slot))
+            with if_(b, b.icmp_signed("==", entry.get(), const(I32, 0))):
+                fresh = node_count.get()
+                entry.set(b.trunc(fresh, I32))
+                _store(b, entry.get(), nodes, slot)
+                node_count.set(b.add(fresh, const(I64, 1)))
+                _bump(b, state, b.add(level, const(I64, LEVEL_COUNTS + 1)))
+            _store(b, b.sext(entry.get(), I64), state, b.add(level, const(I64, PATH + 1)))
+        leaf_parent = b.sext(_load(b, state, b.add(b.sub(depth, const(I64, 1)), const(I64, PATH))), I64)
+        slot = b.add(b.mul(leaf_parent, const(I64, 8)), _child_index(b, xyz, const(I32, 0)))
+        with if_(b, b.icmp_signed("==", _load(b, nodes, slot), const(I32, 0))):
+            _bump(b, state, b.add(depth, const(I64, LEVEL_COUNTS)))
+        _store(b, b.trunc(b.add(b.add(first_index, v), const(I64, 1)), I32), nodes, slot)
+        for a in range(3):
+            _store(b, b.zext(xyz[a], I64), state, PREV + a)
+        _store(b, const(I64, 1), state, STARTED)
+        inserted.set(b.add(v, const(I64, 1)))
+    _store(b, node_count.get(), state, NODE_COUNT)
+    b.ret(inserted.get())
+
+
+def _octree_traverse(module):
+    fn, b = _function(module, "implc_octree_traverse")
+    nodes, depth, target, out, payload = fn.args
+    node_stack = local_array(b, I64, MAX_DEPTH + 2, "node_stack")
+    next_child = local_array(b, I64, MAX_DEPTH + 2, "next_child")
+    level = Local(b, I64, 0, "level")
+    xyz = [Local(b, I32, 0, n) for n in "XYZ"]
+    count = Local(b, I64, 0, "count")
+    _store(b, const(I64, 0), node_stack, 0)
+    _store(b, const(I64, 0), next_child, 0)
+    with while_true(b) as loop:
+        lv = level.get()
+        i = _load(b, next_child, lv)
+        done_here = b.icmp_signed("==", i, const(I64, 8))
+        loop.break_if(b.and_(done_here, b.icmp_signed("==", lv, const(I64, 0))))
+        with b.if_else(done_here) as (ascend, visit):
+            with ascend:  # every child seen: up one level
+                level.set(b.sub(lv, const(I64, 1)))
+                for v in xyz:
+                    v.set(b.lshr(v.get(), const(I32, 1)))
+            with visit:
+                _store(b, b.add(i, const(I64, 1)), next_child, lv)
+                entry = _load(b, nodes, b.add(b.mul(_load(b, node_stack, lv), const(I64, 8)), i))
+                with if_(b, b.icmp_signed("!=", entry, const(I32, 0))):
+                    i32 = b.trunc(i, I32)
+                    child = [b.or_(b.shl(xyz[a].get(), const(I32, 1)), b.and_(b.lshr(i32, const(I32, a)), const(I32, 1)))
+                             for a in range(3)]
+                    child_level = b.add(lv, const(I64, 1))
+                    with b.if_else(b.icmp_signed("==", child_level, target)) as (emit, descend):
+                        with emit:
+                            k = count.get()
+                            for a in range(3):
+                                _store(b, child[a], out, b.add(b.mul(k, const(I64, 3)), const(I64, a)))
+                            is_leaf = b.icmp_signed("==", child_level, depth)
+                            value = b.sext(entry, I64)
+                            _store(b, b.select(is_leaf, b.sub(value, const(I64, 1)), value), payload, k)
+                            count.set(b.add(k, const(I64, 1)))
+                        with descend:
+                            _store(b, b.sext(entry, I64), node_stack, child_level)
+                            _store(b, const(I64, 0), next_child, child_level)
+                            level.set(child_level)
+                            for a in range(3):
+                                xyz[a].set(child[a])
+    b.ret(count.get())
+
+
+def build_runtime() -> str:
+    """The LLVM IR text of the runtime module."""
+    module = ir.Module(name="implc_runtime")
+    _subdivide(module)
+    _normals(module)
+    _octree_insert(module)
+    _octree_traverse(module)
+    return str(module)

@@ -1,0 +1,113 @@
+"""The octree backend (the paper's Fig. 2 and Fig. 6), index-based and relocatable.
+
+Nodes are rows of an (M, 8) int32 array: entry c of node n is its child in octant c (x bit | y bit << 1 |
+z bit << 2), 0 meaning empty (the root, node 0, is nobody's child). Nodes at level depth − 1 hold
+``voxel index + 1`` instead: the payload, a normal per voxel, lives in ``normals``. Insertion and
+traversal run natively (:mod:`implc.codegen.runtime`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..codegen.runtime import DEPTH, LEVEL_COUNTS, NODE_COUNT, OCTREE_STATE_WORDS
+from ..runtime import Runtime
+
+
+class Octree:
+    def __init__(self, depth: int, bounds, nodes: np.ndarray, normals: np.ndarray, level_counts: np.ndarray,
+                 runtime: Runtime | None = None):
+        self.depth = depth
+        self.bounds = bounds
+        self.nodes = nodes
+        self.normals = normals
+        self.level_counts = level_counts
+        self._runtime = runtime
+
+    @property
+    def runtime(self) -> Runtime:
+        if self._runtime is None:
+            self._runtime = Runtime()
+        return self._runtime
+
+    def __len__(self) -> int:
+        return len(self.normals)
+
+    @property
+    def nbytes(self) -> int:
+        return self.nodes.nbytes + self.normals.nbytes
+
+    @property
+    def bytes_per_voxel(self) -> float:
+        return self.nbytes / max(len(self), 1)
+
+    def traverse(self, level: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The nodes at ``level`` (default: the voxels) in Fig. 6 order (which is Morton order).
+
+        Returns (coords (K, 3) uint32 at that level's resolution, payload (K,) int64): voxel indices into
+        ``normals`` at the leaf level, node indices above it.
+        """
+        level = self.depth if level is None else int(level)
+        if not 0 <= level <= self.depth:
+            raise ValueError(f"level must be in 0..{self.depth}, got {level}")
+        if level == 0:
+            return np.zeros((1, 3), np.uint32), np.zeros(1, np.int64)
+        count = int(self.level_counts[level])
+        coords = np.empty((count, 3), dtype=np.uint32)
+        payload = np.empty(count, dtype=np.int64)
+        nodes = np.ascontiguousarray(self.nodes, dtype=np.int32)
+        got = self.runtime.octree_traverse(nodes.ctypes.data, self.depth, level, coords.ctypes.data,
+                                           payload.ctypes.data)
+        assert got == count, f"octree traversal found {got} nodes at level {level}, expected {count}"
+        return coords, payload
+
+    def level(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Level of detail: the nodes at depth k and the normalised mean normal of the voxels below each."""
+        coords, payload = self.traverse(k)
+        if k == self.depth:
+            return coords, self.normals[payload]
+        voxels, index = self.traverse(self.depth)
+        prefix = voxels >> np.uint32(self.depth - k)
+        starts = np.flatnonzero(np.r_[True, np.any(prefix[1:] != prefix[:-1], axis=1)])
+        sums = np.add.reduceat(self.normals[index].astype(np.float64), starts, axis=0)
+        lengths = np.linalg.norm(sums, axis=1, keepdims=True)
+        mean = np.where(lengths > 0, sums / np.where(lengths > 0, lengths, 1), [0.0, 0.0, 1.0])
+        return coords, mean.astype(np.float32)
+
+
+class OctreeBuilder:
+    """Storage backend that inserts each Morton-ordered batch natively as it arrives."""
+
+    def begin(self, depth, bounds):
+        self.depth, self.bounds = depth, bounds
+        self.runtime = Runtime()
+        self.nodes = np.zeros((1024, 8), dtype=np.int32)
+        self.state = np.zeros(OCTREE_STATE_WORDS, dtype=np.int64)
+        self.state[NODE_COUNT] = 1  # the root
+        self.state[DEPTH] = depth
+        self.state[LEVEL_COUNTS] = 1
+        self.count = 0
+        self._normals = []
+
+    def add(self, coords, normals):
+        coords = np.ascontiguousarray(coords, dtype=np.uint32)
+        done = 0
+        while done < len(coords):
+            inserted = self.runtime.octree_insert(
+                self.nodes.ctypes.data, len(self.nodes), self.state.ctypes.data,
+                coords[done:].ctypes.data, len(coords) - done, self.count + done)
+            done += inserted
+            if done < len(coords):  # out of nodes: grow and go on where it stopped
+                grown = np.zeros((2 * len(self.nodes), 8), dtype=np.int32)
+                grown[: len(self.nodes)] = self.nodes
+                self.nodes = grown
+        self.count += len(coords)
+        self._normals.append(np.asarray(normals, dtype=np.float32))
+
+    def finish(self):
+        used = int(self.state[NODE_COUNT])
+        normals = np.concatenate(self._normals) if self._normals else np.zeros((0, 3), np.float32)
+        counts = self.state[LEVEL_COUNTS: LEVEL_COUNTS + self.depth + 1].copy()
+        tree = Octree(self.depth, self.bounds, self.nodes[:used].copy(), normals, counts, self.runtime)
+        self.nodes = self._normals = None
+        return tree

@@ -1,0 +1,157 @@
+"""``implc.voxelize``: every cell of a 2^depth grid that may meet the surface, with normals, stored.
+
+Cell (i, j, k) at depth d is the closed box [b0 + i·h, b0 + (i+1)·h] on each axis, h = (b1 − b0) / 2^d.
+A cell is a voxel when the compiled enclosure of F over it (padded outward by a few ulps for the
+rounding of its corners) contains 0: no cell where F changes sign is ever missed.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .runtime import Runtime
+from .storage import bytes_per_voxel, make_backend
+from .storage.grid import dense_bytes
+from .storage.octree import Octree, OctreeBuilder
+from .subdivide import SubdivisionStats, Subdivider, default_workers
+from .surface import Surface
+
+MIN_DEPTH, MAX_DEPTH = 1, 21
+
+
+def available_memory() -> int:
+    """Bytes of memory available to this process now (MemAvailable on Linux)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:  # pragma: no cover - non-Linux
+        pass
+    import os
+    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
+class Voxels:
+    """The voxels of a surface at one depth: Morton-ordered cell indices and unit normals."""
+
+    def __init__(self, coords, normals, depth, bounds, stats: SubdivisionStats, storage=None):
+        self.coords = coords
+        self.normals = normals
+        self.depth = depth
+        self.bounds = bounds
+        self.stats = stats
+        self.storage = storage
+        self._octree = storage if isinstance(storage, Octree) else None
+
+    def __len__(self) -> int:
+        return len(self.coords)
+
+    def __repr__(self) -> str:
+        n = 1 << self.depth
+        return f"Voxels({len(self)} voxels of a {n}³ grid over {self.bounds})"
+
+    @property
+    def cell_size(self) -> np.ndarray:
+        return np.array([(hi - lo) / (1 << self.depth) for lo, hi in self.bounds])
+
+    @property
+    def octree(self) -> Octree:
+        """The octree of these voxels (built on first use when another backend was chosen)."""
+        if self._octree is None:
+            builder = OctreeBuilder()
+            builder.begin(self.depth, self.bounds)
+            builder.add(self.coords, self.normals)
+            self._octree = builder.finish()
+        return self._octree
+
+    def centers(self) -> np.ndarray:
+        """Cell centres in world coordinates, (N, 3) float64."""
+        origin = np.array([lo for lo, _ in self.bounds])
+        return origin + (self.coords.astype(np.float64) + 0.5) * self.cell_size
+
+    def to_dense(self) -> np.ndarray:
+        """Occupancy as a bool array indexed [i, j, k]."""
+        n = 1 << self.depth
+        grid = np.zeros((n, n, n), dtype=bool)
+        grid[self.coords[:, 0], self.coords[:, 1], self.coords[:, 2]] = True
+        return grid
+
+
+class _Collect:
+    """Keeps the voxel arrays for Voxels while forwarding each batch to the chosen backend."""
+
+    def __init__(self, backend):
+        self.backend = backend
+        self.coords, self.normals = [], []
+
+    def __call__(self, coords, normals):
+        self.coords.append(coords)
+        self.normals.append(normals)
+        self.backend.add(coords, normals)
+
+    def arrays(self):
+        if not self.coords:
+            return np.zeros((0, 3), np.uint32), np.zeros((0, 3), np.float32)
+        return np.concatenate(self.coords), np.concatenate(self.normals)
+
+
+def _check_depth(depth):
+    if isinstance(depth, bool) or not isinstance(depth, (int, np.integer)) or not MIN_DEPTH <= depth <= MAX_DEPTH:
+        raise ValueError(f"depth must be an integer from {MIN_DEPTH} to {MAX_DEPTH}, got {depth!r}")
+    return int(depth)
+
+
+def _check_memory(depth, storage, planned_cells, plan_level, available):
+    """Refuse before starting when the result cannot fit (estimate: surface cells grow 4x per level)."""
+    estimate_voxels = planned_cells * 4 ** (depth - plan_level)
+    estimate = estimate_voxels * bytes_per_voxel(storage)
+    if storage == "grid":
+        estimate += dense_bytes(depth)
+    if estimate > available:
+        raise MemoryError(f"depth {depth} needs an estimated {estimate / 2**30:.1f} GiB "
+                          f"(~{estimate_voxels:.3g} voxels{' plus a dense grid' if storage == 'grid' else ''}) "
+                          f"but {available / 2**30:.1f} GiB are available; lower the depth")
+
+
+def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False, max_voxels=None) -> Voxels:
+    """Voxelize a compiled surface on a 2^depth grid over its bounds."""
+    if not isinstance(surface, Surface):
+        raise TypeError(f"voxelize expects an implc.Surface (from implc.compile), got {type(surface).__name__}")
+    depth = _check_depth(depth)
+    workers = default_workers() if workers is None else int(workers)
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
+    backend = make_backend(storage)
+    available = available_memory()
+    if max_voxels is None:
+        max_voxels = int(available * 0.8 / bytes_per_voxel(storage))
+
+    t_start = time.perf_counter()
+    runtime = Runtime()
+    subdivider = Subdivider(surface, depth, workers, runtime, max_voxels=max_voxels)
+    cells, level = subdivider.plan()
+    _check_memory(depth, storage, len(cells), level, available)
+    subdivider.plan = lambda: (cells, level)  # run() reuses the plan just made
+
+    t0 = time.perf_counter()
+    backend.begin(depth, surface.bounds)
+    collect = _Collect(backend)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(cells), unit="octant", desc=f"voxelize {1 << depth}³", leave=False)
+    try:
+        stats = subdivider.run(collect, progress=bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    t1 = time.perf_counter()
+    result = backend.finish()
+    stats.seconds["finish"] = time.perf_counter() - t1
+    stats.seconds["setup"] = t0 - t_start - stats.seconds["plan"]
+    stats.seconds["total"] = time.perf_counter() - t_start
+    coords, normals = collect.arrays()
+    return Voxels(coords, normals, depth, surface.bounds, stats, storage=result)

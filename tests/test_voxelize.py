@@ -1,0 +1,229 @@
+"""The voxelizer against dense sampling, across worker counts and storage backends, and its error paths."""
+
+import threading
+
+import numpy as np
+import pytest
+import sympy
+from sympy import Max, Min, Rational, cos, exp, log, sin, sqrt
+
+import implc
+from implc import phi, r, scene, shapes, theta, x, y, z
+
+SURFACES = {
+    "paper_blobs": None, "paper_sin4_sin8": None, "paper_sin3_sin4": None,  # from scenes/
+    "csg": (shapes.difference(shapes.box((Rational(3, 5),) * 3),
+                              shapes.union(shapes.sphere(Rational(7, 10)), shapes.sphere(Rational(1, 4), (0, 0, 1)))),
+            ((-1, 1),) * 3),
+    "spherical_cos_phi": (r - Rational(3, 5) - Rational(1, 5) * cos(5 * phi) * sin(theta), ((-1, 1),) * 3),
+    "division": (1 / (x**2 + y**2 + z**2 + Rational(1, 20)) + 1 / ((x - Rational(1, 2))**2 + y**2 + z**2 + Rational(1, 20))
+                 - 6, ((-1, 1),) * 3),
+    "exp_gyroid_ball": (Max(sin(6 * x) * cos(6 * y) + sin(6 * y) * cos(6 * z) + sin(6 * z) * cos(6 * x),
+                            sqrt(x**2 + y**2 + z**2) - Rational(9, 10)) + exp(-8 * x**2) / 4, ((-1, 1),) * 3),
+    "log": (log(x**2 + y**2 + Rational(1, 10)) + z * 2, ((-1, 1),) * 3),
+    "torus": (shapes.torus(Rational(3, 5), Rational(1, 4)), ((-1, 1),) * 3),
+    "tangle_cube": (x**4 - 5 * x**2 + y**4 - 5 * y**2 + z**4 - 5 * z**2 + Rational(59, 5), ((-3, 3),) * 3),
+    "heart": ((x**2 + Rational(9, 4) * y**2 + z**2 - 1) ** 3 - x**2 * z**3 - Rational(9, 80) * y**2 * z**3,
+              ((-Rational(3, 2), Rational(3, 2)),) * 3),
+    "min_of_blobs": (Min(shapes.sphere(Rational(1, 2), (Rational(-1, 4), 0, 0)),
+                         shapes.sphere(Rational(1, 2), (Rational(1, 4), Rational(1, 10), 0))), ((-1, 1),) * 3),
+}
+
+
+def load(name):
+    if SURFACES[name] is None:
+        sc = scene.load(name)
+        return implc.compile(sc.surface, sc.bounds)
+    expr, bounds = SURFACES[name]
+    return implc.compile(expr, bounds)
+
+
+@pytest.fixture(scope="module")
+def compiled():
+    return {name: load(name) for name in SURFACES}
+
+
+def sign_change_cells(surface, depth):
+    """Cells whose corner values (F computed at every grid corner) change sign, touch 0 or are undefined."""
+    n = 1 << depth
+    axes = [np.linspace(lo, hi, n + 1) for lo, hi in surface.bounds]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    f = surface.eval(grid).reshape(n + 1, n + 1, n + 1)
+    lo = np.full((n, n, n), np.inf)
+    hi = np.full((n, n, n), -np.inf)
+    undefined = np.zeros((n, n, n), dtype=bool)
+    for dx in (0, 1):
+        for dy in (0, 1):
+            for dz in (0, 1):
+                c = f[dx:dx + n, dy:dy + n, dz:dz + n]
+                lo = np.minimum(lo, c)
+                hi = np.maximum(hi, c)
+                undefined |= np.isnan(c)
+    return ((lo <= 0) & (hi >= 0)) | undefined
+
+
+@pytest.mark.parametrize("depth", [5, 6, 7, 8])
+@pytest.mark.parametrize("name", sorted(SURFACES))
+def test_no_cell_with_a_sign_change_is_missed(name, depth, compiled, over_inclusion):
+    s = compiled[name]
+    voxels = implc.voxelize(s, depth, workers=2, storage="coords")
+    expected = sign_change_cells(s, depth)
+    got = voxels.to_dense()
+    missed = np.argwhere(expected & ~got)
+    assert len(missed) == 0, f"{name} depth {depth}: {len(missed)} missed cells, e.g. {missed[:5].tolist()}"
+    assert expected.sum() > 0, "the test surface must cross the box"
+    over_inclusion[(name, depth)] = len(voxels) / expected.sum()
+
+
+def morton_keys(coords, depth):
+    key = np.zeros(len(coords), dtype=np.uint64)
+    c = coords.astype(np.uint64)
+    for bit in range(depth):
+        for a in range(3):
+            key |= ((c[:, a] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + a)
+    return key
+
+
+@pytest.mark.parametrize("name", ["paper_blobs", "paper_sin4_sin8", "csg", "heart"])
+def test_worker_counts_agree_and_order_is_morton(name, compiled):
+    s = compiled[name]
+    one = implc.voxelize(s, 7, workers=1)
+    two = implc.voxelize(s, 7, workers=2)
+    three = implc.voxelize(s, 7, workers=3)
+    for other in (two, three):
+        np.testing.assert_array_equal(one.coords, other.coords)
+        np.testing.assert_array_equal(one.normals, other.normals)
+    keys = morton_keys(one.coords, 7)
+    assert np.all(keys[1:] > keys[:-1])
+    assert one.coords.dtype == np.uint32 and one.normals.dtype == np.float32
+    assert one.stats.kept_per_level[7] == len(one)
+    assert one.stats.interval_evaluations == two.stats.interval_evaluations > 0
+    assert one.stats.kept_per_level == two.stats.kept_per_level
+
+
+def test_backends_hold_the_same_voxels(compiled):
+    s = compiled["paper_sin3_sin4"]
+    depth = 6
+    base = implc.voxelize(s, depth, storage="coords")
+    coords, normals = base.storage
+    np.testing.assert_array_equal(coords, base.coords)
+    tree = implc.voxelize(s, depth, storage="octree")
+    t_coords, payload = tree.octree.traverse()
+    np.testing.assert_array_equal(t_coords, base.coords)
+    np.testing.assert_array_equal(tree.octree.normals[payload], base.normals)
+    grid = implc.voxelize(s, depth, storage="grid").storage
+    np.testing.assert_array_equal(grid.occupancy, base.to_dense())
+    c = base.coords
+    np.testing.assert_array_equal(grid.normals[c[:, 0], c[:, 1], c[:, 2]], base.normals)
+    batches = []
+    implc.voxelize(s, depth, storage=lambda cc, nn: batches.append((cc, nn)))
+    np.testing.assert_array_equal(np.concatenate([b[0] for b in batches]), base.coords)
+    # an octree built later from another backend's voxels is the same tree
+    np.testing.assert_array_equal(base.octree.nodes, tree.octree.nodes)
+
+
+def test_octree_levels_match_the_voxels(compiled):
+    v = implc.voxelize(compiled["torus"], 7)
+    tree = v.octree
+    assert len(tree) == len(v)
+    for k in range(1, 8):
+        coords, _ = tree.traverse(k)
+        prefix = v.coords >> np.uint32(7 - k)
+        keep = np.r_[True, np.any(prefix[1:] != prefix[:-1], axis=1)]
+        np.testing.assert_array_equal(coords, prefix[keep])  # a node at level k exactly where voxels lie below
+        lod_coords, lod_normals = tree.level(k)
+        np.testing.assert_array_equal(lod_coords, coords)
+        np.testing.assert_allclose(np.linalg.norm(lod_normals, axis=1), 1, atol=1e-5)
+    assert tree.nbytes > 0 and 0 < tree.bytes_per_voxel < 100
+
+
+def test_normals_are_unit_and_follow_the_gradient(compiled):
+    v = implc.voxelize(load("torus"), 7)
+    assert np.all(np.isfinite(v.normals))
+    np.testing.assert_allclose(np.linalg.norm(v.normals, axis=1), 1, atol=1e-5)
+    g = compiled["torus"].gradient(v.centers())
+    expected = g / np.linalg.norm(g, axis=1, keepdims=True)
+    np.testing.assert_allclose(v.normals, expected, atol=1e-5)
+    sphere = implc.voxelize(implc.compile(x**2 + y**2 + z**2 - Rational(1, 2)), 6)
+    radial = sphere.centers() / np.linalg.norm(sphere.centers(), axis=1, keepdims=True)
+    np.testing.assert_allclose(sphere.normals, radial, atol=1e-5)
+
+
+def test_spherical_normals_never_nan_or_zero(compiled):
+    v = implc.voxelize(compiled["paper_sin4_sin8"], 7)
+    assert np.all(np.isfinite(v.normals))
+    np.testing.assert_allclose(np.linalg.norm(v.normals, axis=1), 1, atol=1e-5)
+    flat = implc.voxelize(implc.compile(sympy.Piecewise((0, x < 0), (x, True)) + 0 * y), 4)
+    np.testing.assert_allclose(np.linalg.norm(flat.normals, axis=1), 1, atol=1e-5)
+
+
+def test_voxels_helpers():
+    s = implc.compile(x + y + z, bounds=((0, 2), (-1, 1), (-1, 3)))
+    v = implc.voxelize(s, 4)
+    h = np.array([2, 2, 4]) / 16
+    np.testing.assert_allclose(v.cell_size, h)
+    np.testing.assert_allclose(v.centers()[0], np.array([0, -1, -1]) + (v.coords[0] + 0.5) * h)
+    assert v.to_dense().sum() == len(v)
+    assert "Voxels(" in repr(v)
+
+
+@pytest.mark.parametrize("depth", [0, 22, -1, 3.5, "9", True, None])
+def test_bad_depth_names_the_range(depth):
+    s = implc.compile(x - y)
+    with pytest.raises(ValueError, match="depth must be an integer from 1 to 21"):
+        implc.voxelize(s, depth)
+
+
+def test_bad_arguments():
+    s = implc.compile(x - y)
+    with pytest.raises(TypeError, match="implc.Surface"):
+        implc.voxelize(x - y, 5)
+    with pytest.raises(ValueError, match="unknown storage 'tree'"):
+        implc.voxelize(s, 5, storage="tree")
+    with pytest.raises(ValueError, match="storage must be"):
+        implc.voxelize(s, 5, storage=42)
+    with pytest.raises(ValueError, match="workers"):
+        implc.voxelize(s, 5, workers=0)
+
+
+def test_memory_is_checked_before_and_during_the_run():
+    s = implc.compile(sin(40 * x) * sin(40 * y) * sin(40 * z))
+    with pytest.raises(MemoryError, match="depth 21 needs an estimated .* GiB"):
+        implc.voxelize(s, 21)
+    with pytest.raises(MemoryError, match="depth 15 needs"):
+        implc.voxelize(s, 15, storage="grid")
+    before = threading.active_count()
+    with pytest.raises(MemoryError, match="max_voxels=1000"):
+        implc.voxelize(s, 8, max_voxels=1000)
+    assert threading.active_count() == before
+
+
+def test_worker_errors_reach_the_caller_and_no_thread_is_left(monkeypatch):
+    from implc.subdivide import Subdivider
+    s = implc.compile(x**2 + y**2 + z**2 - Rational(1, 2))
+    calls = {"n": 0}
+    original = Subdivider._normals
+
+    def failing(self, coords):
+        calls["n"] += 1
+        if calls["n"] > 3:
+            raise RuntimeError("boom in a worker")
+        return original(self, coords)
+
+    monkeypatch.setattr(Subdivider, "_normals", failing)
+    before = threading.active_count()
+    with pytest.raises(RuntimeError, match="boom in a worker"):
+        implc.voxelize(s, 8, workers=2)
+    assert threading.active_count() == before
+
+
+def test_storage_errors_stop_the_workers():
+    s = implc.compile(x**2 + y**2 + z**2 - Rational(1, 2))
+    before = threading.active_count()
+
+    def full(coords, normals):
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        implc.voxelize(s, 8, storage=full, workers=2)
+    assert threading.active_count() == before
