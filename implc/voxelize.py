@@ -92,10 +92,13 @@ class _Collect:
         self.normals.append(normals)
         self.backend.add(coords, normals)
 
-    def arrays(self):
+    def arrays(self, reuse=None):
+        """The concatenated voxel arrays; an octree's payload already is the normals array."""
         if not self.coords:
             return np.zeros((0, 3), np.uint32), np.zeros((0, 3), np.float32)
-        return np.concatenate(self.coords), np.concatenate(self.normals)
+        coords = np.concatenate(self.coords)
+        normals = reuse.normals if isinstance(reuse, Octree) else np.concatenate(self.normals)
+        return coords, normals
 
 
 def _check_depth(depth):
@@ -104,9 +107,13 @@ def _check_depth(depth):
     return int(depth)
 
 
-def _check_memory(depth, storage, planned_cells, plan_level, available):
-    """Refuse before starting when the result cannot fit (estimate: surface cells grow 4x per level)."""
-    estimate_voxels = planned_cells * 4 ** (depth - plan_level)
+def _estimate_voxels(planned_cells, plan_level, depth):
+    """Surface cells grow about 4x per level; coarse levels over-include, so this errs high."""
+    return planned_cells * 4 ** (depth - plan_level)
+
+
+def _check_memory(depth, storage, estimate_voxels, available):
+    """Refuse before starting when the result cannot fit."""
     estimate = estimate_voxels * bytes_per_voxel(storage)
     if storage == "grid":
         estimate += dense_bytes(depth)
@@ -133,11 +140,14 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     runtime = Runtime()
     subdivider = Subdivider(surface, depth, workers, runtime, max_voxels=max_voxels)
     cells, level = subdivider.plan()
-    _check_memory(depth, storage, len(cells), level, available)
+    estimate = _estimate_voxels(len(cells), level, depth)
+    _check_memory(depth, storage, estimate, available)
     subdivider.plan = lambda: (cells, level)  # run() reuses the plan just made
 
     t0 = time.perf_counter()
     backend.begin(depth, surface.bounds)
+    if hasattr(backend, "reserve"):
+        backend.reserve(min(estimate, max_voxels) // 2)
     collect = _Collect(backend)
     bar = None
     if progress:
@@ -153,5 +163,5 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     stats.seconds["finish"] = time.perf_counter() - t1
     stats.seconds["setup"] = t0 - t_start - stats.seconds["plan"]
     stats.seconds["total"] = time.perf_counter() - t_start
-    coords, normals = collect.arrays()
+    coords, normals = collect.arrays(reuse=result)
     return Voxels(coords, normals, depth, surface.bounds, stats, storage=result)

@@ -227,3 +227,8 @@ def test_storage_errors_stop_the_workers():
     with pytest.raises(OSError, match="disk full"):
         implc.voxelize(s, 8, storage=full, workers=2)
     assert threading.active_count() == before
+
+
+def test_progress_bar(capsys):
+    implc.voxelize(implc.compile(x**2 + y**2 + z**2 - Rational(1, 2)), 6, progress=True)
+    assert "voxelize 64³" in capsys.readouterr().err

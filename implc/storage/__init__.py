@@ -2,7 +2,8 @@
 
 The voxelizer calls ``begin(depth, bounds)``, then ``add(coords, normals)`` with batches in Morton
 order ((n, 3) uint32 cell indices and (n, 3) float32 unit normals), then ``finish()``, whose result
-becomes ``Voxels.storage``. Any object with these three methods is a backend; a plain callable
+becomes ``Voxels.storage``. A backend may also offer ``reserve(voxels)``, called after ``begin`` with
+the voxelizer's estimate of the voxel count. Any object with these three methods is a backend; a plain callable
 ``fn(coords, normals)`` is wrapped as one that streams each batch to it.
 """
 

@@ -89,6 +89,14 @@ class OctreeBuilder:
         self.count = 0
         self._normals = []
 
+    def reserve(self, voxels: int):
+        """Size the node array for about ``voxels`` voxels (a surface needs ~1/3 node per voxel)."""
+        rows = max(1024, int(voxels * 0.4))
+        if rows > len(self.nodes):
+            grown = np.zeros((rows, 8), dtype=np.int32)
+            grown[: len(self.nodes)] = self.nodes
+            self.nodes = grown
+
     def add(self, coords, normals):
         coords = np.ascontiguousarray(coords, dtype=np.uint32)
         done = 0
@@ -98,9 +106,7 @@ class OctreeBuilder:
                 coords[done:].ctypes.data, len(coords) - done, self.count + done)
             done += inserted
             if done < len(coords):  # out of nodes: grow and go on where it stopped
-                grown = np.zeros((2 * len(self.nodes), 8), dtype=np.int32)
-                grown[: len(self.nodes)] = self.nodes
-                self.nodes = grown
+                self.reserve(int(len(self.nodes) * 2 / 0.4))
         self.count += len(coords)
         self._normals.append(np.asarray(normals, dtype=np.float32))
 
@@ -108,6 +114,6 @@ class OctreeBuilder:
         used = int(self.state[NODE_COUNT])
         normals = np.concatenate(self._normals) if self._normals else np.zeros((0, 3), np.float32)
         counts = self.state[LEVEL_COUNTS: LEVEL_COUNTS + self.depth + 1].copy()
-        tree = Octree(self.depth, self.bounds, self.nodes[:used].copy(), normals, counts, self.runtime)
+        tree = Octree(self.depth, self.bounds, self.nodes[:used], normals, counts, self.runtime)
         self.nodes = self._normals = None
         return tree
