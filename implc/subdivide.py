@@ -29,7 +29,12 @@ OUTPUT_CHUNK = 1 << 16
 
 @dataclass
 class SubdivisionStats:
-    """What a voxelization did: work, per-level survivors, stage times, per-worker busy time."""
+    """What a voxelization did: work, per-level survivors, stage times, per-worker busy time.
+
+    ``seconds``: wall time of each stage (plan, subdivide — the parallel phase, normals included —,
+    storage — time the calling thread spent in the backend —, finish, total). ``worker_busy``: seconds
+    each worker spent in native work, of which ``worker_normals`` computing normals.
+    """
 
     depth: int
     workers: int
@@ -39,6 +44,7 @@ class SubdivisionStats:
     kept_per_level: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     worker_busy: list = field(default_factory=list)
+    worker_normals: list = field(default_factory=list)
     worker_tasks: list = field(default_factory=list)
 
     @property
@@ -80,6 +86,7 @@ class _Worker:
         self.stats = np.zeros(MAX_DEPTH + 2, dtype=np.int64)
         self.depth = depth
         self.busy = 0.0
+        self.normals = 0.0
         self.tasks = 0
 
 
@@ -149,6 +156,7 @@ class Subdivider:
             emit(cells, self._normals(cells))
             self.stats.seconds["subdivide"] = time.perf_counter() - t0
             self.stats.worker_busy = [self.stats.seconds["subdivide"]]
+            self.stats.worker_normals = [self.stats.seconds["subdivide"]]
             self.stats.worker_tasks = [len(cells)]
             return self.stats
         self._parallel(cells, level, emit, progress)
@@ -176,8 +184,11 @@ class Subdivider:
                         return
                     t0 = time.perf_counter()
                     coords = self._run_task(w, cells[t], level, self.depth)
+                    t1 = time.perf_counter()
                     normals = self._normals(coords)
-                    w.busy += time.perf_counter() - t0
+                    t2 = time.perf_counter()
+                    w.busy += t2 - t0
+                    w.normals += t2 - t1
                     w.tasks += 1
                     with cond:
                         produced[0] += len(coords)
@@ -224,4 +235,5 @@ class Subdivider:
         for w in workers:
             self._absorb(w)
         self.stats.worker_busy = [w.busy for w in workers]
+        self.stats.worker_normals = [w.normals for w in workers]
         self.stats.worker_tasks = [w.tasks for w in workers]

@@ -137,6 +137,16 @@ def test_octree_levels_match_the_voxels(compiled):
     assert tree.nbytes > 0 and 0 < tree.bytes_per_voxel < 100
 
 
+def test_octree_saves_and_loads(tmp_path, compiled):
+    tree = implc.voxelize(compiled["csg"], 6).octree
+    tree.save(tmp_path / "tree.npz")
+    loaded = type(tree).load(tmp_path / "tree.npz")
+    assert loaded.depth == tree.depth and loaded.bounds == tree.bounds
+    for level in (3, 6):
+        np.testing.assert_array_equal(loaded.traverse(level)[0], tree.traverse(level)[0])
+    np.testing.assert_array_equal(loaded.normals, tree.normals)
+
+
 def test_normals_are_unit_and_follow_the_gradient(compiled):
     v = implc.voxelize(load("torus"), 7)
     assert np.all(np.isfinite(v.normals))

@@ -41,6 +41,17 @@ class Octree:
     def bytes_per_voxel(self) -> float:
         return self.nbytes / max(len(self), 1)
 
+    def save(self, path) -> None:
+        """Write the octree to an ``.npz`` file (plain arrays: it is index-based, so it relocates)."""
+        np.savez(path, nodes=self.nodes, normals=self.normals, level_counts=self.level_counts,
+                 depth=self.depth, bounds=np.asarray(self.bounds, dtype=np.float64))
+
+    @classmethod
+    def load(cls, path) -> "Octree":
+        with np.load(path) as data:
+            return cls(int(data["depth"]), tuple(map(tuple, data["bounds"].tolist())), data["nodes"],
+                       data["normals"], data["level_counts"])
+
     def traverse(self, level: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The nodes at ``level`` (default: the voxels) in Fig. 6 order (which is Morton order).
 
