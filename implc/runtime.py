@@ -1,4 +1,4 @@
-"""The generic native routines (subdivision, normals, octree) as callable ctypes functions.
+"""The generic native routines (subdivision, normals, octree, splatting) as callable ctypes functions.
 
 A :class:`Runtime` owns the JIT-compiled runtime module (see :mod:`implc.codegen.runtime`); like surface
 kernels it is cached on disk, so creating one costs a few milliseconds after the first time.
@@ -23,3 +23,4 @@ class Runtime:
         self.normals = fn("implc_normals", [_P, _P, _P, _P, _N, _P])
         self.octree_insert = fn("implc_octree_insert", [_P, _N, _P, _P, _N, _N], _N)
         self.octree_traverse = fn("implc_octree_traverse", [_P, _N, _N, _P, _P], _N)
+        self.splat = fn("implc_splat", [_P, _P, _P, _P, _N, _N, _P, _P])

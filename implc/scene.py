@@ -10,7 +10,16 @@ import runpy
 from dataclasses import dataclass
 from pathlib import Path
 
-SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+def _scenes_dir() -> Path:
+    """The project's scenes/ folder (installed as the implc.scenes package)."""
+    try:
+        from . import scenes as package
+        return Path(next(iter(package.__path__)))
+    except ImportError:  # running from a source tree that was never installed
+        return Path(__file__).resolve().parent.parent / "scenes"
+
+
+SCENES_DIR = _scenes_dir()
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@
 - ``implc_octree_insert``: Fig. 2, insertion of Morton-ordered voxels into an index-based octree that
   starts from the previous voxel's path and ascends only to the common parent.
 - ``implc_octree_traverse``: Fig. 6, depth-first traversal yielding the nodes of one level in order.
+- ``implc_splat``: z-buffered square splats for the point renderer (nearest point wins each pixel).
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ SIGNATURES = {
     "implc_normals": (VOID, [I8P, I8P, PD, PI32, I64, PF]),
     "implc_octree_insert": (I64, [PI32, I64, PI64, PI32, I64, I64]),
     "implc_octree_traverse": (I64, [PI32, I64, I64, PI32, PI64]),
+    "implc_splat": (VOID, [PI64, PI64, PI64, PD, I64, I64, PD, PI64]),
 }
 
 
@@ -326,6 +328,28 @@ def _octree_traverse(module):
     b.ret(count.get())
 
 
+def _splat(module):
+    fn, b = _function(module, "implc_splat")
+    px, py, sizes, depth, n, size, zbuf, winner = fn.args
+    zero = const(I64, 0)
+    with for_range(b, n) as i:
+        k = _load(b, sizes, i)
+        half = b.sdiv(k, const(I64, 2))
+        x0, y0 = b.sub(_load(b, px, i), half), b.sub(_load(b, py, i), half)
+        z = _load(b, depth, i)
+        with for_range(b, k) as dy:
+            y = b.add(y0, dy)
+            with if_(b, b.and_(b.icmp_signed(">=", y, zero), b.icmp_signed("<", y, size))):
+                with for_range(b, k) as dx:
+                    x = b.add(x0, dx)
+                    with if_(b, b.and_(b.icmp_signed(">=", x, zero), b.icmp_signed("<", x, size))):
+                        pixel = b.add(b.mul(y, size), x)
+                        with if_(b, b.fcmp_ordered("<", z, _load(b, zbuf, pixel))):
+                            _store(b, z, zbuf, pixel)
+                            _store(b, i, winner, pixel)
+    b.ret_void()
+
+
 def build_runtime() -> str:
     """The LLVM IR text of the runtime module."""
     module = ir.Module(name="implc_runtime")
@@ -333,4 +357,5 @@ def build_runtime() -> str:
     _normals(module)
     _octree_insert(module)
     _octree_traverse(module)
+    _splat(module)
     return str(module)

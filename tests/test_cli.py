@@ -1,0 +1,131 @@
+"""The implc command: every subcommand works, and every user error is one line on stderr with exit 2."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from implc import io as voxel_io
+from implc.cli import main
+
+
+def run(*argv):
+    """(exit status, stdout, stderr) of the command in a fresh process, as a user runs it."""
+    proc = subprocess.run([sys.executable, "-m", "implc", *argv], capture_output=True, text=True, timeout=300)
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+def test_scenes_lists_every_scene_with_a_line(capsys):
+    assert main(["scenes"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    names = [line.split()[0] for line in lines]
+    for required in ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4", "torus", "tangle_cube",
+                     "gyroid_sphere", "heart", "csg_part"):
+        assert required in names
+    assert len(names) >= 9
+
+
+def test_voxelize_info_render_round_trip(tmp_path, capsys):
+    out = tmp_path / "blobs.npz"
+    assert main(["voxelize", "paper_blobs", "--depth", "6", "--workers", "2", "-o", str(out)]) == 0
+    summary = capsys.readouterr().out
+    assert "voxels at 64³" in summary and "yield" in summary
+    voxels = voxel_io.load_npz(out)
+    assert voxels.depth == 6 and len(voxels) > 0
+    assert main(["info", str(out)]) == 0
+    info = capsys.readouterr().out
+    assert f"voxels   {len(voxels)}" in info and "64³" in info
+    png = tmp_path / "blobs.png"
+    assert main(["render", str(out), "-o", str(png), "--size", "128", "--view", "10,60", "--lod", "5"]) == 0
+    from PIL import Image
+    assert Image.open(png).size == (128, 128)
+
+
+def test_voxelize_expr_and_formats(tmp_path):
+    for suffix in (".npz", ".ply", ".npy"):
+        out = tmp_path / f"s{suffix}"
+        assert main(["voxelize", "--expr", "sin(4*theta)*sin(8*phi) - r", "--depth", "5", "--quiet",
+                     "-o", str(out)]) == 0
+        assert out.stat().st_size > 0
+    dense = np.load(tmp_path / "s.npy")
+    assert dense.shape == (32, 32, 32) and dense.dtype == bool
+    assert dense.sum() == len(voxel_io.load_npz(tmp_path / "s.npz"))
+
+
+def test_render_scene_directly_with_perspective(tmp_path):
+    png = tmp_path / "t.png"
+    assert main(["render", "torus", "--depth", "6", "--quiet", "-o", str(png), "--size", "96", "--perspective",
+                 "--color", "0.2,0.5,0.9"]) == 0
+    assert png.exists()
+
+
+@pytest.mark.parametrize("formula", [
+    "__import__('os').system('echo pwned')",
+    "x.__class__",
+    "(lambda: 1)()",
+    "[x for x in ()]",
+    "open('/etc/passwd')",
+    "sin(x) if x else y",
+    "x ^ 2",
+    "exec('1')",
+    "sympy.sin(x)",
+    "x + w",
+    "10**10**10",
+    "sin(x, y)",
+    "x; y",
+])
+def test_expr_never_executes_code(formula, tmp_path):
+    marker = tmp_path / "pwned"
+    status, out, err = run("voxelize", "--expr", formula.replace("pwned", str(marker)), "--depth", "4",
+                           "-o", str(tmp_path / "x.npz"))
+    assert status == 2
+    assert err.startswith("implc: error: --expr:") and len(err.strip().splitlines()) == 1, err
+    assert "Traceback" not in err and not marker.exists()
+    assert not (tmp_path / "x.npz").exists()
+
+
+def test_user_errors_are_one_line_with_exit_2(tmp_path):
+    broken = tmp_path / "broken.py"
+    broken.write_text("import sympy\nsurface = (\n")
+    empty = tmp_path / "empty.py"
+    empty.write_text("bounds = ((-1, 1),) * 3\n")
+    readonly = tmp_path / "ro"
+    readonly.mkdir()
+    readonly.chmod(0o500)
+    cases = [
+        (["voxelize", "nosuch", "-o", str(tmp_path / "a.npz")], "no scene 'nosuch'"),
+        (["voxelize", str(tmp_path / "missing.py"), "-o", str(tmp_path / "a.npz")], "no scene"),
+        (["voxelize", str(broken), "-o", str(tmp_path / "a.npz")], "failed to load: SyntaxError"),
+        (["voxelize", str(empty), "-o", str(tmp_path / "a.npz")], "defines no 'surface'"),
+        (["voxelize", "torus", "--depth", "0", "-o", str(tmp_path / "a.npz")], "depth must be an integer from 1 to 21"),
+        (["voxelize", "torus", "-o", str(tmp_path / "a.txt")], "unknown output format '.txt'"),
+        (["voxelize", "torus", "-o", str(tmp_path / "no" / "a.npz")], "does not exist"),
+        (["render", "torus", "--size", "5", "-o", str(tmp_path / "a.png")], "--size must be from 16 to 16384"),
+        (["render", "torus", "--view", "up", "-o", str(tmp_path / "a.png")], "--view must be two numbers"),
+        (["info", str(tmp_path / "nothing.npz")], "cannot read"),
+        (["voxelize", "torus", "--bounds", "1,2,3", "-o", str(tmp_path / "a.npz")], "--bounds must be six"),
+        (["voxelize", "--expr", "x", "--bounds", "1,0,-1,1,-1,1", "-o", str(tmp_path / "a.npz")], "lo < hi"),
+    ]
+    if os.geteuid() != 0:  # root writes anywhere
+        cases.append((["voxelize", "torus", "-o", str(readonly / "a.npz")], "permission denied"))
+    for argv, message in cases:
+        status, out, err = run(*argv)
+        assert status == 2, (argv, status, err)
+        assert message in err, (argv, err)
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, (argv, err)
+
+
+def test_demo_writes_the_three_renders(tmp_path, capsys):
+    assert main(["demo", "--depth", "5", "--size", "64", "--out-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    for name in ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4"):
+        assert name in out
+        assert (tmp_path / f"{name}.png").stat().st_size > 0
+
+
+def test_console_script_is_declared():
+    text = (Path(__file__).parent.parent / "pyproject.toml").read_text()
+    assert 'implc = "implc.cli:main"' in text
