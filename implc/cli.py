@@ -147,6 +147,11 @@ def cmd_info(args) -> int:
     return 0
 
 
+def cmd_bench(argv) -> int:
+    from .benchmarks.suite import main as bench_main  # the suite lives in benchmarks/, installed with us
+    return bench_main(argv)
+
+
 def cmd_demo(args) -> int:
     out_dir = Path(args.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -203,6 +208,8 @@ def _parser():
     i.add_argument("file")
     i.set_defaults(run=cmd_info)
 
+    sub.add_parser("bench", help="run the benchmark suite (options: 'implc bench --help')", add_help=False)
+
     d = sub.add_parser("demo", help="voxelize the paper's three scenes at 512³ and render them")
     d.add_argument("--depth", type=int, default=9, help="grid depth (default 9: 512³)")
     d.add_argument("--size", type=int, default=1024, help="image size (default 1024)")
@@ -212,8 +219,11 @@ def _parser():
 
 
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
     try:
+        if argv[:1] == ["bench"]:  # the suite parses its own options
+            return cmd_bench(argv[1:])
+        args = _parser().parse_args(argv)
         return args.run(args)
     except (UsageError, ExprError, CompileError, scenes.SceneError, voxel_io.VoxelFileError, MemoryError,
             ValueError, OSError) as exc:

@@ -1,0 +1,1 @@
+"""implc's benchmark suite (installed as implc.benchmarks; run it with `implc bench`)."""

@@ -1,0 +1,322 @@
+"""implc's benchmark suite (``implc bench``): the paper's Table 1, baselines, growth, tightness, kernels.
+
+Every figure is measured in this run on this machine and printed, never asserted. Times are medians over
+``--repeats`` runs; speedups are ratios of figures from the same run. Results go to stdout as Markdown
+and to ``--out`` (default ``benchmarks/results``) as ``latest.md`` and ``latest.json`` with the machine
+described.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import implc
+from implc import scene
+from implc.subdivide import default_workers
+
+PAPER_SCENES = ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4")
+PAPER_TABLE1 = {  # seconds on the SGI Challenge, 1..7 slaves (Stolte & Caubet, Table 1)
+    "paper_blobs": [88, 45, 34, 26, 21, 20, 14],
+    "paper_sin4_sin8": [111, 58, 38, 31, 28, 24, 21],
+    "paper_sin3_sin4": [71, 35, 23, 17, 16, 14, 11],
+}
+
+
+# -- measuring -------------------------------------------------------------------------------------
+def median_time(fn, repeats):
+    times, result = [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), result
+
+
+def machine() -> dict:
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import llvmlite
+    import sympy
+    return {"cpu": cpu, "cores": default_workers(), "python": platform.python_version(),
+            "llvmlite": llvmlite.__version__, "numpy": np.__version__, "sympy": sympy.__version__,
+            "implc": implc.__version__, "platform": platform.platform(), "date": time.strftime("%Y-%m-%d %H:%M")}
+
+
+def compiled(name):
+    sc = scene.load(name)
+    return implc.compile(sc.surface, sc.bounds)
+
+
+def corner_grid(bounds, depth, k):
+    """The (n+1)² corners of z-slab k of the grid, as (points, n + 1)."""
+    n = 1 << depth
+    xs, ys, zs = (np.linspace(lo, hi, n + 1) for lo, hi in bounds)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    return np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, zs[k])]), n + 1
+
+
+def dense_sign_changes(evaluate, bounds, depth) -> int:
+    """Cells with a sign change among their corners, F sampled slab by slab (the baseline a user writes)."""
+    n = 1 << depth
+    count = 0
+    previous = None
+    for k in range(n + 1):
+        pts, m = corner_grid(bounds, depth, k)
+        f = np.asarray(evaluate(pts), dtype=np.float64).reshape(m, m)
+        if previous is not None:
+            lo = np.minimum(previous, f)
+            hi = np.maximum(previous, f)
+            lo = np.minimum.reduce([lo[:-1, :-1], lo[1:, :-1], lo[:-1, 1:], lo[1:, 1:]])
+            hi = np.maximum.reduce([hi[:-1, :-1], hi[1:, :-1], hi[:-1, 1:], hi[1:, 1:]])
+            count += int(np.count_nonzero((lo <= 0) & (hi >= 0)))
+        previous = f
+    return count
+
+
+def numpy_evaluator(expr):
+    import sympy
+    from implc.symbols import cartesian_form, x, y, z
+    fn = sympy.lambdify((x, y, z), cartesian_form(expr), modules="numpy")
+
+    def evaluate(pts):
+        with np.errstate(all="ignore"):
+            return np.broadcast_to(fn(pts[:, 0], pts[:, 1], pts[:, 2]), (len(pts),))
+    return evaluate
+
+
+def symengine_evaluator(expr):
+    """symengine's LLVM-compiled Lambdify, or None when symengine is not installed."""
+    try:
+        import symengine
+    except ImportError:
+        return None
+    from implc.symbols import cartesian_form, x, y, z
+    fn = symengine.Lambdify([x, y, z], [cartesian_form(expr)], backend="llvm")
+    return lambda pts: fn(pts)[:, 0]
+
+
+# -- sections --------------------------------------------------------------------------------------
+def table1(args, out):
+    workers = args.workers or list(range(1, default_workers() + 1))
+    rows = []
+    for name in args.scenes:
+        t0 = time.perf_counter()
+        s = compiled(name)
+        compile_s = time.perf_counter() - t0
+        implc.voxelize(s, min(args.depth, 6))  # warm the runtime
+        t1 = None
+        for w in workers:
+            seconds, v = median_time(lambda: implc.voxelize(s, args.depth, workers=w), args.repeats)
+            t1 = seconds if w == 1 else t1
+            st = v.stats
+            busy, normals = sum(st.worker_busy), sum(st.worker_normals)
+            paper = PAPER_TABLE1.get(name, [])
+            rows.append({
+                "scene": name, "workers": w, "seconds": seconds,
+                "yield": (t1 / (w * seconds)) if t1 else None,
+                "compile_s": compile_s, "subdivision_busy_s": busy - normals, "normals_busy_s": normals,
+                "octree_build_s": st.seconds.get("storage", 0.0) + st.seconds.get("finish", 0.0),
+                "voxels": len(v), "interval_evaluations": st.interval_evaluations,
+                "paper_seconds": paper[w - 1] if w <= len(paper) else None,
+                "paper_speedup": (paper[w - 1] / seconds) if w <= len(paper) else None,
+            })
+    out["table1"] = rows
+    md = [f"### Table 1 at {1 << args.depth}³ (paper: SGI Challenge, 1 to 7 slaves)", "",
+          "| scene | workers | seconds | yield | compile s | subdivision s | normals s | octree s | voxels "
+          "| interval evals | paper s | vs paper |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        paper = f"{r['paper_seconds']}" if r["paper_seconds"] else "-"
+        ratio = f"{r['paper_speedup']:.0f}×" if r["paper_speedup"] else "-"
+        yld = f"{r['yield']:.0%}" if r["yield"] is not None else "-"
+        md.append(f"| {r['scene']} | {r['workers']} | {r['seconds']:.3f} | {yld} | {r['compile_s']:.3f} "
+                  f"| {r['subdivision_busy_s']:.3f} | {r['normals_busy_s']:.3f} | {r['octree_build_s']:.3f} "
+                  f"| {r['voxels']} | {r['interval_evaluations']} | {paper} | {ratio} |")
+    md += ["", "subdivision and normals: summed worker busy time; octree: time the calling thread spent "
+           "inserting and finishing; yield = t1 / (n · tn) from the wall times in this table."]
+    return md
+
+
+def baselines(args, out):
+    rows = []
+    for name in args.baseline_scenes:
+        sc = scene.load(name)
+        s = implc.compile(sc.surface, sc.bounds)
+        implc.voxelize(s, 6)
+        evaluators = {"numpy": numpy_evaluator(sc.surface)}
+        se = symengine_evaluator(sc.surface)
+        if se is not None:
+            evaluators["symengine llvm"] = se
+        for depth in args.baseline_depths:
+            ours, v = median_time(lambda: implc.voxelize(s, depth), args.repeats)
+            row = {"scene": name, "depth": depth, "implc_s": ours, "voxels": len(v)}
+            for label, ev in evaluators.items():
+                if label == "numpy" and depth > args.numpy_max_depth:
+                    continue
+                seconds, cells = median_time(lambda: dense_sign_changes(ev, s.bounds, depth), 1)
+                row[f"{label}_s"] = seconds
+                row[f"{label}_cells"] = cells
+                row[f"{label}_speedup"] = seconds / ours
+            rows.append(row)
+    out["baselines"] = rows
+    md = ["### Against dense sampling (what a Python user writes instead)", "",
+          "| scene | grid | implc s | numpy s | implc vs numpy | symengine-LLVM s | implc vs symengine |",
+          "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        def cell(label):
+            return (f"{r[label + '_s']:.2f} | {r[label + '_speedup']:.0f}×" if label + "_s" in r else "- | -")
+        md.append(f"| {r['scene']} | {1 << r['depth']}³ | {r['implc_s']:.3f} | {cell('numpy')} "
+                  f"| {cell('symengine llvm')} |")
+    md += ["", "Dense sampling evaluates F at every cell corner, slab by slab, and marks sign-change cells; "
+           "implc's time is voxelize end to end without compile, all cores."]
+    return md
+
+
+GROWTH_SCRIPT = """
+import json, resource, sys, time, implc
+from implc import scene
+sc = scene.load(sys.argv[1]); s = implc.compile(sc.surface, sc.bounds)
+t0 = time.perf_counter(); v = implc.voxelize(s, int(sys.argv[2])); seconds = time.perf_counter() - t0
+print(json.dumps({"seconds": seconds, "voxels": len(v),
+                  "peak_rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
+"""
+
+
+def growth(args, out):
+    rows = []
+    for name in args.growth_scenes:
+        previous = None
+        for depth in args.growth_depths:
+            proc = subprocess.run([sys.executable, "-c", GROWTH_SCRIPT, name, str(depth)], capture_output=True,
+                                  text=True, check=True)
+            r = json.loads(proc.stdout)
+            r.update(scene=name, depth=depth, ratio=(r["seconds"] / previous["seconds"]) if previous else None)
+            rows.append(r)
+            previous = r
+    out["growth"] = rows
+    md = ["### Growth with resolution (one process per run; ideal ratio per doubling for a surface: 4)", "",
+          "| scene | grid | seconds | voxels | peak memory | time ratio per doubling |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        ratio = f"{r['ratio']:.2f}" if r["ratio"] else "-"
+        md.append(f"| {r['scene']} | {1 << r['depth']}³ | {r['seconds']:.2f} | {r['voxels']} "
+                  f"| {r['peak_rss'] / 2**30:.2f} GiB | {ratio} |")
+    return md
+
+
+def tightness(args, out):
+    rows = []
+    for name in args.tightness_scenes:
+        s = compiled(name)
+        v = implc.voxelize(s, args.tightness_depth, storage="coords")
+        cells = dense_sign_changes(s.eval, s.bounds, args.tightness_depth)
+        rows.append({"scene": name, "voxels": len(v), "sign_change_cells": cells, "ratio": len(v) / cells})
+    out["tightness"] = rows
+    md = [f"### Tightness at {1 << args.tightness_depth}³: voxels / sign-change cells (1.00 is exact)", "",
+          "| scene | voxels | sign-change cells | ratio |", "|---|---|---|---|"]
+    md += [f"| {r['scene']} | {r['voxels']} | {r['sign_change_cells']} | {r['ratio']:.3f} |" for r in rows]
+    return md
+
+
+def kernels(args, out):
+    rows = []
+    n = 1 << 20
+    rng = np.random.default_rng(0)
+    lo = rng.uniform(-1, 1, (n, 3))
+    hi = lo + 2 / 512
+    for name in args.scenes:
+        sc = scene.load(name)
+        s = implc.compile(sc.surface, sc.bounds)
+        out_lo, out_hi, values, grads = np.empty(n), np.empty(n), np.empty(n), np.empty((n, 3))
+        interval_s, _ = median_time(lambda: s._interval(lo.ctypes.data, hi.ctypes.data, out_lo.ctypes.data,
+                                                        out_hi.ctypes.data, n), args.repeats)
+        gradient_s, _ = median_time(lambda: s._gradient(lo.ctypes.data, values.ctypes.data, grads.ctypes.data, n),
+                                    args.repeats)
+        saved = os.environ.get("IMPLC_CACHE_DIR")
+        try:
+            os.environ["IMPLC_CACHE_DIR"] = "off"
+            cold, _ = median_time(lambda: implc.compile(sc.surface, sc.bounds), max(1, args.repeats // 2))
+            with tempfile.TemporaryDirectory() as tmp:
+                os.environ["IMPLC_CACHE_DIR"] = tmp
+                implc.compile(sc.surface, sc.bounds)
+                cached, _ = median_time(lambda: implc.compile(sc.surface, sc.bounds), args.repeats)
+        finally:
+            os.environ.pop("IMPLC_CACHE_DIR", None) if saved is None else os.environ.update(IMPLC_CACHE_DIR=saved)
+        rows.append({"scene": name, "ops": len(s.tape), "interval_per_s": n / interval_s,
+                     "gradient_per_s": n / gradient_s, "compile_cold_s": cold, "compile_cached_s": cached})
+    out["kernels"] = rows
+    md = ["### Kernels, one core", "", "| scene | ops | interval evals/s | gradient evals/s | compile cold | "
+          "compile cached |", "|---|---|---|---|---|---|"]
+    md += [f"| {r['scene']} | {r['ops']} | {r['interval_per_s'] / 1e6:.1f} M | {r['gradient_per_s'] / 1e6:.1f} M "
+           f"| {r['compile_cold_s'] * 1e3:.0f} ms | {r['compile_cached_s'] * 1e3:.1f} ms |" for r in rows]
+    return md
+
+
+SECTIONS = {"table1": table1, "baselines": baselines, "growth": growth, "tightness": tightness, "kernels": kernels}
+
+
+def parser():
+    p = argparse.ArgumentParser(prog="implc bench", description="implc's benchmark suite")
+    p.add_argument("--sections", default=",".join(SECTIONS), help=f"comma list of {', '.join(SECTIONS)}")
+    p.add_argument("--scenes", default=",".join(PAPER_SCENES), help="scenes for Table 1 and the kernels")
+    p.add_argument("--depth", type=int, default=9, help="Table 1 depth (default 9: 512³)")
+    p.add_argument("--workers", help="comma list of worker counts (default 1..cores)")
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--baseline-scenes", default="paper_blobs")
+    p.add_argument("--baseline-depths", default="8,9")
+    p.add_argument("--numpy-max-depth", type=int, default=9, help="skip numpy sampling above this depth")
+    p.add_argument("--growth-scenes", default="paper_blobs")
+    p.add_argument("--growth-depths", default="7,8,9,10,11")
+    p.add_argument("--tightness-scenes", default=None, help="default: every scene")
+    p.add_argument("--tightness-depth", type=int, default=8)
+    p.add_argument("--out", default=str(Path(__file__).parent / "results"), help="folder for latest.md/.json")
+    return p
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    args.scenes = args.scenes.split(",")
+    args.workers = [int(w) for w in args.workers.split(",")] if args.workers else None
+    args.baseline_scenes = args.baseline_scenes.split(",")
+    args.baseline_depths = [int(d) for d in args.baseline_depths.split(",")]
+    args.growth_scenes = args.growth_scenes.split(",")
+    args.growth_depths = [int(d) for d in args.growth_depths.split(",")]
+    args.tightness_scenes = args.tightness_scenes.split(",") if args.tightness_scenes else scene.available()
+    sections = args.sections.split(",")
+    unknown = [s for s in sections if s not in SECTIONS]
+    if unknown:
+        raise ValueError(f"unknown benchmark section(s) {', '.join(unknown)}: use {', '.join(SECTIONS)}")
+    out = {"machine": machine()}
+    m = out["machine"]
+    lines = ["## implc benchmarks", "", f"{m['cpu']}, {m['cores']} cores; Python {m['python']}, llvmlite "
+             f"{m['llvmlite']}, numpy {m['numpy']}; {m['date']}; medians of {args.repeats}", ""]
+    print("\n".join(lines), flush=True)
+    for name in sections:
+        section = SECTIONS[name](args, out)
+        print("\n".join(section) + "\n", flush=True)
+        lines += section + [""]
+    folder = Path(args.out)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "latest.md").write_text("\n".join(lines))
+    (folder / "latest.json").write_text(json.dumps(out, indent=1))
+    print(f"wrote {folder / 'latest.md'} and {folder / 'latest.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
