@@ -3,9 +3,10 @@
 After the paper's Fig. 3, with today's means: a plan pass subdivides the root down to a coarse level
 and keeps the octants that may meet the surface; those become tasks, handed to workers as they go idle
 (a shared counter). Each worker runs the native depth-first subdivider (:mod:`implc.codegen.runtime`)
-on its task with the GIL released, then the native normal kernel, and returns the task's voxels. The
-calling thread (the paper's master) hands finished tasks to the storage backend strictly in task order,
-so the voxels arrive in Morton order and the result is identical for every worker count.
+on its task with the GIL released, then the native normal kernel. Finished tasks reach the storage
+backend strictly in task order (the paper's master's role, taken by whichever worker finds the next task
+ready, so that no extra thread competes for the cores): the voxels arrive in Morton order and the result
+is identical for every worker count. The calling thread only waits.
 
 Ctrl-C or an error in a worker raises a cancel flag that native code polls every octant; every thread is
 joined before the exception reaches the caller.
@@ -76,6 +77,26 @@ def geometry(bounds, depth: int) -> np.ndarray:
     return geom
 
 
+class _TaskResult:
+    """Reusable arrays for one finished task's voxels: pooled, so that steady state allocates nothing
+    (fresh pages are costly, and page faults from several threads contend in the kernel)."""
+
+    def __init__(self):
+        self.coords = np.empty((OUTPUT_CHUNK, 3), dtype=np.uint32)
+        self.normals = np.empty((OUTPUT_CHUNK, 3), dtype=np.float32)
+        self.count = 0
+
+    def append(self, chunk):
+        end = self.count + len(chunk)
+        if end > len(self.coords):
+            grown = np.empty((max(end, 2 * len(self.coords)), 3), dtype=np.uint32)
+            grown[: self.count] = self.coords[: self.count]
+            self.coords = grown
+            self.normals = np.empty_like(grown, dtype=np.float32)
+        self.coords[self.count:end] = chunk
+        self.count = end
+
+
 class _Worker:
     """Per-thread native buffers and counters."""
 
@@ -85,6 +106,9 @@ class _Worker:
         self.out = np.empty((OUTPUT_CHUNK, 3), dtype=np.uint32)
         self.stats = np.zeros(MAX_DEPTH + 2, dtype=np.int64)
         self.depth = depth
+        # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
+        self.stack_ptr, self.state_ptr = self.stack.ctypes.data, self.state.ctypes.data
+        self.out_ptr, self.stats_ptr = self.out.ctypes.data, self.stats.ctypes.data
         self.busy = 0.0
         self.normals = 0.0
         self.tasks = 0
@@ -106,29 +130,29 @@ class Subdivider:
         self.gradient = surface.native.address("implc_gradient")
         self.point = surface.native.address("implc_point")
         self.cancel = np.zeros(1, dtype=np.int32)
+        self.geom_ptr, self.leaf_geom_ptr = self.geom.ctypes.data, self.leaf_geom.ctypes.data
+        self.cancel_ptr = self.cancel.ctypes.data
         self.stats = SubdivisionStats(depth=depth, workers=workers, kept_per_level=[1] + [0] * depth)
 
     # -- native steps ------------------------------------------------------------------------------
-    def _run_task(self, w: _Worker, cell, level: int, depth: int) -> np.ndarray:
-        """All kept cells at ``depth`` below ``cell`` (at ``level``), in Morton order."""
+    def _run_task(self, w: _Worker, cell, level: int, depth: int, result: _TaskResult) -> None:
+        """Append all kept cells at ``depth`` below ``cell`` (at ``level``) to ``result``, in Morton order."""
         w.stack[:4] = (*cell, level)
         w.state[:] = (1, depth)
-        chunks = []
         while True:
-            n = self.runtime.subdivide(self.box, self.geom.ctypes.data, w.stack.ctypes.data, w.state.ctypes.data,
-                                       w.out.ctypes.data, len(w.out), w.stats.ctypes.data, self.cancel.ctypes.data)
+            n = self.runtime.subdivide(self.box, self.geom_ptr, w.stack_ptr, w.state_ptr, w.out_ptr, OUTPUT_CHUNK,
+                                       w.stats_ptr, self.cancel_ptr)
             if n:
-                chunks.append(w.out[:n].copy())
+                result.append(w.out[:n])
             if w.state[0] == 0 or self.cancel[0]:
                 break
-        return np.concatenate(chunks) if chunks else np.zeros((0, 3), dtype=np.uint32)
 
-    def _normals(self, coords: np.ndarray) -> np.ndarray:
-        normals = np.empty((len(coords), 3), dtype=np.float32)
+    def _normals(self, coords: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Unit normals at the centres of ``coords``, written to ``out`` (same length)."""
         if len(coords):
-            self.runtime.normals(self.gradient, self.point, self.leaf_geom.ctypes.data, coords.ctypes.data,
-                                 len(coords), normals.ctypes.data)
-        return normals
+            self.runtime.normals(self.gradient, self.point, self.leaf_geom_ptr, coords.ctypes.data, len(coords),
+                                 out.ctypes.data)
+        return out
 
     # -- orchestration ---------------------------------------------------------------------------
     def plan(self) -> tuple[np.ndarray, int]:
@@ -136,7 +160,9 @@ class Subdivider:
         level = min(self.depth, 3 if self.workers <= 4 else 4)
         w = _Worker(level)
         t0 = time.perf_counter()
-        cells = self._run_task(w, (0, 0, 0), 0, level)
+        result = _TaskResult()
+        self._run_task(w, (0, 0, 0), 0, level, result)
+        cells = result.coords[: result.count].copy()
         self.stats.seconds["plan"] = time.perf_counter() - t0
         self._absorb(w)
         self.stats.task_level = level
@@ -153,7 +179,7 @@ class Subdivider:
         cells, level = self.plan()
         if level == self.depth:  # the plan already reached the leaves
             t0 = time.perf_counter()
-            emit(cells, self._normals(cells))
+            emit(cells, self._normals(cells, np.empty((len(cells), 3), dtype=np.float32)))
             self.stats.seconds["subdivide"] = time.perf_counter() - t0
             self.stats.worker_busy = [self.stats.seconds["subdivide"]]
             self.stats.worker_normals = [self.stats.seconds["subdivide"]]
@@ -167,10 +193,37 @@ class Subdivider:
         results: dict[int, tuple] = {}
         errors: list[BaseException] = []
         cond = threading.Condition()
-        next_task = [0]
-        produced = [0]
-        in_flight = threading.Semaphore(4 * self.workers)  # bounds finished-but-unconsumed results
+        finished = threading.Event()  # all tasks stored, or an error: the only thing the caller waits for
+        next_task, next_emit, committing, produced = [0], [0], [False], [0]
+        storage_seconds = [0.0]
+        in_flight = threading.Semaphore(4 * self.workers)  # bounds finished-but-unstored results
         workers = [_Worker(self.depth) for _ in range(self.workers)]
+        pool: list[_TaskResult] = []
+
+        def commit_ready():
+            """Hand finished tasks to the backend in task order; whichever worker finds the next one ready
+            does it, so storage needs no extra thread competing for the cores."""
+            while True:
+                with cond:
+                    t = next_emit[0]
+                    if committing[0] or t not in results or self.cancel[0]:
+                        return
+                    committing[0] = True
+                    result = results.pop(t)
+                try:
+                    t0 = time.perf_counter()
+                    emit(result.coords[: result.count], result.normals[: result.count])
+                    storage_seconds[0] += time.perf_counter() - t0
+                    if progress is not None:
+                        progress.update(1)
+                finally:
+                    in_flight.release()
+                    with cond:
+                        pool.append(result)
+                        next_emit[0] = t + 1
+                        committing[0] = False
+                    if t + 1 == n_tasks:
+                        finished.set()
 
         def work(w: _Worker):
             try:
@@ -182,46 +235,41 @@ class Subdivider:
                     if t >= n_tasks:
                         in_flight.release()
                         return
+                    with cond:
+                        result = pool.pop() if pool else _TaskResult()
+                    result.count = 0
                     t0 = time.perf_counter()
-                    coords = self._run_task(w, cells[t], level, self.depth)
+                    self._run_task(w, cells[t], level, self.depth, result)
                     t1 = time.perf_counter()
-                    normals = self._normals(coords)
+                    self._normals(result.coords[: result.count], result.normals[: result.count])
                     t2 = time.perf_counter()
                     w.busy += t2 - t0
                     w.normals += t2 - t1
                     w.tasks += 1
                     with cond:
-                        produced[0] += len(coords)
+                        produced[0] += result.count
                         if self.max_voxels is not None and produced[0] > self.max_voxels:
                             raise MemoryError(f"more than max_voxels={self.max_voxels} voxels at depth {self.depth}")
-                        results[t] = (coords, normals)
-                        cond.notify_all()
+                        results[t] = result
+                    commit_ready()
             except BaseException as exc:  # noqa: BLE001 - any failure must reach the caller
                 self.cancel[0] = 1
                 with cond:
                     errors.append(exc)
-                    cond.notify_all()
+                finished.set()
 
         threads = [threading.Thread(target=work, args=(w,), name=f"implc-worker-{i}", daemon=True)
                    for i, w in enumerate(workers)]
         t_start = time.perf_counter()
-        storage_seconds = 0.0
+        if n_tasks == 0:
+            finished.set()
         try:
             for th in threads:
                 th.start()
-            for t in range(n_tasks):
-                with cond:
-                    while t not in results and not errors:
-                        cond.wait(0.05)  # short waits keep Ctrl-C prompt
-                    if errors:
-                        raise errors[0]
-                    coords, normals = results.pop(t)
-                in_flight.release()
-                t0 = time.perf_counter()
-                emit(coords, normals)
-                storage_seconds += time.perf_counter() - t0
-                if progress is not None:
-                    progress.update(1)
+            while not finished.wait(0.05):  # short waits keep Ctrl-C prompt
+                pass
+            if errors:
+                raise errors[0]
         except BaseException:
             self.cancel[0] = 1
             raise
@@ -231,7 +279,7 @@ class Subdivider:
             for th in threads:
                 th.join()
         self.stats.seconds["subdivide"] = time.perf_counter() - t_start
-        self.stats.seconds["storage"] = storage_seconds
+        self.stats.seconds["storage"] = storage_seconds[0]
         for w in workers:
             self._absorb(w)
         self.stats.worker_busy = [w.busy for w in workers]

@@ -81,24 +81,28 @@ class Voxels:
 
 
 class _Collect:
-    """Keeps the voxel arrays for Voxels while forwarding each batch to the chosen backend."""
+    """Copies each batch into growing voxel arrays as it arrives (overlapping the workers, so nothing
+    is left to concatenate at the end) and forwards it to the chosen backend."""
 
-    def __init__(self, backend):
+    def __init__(self, backend, capacity: int):
         self.backend = backend
-        self.coords, self.normals = [], []
+        self.count = 0
+        self.coords = np.empty((max(capacity, 1024), 3), dtype=np.uint32)
+        self.normals = np.empty((max(capacity, 1024), 3), dtype=np.float32)
 
     def __call__(self, coords, normals):
-        self.coords.append(coords)
-        self.normals.append(normals)
-        self.backend.add(coords, normals)
+        end = self.count + len(coords)
+        if end > len(self.coords):
+            size = max(end, 2 * len(self.coords))
+            self.coords = np.resize(self.coords, (size, 3))
+            self.normals = np.resize(self.normals, (size, 3))
+        self.coords[self.count:end] = coords
+        self.normals[self.count:end] = normals
+        self.count = end
+        self.backend.add(self.coords[end - len(coords):end], self.normals[end - len(coords):end])
 
-    def arrays(self, reuse=None):
-        """The concatenated voxel arrays; an octree's payload already is the normals array."""
-        if not self.coords:
-            return np.zeros((0, 3), np.uint32), np.zeros((0, 3), np.float32)
-        coords = np.concatenate(self.coords)
-        normals = reuse.normals if isinstance(reuse, Octree) else np.concatenate(self.normals)
-        return coords, normals
+    def arrays(self):
+        return self.coords[: self.count], self.normals[: self.count]
 
 
 def _check_depth(depth):
@@ -131,13 +135,13 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     workers = default_workers() if workers is None else int(workers)
     if workers < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
-    backend = make_backend(storage)
     available = available_memory()
     if max_voxels is None:
         max_voxels = int(available * 0.8 / bytes_per_voxel(storage))
 
     t_start = time.perf_counter()
     runtime = Runtime()
+    backend = OctreeBuilder(keep_normals=False, runtime=runtime) if storage == "octree" else make_backend(storage)
     subdivider = Subdivider(surface, depth, workers, runtime, max_voxels=max_voxels)
     cells, level = subdivider.plan()
     estimate = _estimate_voxels(len(cells), level, depth)
@@ -146,9 +150,10 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
 
     t0 = time.perf_counter()
     backend.begin(depth, surface.bounds)
+    expected = min(estimate, max_voxels) // 2
     if hasattr(backend, "reserve"):
-        backend.reserve(min(estimate, max_voxels) // 2)
-    collect = _Collect(backend)
+        backend.reserve(expected)
+    collect = _Collect(backend, expected)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -163,5 +168,7 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     stats.seconds["finish"] = time.perf_counter() - t1
     stats.seconds["setup"] = t0 - t_start - stats.seconds["plan"]
     stats.seconds["total"] = time.perf_counter() - t_start
-    coords, normals = collect.arrays(reuse=result)
+    coords, normals = collect.arrays()
+    if isinstance(result, Octree):
+        result.normals = normals  # the octree's payload is the voxels' normals array itself
     return Voxels(coords, normals, depth, surface.bounds, stats, storage=result)

@@ -214,11 +214,11 @@ def test_worker_errors_reach_the_caller_and_no_thread_is_left(monkeypatch):
     calls = {"n": 0}
     original = Subdivider._normals
 
-    def failing(self, coords):
+    def failing(self, coords, out):
         calls["n"] += 1
         if calls["n"] > 3:
             raise RuntimeError("boom in a worker")
-        return original(self, coords)
+        return original(self, coords, out)
 
     monkeypatch.setattr(Subdivider, "_normals", failing)
     before = threading.active_count()
@@ -242,3 +242,11 @@ def test_storage_errors_stop_the_workers():
 def test_progress_bar(capsys):
     implc.voxelize(implc.compile(x**2 + y**2 + z**2 - Rational(1, 2)), 6, progress=True)
     assert "voxelize 64³" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_surface_outside_the_box_gives_no_voxels(workers):
+    v = implc.voxelize(implc.compile(x**2 + y**2 + z**2 + 1), 7, workers=workers)
+    assert len(v) == 0 and v.coords.shape == (0, 3) and len(v.octree) == 0
+    v = implc.voxelize(implc.compile(x - Rational(999, 1000)), 7, workers=workers)  # only in the last slab
+    assert len(v) > 0 and v.coords[:, 0].min() == 127

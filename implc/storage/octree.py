@@ -87,11 +87,19 @@ class Octree:
 
 
 class OctreeBuilder:
-    """Storage backend that inserts each Morton-ordered batch natively as it arrives."""
+    """Storage backend that inserts each Morton-ordered batch natively as it arrives.
+
+    With ``keep_normals=False`` the caller owns the normals array and attaches it as the payload after
+    ``finish()`` (the voxelizer does, to avoid a second copy).
+    """
+
+    def __init__(self, keep_normals: bool = True, runtime: Runtime | None = None):
+        self.keep_normals = keep_normals
+        self.runtime = runtime
 
     def begin(self, depth, bounds):
         self.depth, self.bounds = depth, bounds
-        self.runtime = Runtime()
+        self.runtime = self.runtime or Runtime()
         self.nodes = np.zeros((1024, 8), dtype=np.int32)
         self.state = np.zeros(OCTREE_STATE_WORDS, dtype=np.int64)
         self.state[NODE_COUNT] = 1  # the root
@@ -119,7 +127,8 @@ class OctreeBuilder:
             if done < len(coords):  # out of nodes: grow and go on where it stopped
                 self.reserve(int(len(self.nodes) * 2 / 0.4))
         self.count += len(coords)
-        self._normals.append(np.asarray(normals, dtype=np.float32))
+        if self.keep_normals:
+            self._normals.append(np.asarray(normals, dtype=np.float32))
 
     def finish(self):
         used = int(self.state[NODE_COUNT])
