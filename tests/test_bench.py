@@ -1,0 +1,28 @@
+"""The benchmark suite runs end to end on a small setting and its figures are consistent (not timed)."""
+
+import json
+
+from implc.cli import main
+
+
+def test_bench_suite_small(tmp_path, capsys):
+    status = main(["bench", "--depth", "5", "--workers", "1,2", "--repeats", "1", "--baseline-depths", "5",
+                   "--growth-depths", "5,6", "--tightness-scenes", "torus,paper_blobs", "--tightness-depth", "6",
+                   "--out", str(tmp_path)])
+    assert status == 0
+    assert "Table 1 at 32³" in capsys.readouterr().out
+    data = json.loads((tmp_path / "latest.json").read_text())
+    assert data["machine"]["cores"] >= 1 and data["machine"]["llvmlite"]
+    table = data["table1"]
+    assert {r["workers"] for r in table} == {1, 2}
+    for scene in {r["scene"] for r in table}:  # the same voxels whatever the worker count
+        assert len({r["voxels"] for r in table if r["scene"] == scene}) == 1
+    for r in data["tightness"]:
+        assert r["ratio"] >= 1.0  # no sign-change cell is ever missed
+    for r in data["baselines"]:
+        assert r["voxels"] >= r["numpy_cells"] > 0
+        if "symengine llvm_cells" in r:
+            assert r["symengine llvm_cells"] == r["numpy_cells"]
+    growth = data["growth"]
+    assert growth[1]["voxels"] > growth[0]["voxels"]
+    assert (tmp_path / "latest.md").read_text().startswith("## implc benchmarks")
