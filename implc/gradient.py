@@ -90,9 +90,18 @@ def _d_atan(t, f, a, attr, d):
     return t.div(d[0], t.add(t.const(1), t.powi(a[0], 2)))
 
 
-def _d_atan2(t, f, a, attr, d):  # d atan2(p, q) = (q dp - p dq) / (p² + q²)
+def _d_atan2_wrapped(t, f, a, attr, d):  # d atan2(p, q) = (q dp - p dq) / (p² + q²)
     p, q = a
     return t.div(t.sub(t.mul(q, d[0]), t.mul(p, d[1])), t.add(t.powi(p, 2), t.powi(q, 2)))
+
+
+def _d_atan2(t, f, a, attr, d):
+    """As the wrapped form, guarded: the value jumps by 2π across the cut, where no derivative bounds it."""
+    return t.node("cut_guard", (a[0], a[1], _d_atan2_wrapped(t, f, a, attr, d)))
+
+
+def _d_cut_guard(t, f, a, attr, d):
+    return t.node("cut_guard", (a[0], a[1], d[2]))
 
 
 def _d_sinh(t, f, a, attr, d):
@@ -121,7 +130,8 @@ def _d_max(t, f, a, attr, d):
 
 def _d_select(op):
     def rule(t, f, a, attr, d):
-        return t.node(op, (a[0], d[1], d[2]))
+        # a possibly discontinuous select's derivative is unusable where the condition is undecided
+        return t.node(op, (a[0], d[1], d[2]), None if attr == "continuous" else "jump")
     return rule
 
 
@@ -129,7 +139,7 @@ DERIVATIVE_RULES = {
     "neg": _d_neg, "scale": _d_scale, "add": _d_add, "sub": _d_sub, "mul": _d_mul, "div": _d_div, "powi": _d_powi,
     "powf": _d_powf, "sqrt": _d_sqrt, "cbrt": _d_cbrt, "exp": _d_exp, "log": _d_log, "sin": _d_sin,
     "cos": _d_cos, "tan": _d_tan, "asin": _d_asin, "acos": _d_acos, "atan": _d_atan, "atan2": _d_atan2,
-    "atan2_wrapped": _d_atan2, "sinh": _d_sinh, "cosh": _d_cosh, "tanh": _d_tanh, "abs": _d_abs,
+    "atan2_wrapped": _d_atan2_wrapped, "cut_guard": _d_cut_guard, "sinh": _d_sinh, "cosh": _d_cosh, "tanh": _d_tanh, "abs": _d_abs,
     "min": _d_min, "max": _d_max, "select_lt": _d_select("select_lt"), "select_le": _d_select("select_le"),
 }
 """One derivative rule per op: (tape, node, args, attr, derivatives of args) -> derivative node."""

@@ -233,20 +233,34 @@ def i_max(args, attr):
     return np.maximum(a[0], b[0]), np.maximum(a[1], b[1])
 
 
-def _select(true_for_sure, false_for_sure, a, b):
-    lo = np.where(true_for_sure, a[0], np.where(false_for_sure, b[0], np.minimum(a[0], b[0])))
-    hi = np.where(true_for_sure, a[1], np.where(false_for_sure, b[1], np.maximum(a[1], b[1])))
+def _select(true_for_sure, false_for_sure, a, b, attr):
+    """The decided branch, else the union of both ("jump" selects: NaN where undecided)."""
+    union_lo, union_hi = np.minimum(a[0], b[0]), np.maximum(a[1], b[1])
+    if attr == "jump":
+        union_lo, union_hi = union_lo + NAN, union_hi + NAN
+    lo = np.where(true_for_sure, a[0], np.where(false_for_sure, b[0], union_lo))
+    hi = np.where(true_for_sure, a[1], np.where(false_for_sure, b[1], union_hi))
     return lo, hi
 
 
 def i_select_lt(args, attr):
     g, a, b = args
-    return _select(g[1] < 0, g[0] >= 0, a, b)
+    return _select(g[1] < 0, g[0] >= 0, a, b, attr)
 
 
 def i_select_le(args, attr):
     g, a, b = args
-    return _select(g[1] <= 0, g[0] > 0, a, b)
+    return _select(g[1] <= 0, g[0] > 0, a, b, attr)
+
+
+def straddles_cut(yy, xx):
+    """Boxes crossing atan2's branch cut (x < 0, y from below 0 to 0 or above)."""
+    return (xx[1] < 0) & (yy[0] + 0.0 < 0) & (yy[1] + 0.0 >= 0)
+
+
+def i_cut_guard(args, attr):
+    yy, xx, c = args
+    return _nan_where(straddles_cut(yy, xx), c)
 
 
 def _atan2(yy, xx, wrapped: bool):
@@ -257,7 +271,7 @@ def _atan2(yy, xx, wrapped: bool):
     hi = widen_up(np.maximum(np.maximum(corners[0], corners[1]), np.maximum(corners[2], corners[3])), R.LIBM)
     lo, hi = np.maximum(lo, -R.PI_HI), np.minimum(hi, R.PI_HI)
     origin = (x0 <= 0) & (x1 >= 0) & (y0 <= 0) & (y1 >= 0)
-    cut = (x1 < 0) & (y0 < 0) & (y1 >= 0)
+    cut = straddles_cut(yy, xx)
     if wrapped:
         cut_lo = widen_down(np.arctan2(y1, x1), R.LIBM)
         cut_hi = widen_up(R.TWO_PI_HI + widen_up(np.arctan2(y0, x1), R.LIBM), R.ARITH)
@@ -285,6 +299,6 @@ RULES = {
     "exp": i_exp, "log": i_log, "sin": i_sin, "cos": i_cos, "tan": i_tan, "asin": i_asin, "acos": i_acos,
     "atan": i_atan, "atan2": i_atan2, "atan2_wrapped": i_atan2_wrapped, "sinh": i_sinh, "cosh": i_cosh,
     "tanh": i_tanh, "abs": i_abs, "min": i_min, "max": i_max, "select_lt": i_select_lt,
-    "select_le": i_select_le,
+    "select_le": i_select_le, "cut_guard": i_cut_guard,
 }
 """One interval rule per op: (argument intervals, the node's attr) -> (lo, hi)."""

@@ -50,8 +50,11 @@ OPS = {op.name: op for op in (
     Op("abs", 1, "|a|"),
     Op("min", 2, "min(a, b)"),
     Op("max", 2, "max(a, b)"),
-    Op("select_lt", 3, "b if a < 0 else c"),
-    Op("select_le", 3, "b if a <= 0 else c"),
+    Op("select_lt", 3, "b if a < 0 else c; attr 'continuous' (branches meet where a = 0), 'jump' (an "
+                       "undecided interval is NaN: the derivative of a possibly discontinuous select) or None"),
+    Op("select_le", 3, "b if a <= 0 else c; attr as select_lt"),
+    Op("cut_guard", 3, "c; its interval is NaN where the box straddles atan2(a, b)'s branch cut (guards the "
+                       "derivative of a non-wrapped atan2, whose value jumps there)"),
 )}
 
 LIBM_OPS = ("cbrt", "powf", "exp", "log", "sin", "cos", "tan", "asin", "acos", "atan", "atan2",
@@ -225,6 +228,8 @@ class Tape:
             return attr >= 0 and nn(args[0])
         if op in ("select_lt", "select_le"):
             return nn(args[1]) and nn(args[2])
+        if op == "cut_guard":
+            return nn(args[2])
         return False
 
     def compacted(self) -> "Tape":

@@ -69,6 +69,32 @@ def number_bounds(expr: sympy.Expr) -> tuple[float, float, float]:
     return (nearest, lo, hi)
 
 
+def _meets_on_boundary(then_expr, else_expr, g) -> bool:
+    """Whether then − else = g^k·h (k >= 1, h free of poles): the branches agree where g = 0, so the
+    Piecewise is continuous there (needed before a mean-value enclosure may cross the boundary).
+
+    A structural test (g, or −g, as a factor) and, for small polynomials, exact division; anything else
+    counts as possibly discontinuous, which only costs tightness.
+    """
+    difference = then_expr - else_expr
+    if difference == 0:
+        return True
+    if difference.has(sympy.nan, sympy.Piecewise):
+        return False
+    for factor in sympy.Mul.make_args(difference):
+        base, exponent = factor.as_base_exp()
+        if exponent.is_Integer and exponent > 0 and (base == g or base == -g):
+            return True
+    try:
+        gens = sorted(difference.free_symbols | g.free_symbols, key=lambda s: s.name)
+        p, q = sympy.Poly(difference, *gens), sympy.Poly(g, *gens)
+        if p.total_degree() > 6 or q.total_degree() < 1:
+            return False
+        return p.domain.is_Exact and q.domain.is_Exact and p.rem(q).is_zero
+    except (sympy.PolynomialError, sympy.GeneratorsNeeded, ValueError):
+        return False
+
+
 class _Lowerer:
     def __init__(self, tape: Tape, wrap_phi: bool):
         self.tape = tape
@@ -188,9 +214,13 @@ class _Lowerer:
             return self.lower(value)
         then = self.lower(value)
         otherwise = self._lower_piecewise(pieces[1:])
-        return self._lower_condition(cond, then, otherwise)
+        # the branches' SymPy forms, to prove continuity: only for a final "otherwise" piece
+        final = len(pieces) == 2 and pieces[1][1] == sympy.true
+        return self._lower_condition(cond, then, otherwise, branches=(value, pieces[1][0]) if final else None)
 
-    def _lower_condition(self, cond, then: int, otherwise: int) -> int:
+    def _lower_condition(self, cond, then: int, otherwise: int, branches=None) -> int:
+        """``then`` where ``cond`` holds, else ``otherwise``; ``branches`` are their SymPy forms when the
+        condition is a single relational (used to prove the select continuous)."""
         t = self.tape
         if cond == sympy.true:
             return then
@@ -212,15 +242,17 @@ class _Lowerer:
         if isinstance(cond, sympy.core.relational.Relational):
             # g = lhs - rhs as a SymPy Add, so that g shares its terms with the branches (the blend's
             # condition d² <= R² and its value (d² - R²)⁴ then share one d² - R² node)
-            g = self.lower(cond.lhs - cond.rhs)
+            g_expr = cond.lhs - cond.rhs
+            g = self.lower(g_expr)
+            kind = "continuous" if branches and _meets_on_boundary(*branches, g_expr) else None
             if isinstance(cond, sympy.StrictLessThan):
-                return t.node("select_lt", (g, then, otherwise))
+                return t.node("select_lt", (g, then, otherwise), kind)
             if isinstance(cond, sympy.LessThan):
-                return t.node("select_le", (g, then, otherwise))
+                return t.node("select_le", (g, then, otherwise), kind)
             if isinstance(cond, sympy.StrictGreaterThan):
-                return t.node("select_lt", (t.neg(g), then, otherwise))
+                return t.node("select_lt", (t.neg(g), then, otherwise), kind)
             if isinstance(cond, sympy.GreaterThan):
-                return t.node("select_le", (t.neg(g), then, otherwise))
+                return t.node("select_le", (t.neg(g), then, otherwise), kind)
             gap = t.unary("abs", g)
             if isinstance(cond, sympy.Equality):
                 return t.node("select_le", (gap, then, otherwise))

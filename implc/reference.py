@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import interval as I
+from . import rounding as R
 from .gradient import with_gradient
 from .ir import Tape
 
@@ -25,6 +26,7 @@ POINT_RULES = {
     "atan2_wrapped": lambda yy, xx: np.arctan2(yy + 0.0, xx + 0.0),
     "sinh": np.sinh, "cosh": np.cosh, "tanh": np.tanh, "abs": np.abs, "min": np.minimum, "max": np.maximum,
     "select_lt": lambda g, a, b: _select(g < 0, a, b), "select_le": lambda g, a, b: _select(g <= 0, a, b),
+    "cut_guard": lambda yy, xx, c: c,
 }
 """Point rules of the ops without an attribute (``powi``, ``powf``, ``scale`` take theirs); float64 arrays."""
 
@@ -63,7 +65,11 @@ def eval_interval(tape: Tape, lo, hi) -> tuple[np.ndarray, np.ndarray]:
 
     A possibly undefined result (NaN) is reported as the whole line: it never prunes.
     """
-    lo_cols, hi_cols = _columns(lo), _columns(hi)
+    out_lo, out_hi = _interval_outputs(tape, _columns(lo), _columns(hi))[0]
+    return _whole_line_if_undefined(out_lo, out_hi)
+
+
+def _interval_outputs(tape: Tape, lo_cols, hi_cols) -> list:
     n = len(lo_cols[0])
     vals: list = []
     with np.errstate(all="ignore"):
@@ -76,9 +82,33 @@ def eval_interval(tape: Tape, lo, hi) -> tuple[np.ndarray, np.ndarray]:
             else:
                 v = I.RULES[op](a, attr)
             vals.append(v)
-    out_lo, out_hi = vals[tape.outputs[0]]
-    undefined = np.isnan(out_lo) | np.isnan(out_hi)
-    return np.where(undefined, -np.inf, out_lo), np.where(undefined, np.inf, out_hi)
+    return [vals[o] for o in tape.outputs]
+
+
+def _whole_line_if_undefined(lo, hi):
+    undefined = np.isnan(lo) | np.isnan(hi)
+    return np.where(undefined, -np.inf, lo), np.where(undefined, np.inf, hi)
+
+
+def eval_interval_mean_value(tape: Tape, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """The natural enclosure intersected with the mean-value form F(c) + ∇F(B)·(B − c), c the centre.
+
+    Sound where F is continuous on the box; the gradient enclosure is NaN wherever that is in doubt
+    (an undecided select that may jump, a box across atan2's cut), and a NaN form is not used.
+    """
+    lo_cols, hi_cols = _columns(lo), _columns(hi)
+    (nat_lo, nat_hi), *grad = _interval_outputs(with_gradient(tape), lo_cols, hi_cols)
+    centre = [(a + b) * 0.5 for a, b in zip(lo_cols, hi_cols)]
+    with np.errstate(all="ignore"):
+        acc = _interval_outputs(tape, centre, centre)[0]
+        for axis in range(3):
+            offset = (I.widen_down(lo_cols[axis] - centre[axis], R.ARITH),
+                      I.widen_up(hi_cols[axis] - centre[axis], R.ARITH))
+            acc = I.i_add([acc, I.i_mul([grad[axis], offset], None)], None)
+    usable = ~(np.isnan(acc[0]) | np.isnan(acc[1]))
+    out_lo = np.where(usable, np.maximum(nat_lo, acc[0]), nat_lo)
+    out_hi = np.where(usable, np.minimum(nat_hi, acc[1]), nat_hi)
+    return _whole_line_if_undefined(out_lo, out_hi)
 
 
 def eval_gradient(tape: Tape, points) -> tuple[np.ndarray, np.ndarray]:

@@ -117,7 +117,8 @@ class _Worker:
 class Subdivider:
     """Runs one voxelization of ``surface`` to ``depth``; ``emit(coords, normals)`` receives the voxels."""
 
-    def __init__(self, surface, depth: int, workers: int, runtime: Runtime, max_voxels: int | None = None):
+    def __init__(self, surface, depth: int, workers: int, runtime: Runtime, max_voxels: int | None = None,
+                 mean_value_levels: int = 0):
         self.surface = surface
         self.depth = depth
         self.workers = workers
@@ -127,6 +128,9 @@ class Subdivider:
         leaf = self.geom[6 + 3 * depth: 9 + 3 * depth]
         self.leaf_geom = np.concatenate([self.geom[:3], leaf])
         self.box = surface.native.address("implc_interval")
+        # the last mean_value_levels levels use the tighter mean-value kernel
+        self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
+        self.fine_box = surface.mean_value_address() if mean_value_levels > 0 else self.box
         self.gradient = surface.native.address("implc_gradient")
         self.point = surface.native.address("implc_point")
         self.cancel = np.zeros(1, dtype=np.int32)
@@ -140,8 +144,8 @@ class Subdivider:
         w.stack[:4] = (*cell, level)
         w.state[:] = (1, depth)
         while True:
-            n = self.runtime.subdivide(self.box, self.geom_ptr, w.stack_ptr, w.state_ptr, w.out_ptr, OUTPUT_CHUNK,
-                                       w.stats_ptr, self.cancel_ptr)
+            n = self.runtime.subdivide(self.box, self.fine_box, self.fine_level, self.geom_ptr, w.stack_ptr,
+                                       w.state_ptr, w.out_ptr, OUTPUT_CHUNK, w.stats_ptr, self.cancel_ptr)
             if n:
                 result.append(w.out[:n])
             if w.state[0] == 0 or self.cancel[0]:

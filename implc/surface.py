@@ -12,7 +12,7 @@ import math
 import numpy as np
 import sympy
 
-from .codegen.kernels import WIDTH, build_module
+from .codegen.kernels import MEAN_VALUE_KERNEL, WIDTH, build_mean_value_module, build_module
 from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape
@@ -67,6 +67,22 @@ class Surface:
         self._point = self.native.function("implc_point", [_P, _P, _N])
         self._gradient = self.native.function("implc_gradient", [_P, _P, _P, _N])
         self._interval = self.native.function("implc_interval", [_P, _P, _P, _P, _N])
+        self.mean_value_native: NativeModule | None = None  # compiled on first use
+        self._interval_mvf = None
+
+    def _mean_value_kernel(self):
+        """The mean-value interval kernel, compiled (or loaded from the cache) on first use."""
+        if self._interval_mvf is None:
+            self.mean_value_native = NativeModule(
+                lambda: build_mean_value_module(self.tape, self.gradient_tape),
+                source_key="mvf" + self.tape.fingerprint() + self.gradient_tape.fingerprint())
+            self._interval_mvf = self.mean_value_native.function(MEAN_VALUE_KERNEL, [_P, _P, _P, _P, _N])
+        return self._interval_mvf
+
+    def mean_value_address(self) -> int:
+        """Address of the mean-value kernel, for native callers (valid while this Surface lives)."""
+        self._mean_value_kernel()
+        return self.mean_value_native.address(MEAN_VALUE_KERNEL)
 
     # -- inspection ----------------------------------------------------------------------------
     @property
@@ -113,10 +129,12 @@ class Surface:
     def value_and_gradient(self, points) -> tuple[np.ndarray, np.ndarray]:
         return tuple(self._run(self._gradient, [_rows("points", points)], [(), (3,)]))
 
-    def interval(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    def interval(self, lo, hi, mean_value: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """(f_lo, f_hi): an enclosure of F over each box [lo[i], hi[i]] ((N, 3) corners each).
 
         Boxes where F may be undefined (NaN) get the whole line (-inf, inf): they never prune.
+        ``mean_value=True`` intersects the natural enclosure with the mean-value form: tighter on small
+        boxes, about four times the work.
         """
         lo, hi = _rows("lo", lo), _rows("hi", hi)
         if lo.shape != hi.shape:
@@ -124,7 +142,8 @@ class Surface:
         if not np.all(lo <= hi):
             bad = int(np.argmin(np.all(lo <= hi, axis=1)))
             raise ValueError(f"box {bad} has lo > hi (or NaN): {lo[bad]} .. {hi[bad]}")
-        f_lo, f_hi = self._run(self._interval, [lo, hi], [(), ()])
+        kernel = self._mean_value_kernel() if mean_value else self._interval
+        f_lo, f_hi = self._run(kernel, [lo, hi], [(), ()])
         return f_lo, f_hi
 
 

@@ -91,6 +91,43 @@ def test_interval_encloses_true_values(name, surfaces):
 
 
 @pytest.mark.parametrize("name", sorted(OP_CASES))
+def test_mean_value_form_encloses_and_never_loosens(name, surfaces):
+    s = surfaces[name]
+    rng = np.random.default_rng(abs(hash(name)) % 2**32 + 1)
+    lo, hi = adversarial_boxes(rng, 60)
+    small = rng.random(60) < 0.5  # the form pays on small boxes: shrink half of them
+    hi[small] = lo[small] + (hi[small] - lo[small]) * 1e-3
+    assert_encloses(s, OP_CASES[name], lo, hi, rng, mean_value=True)
+    n_lo, n_hi = s.interval(lo, hi)
+    m_lo, m_hi = s.interval(lo, hi, mean_value=True)
+    assert np.all(m_lo >= n_lo) and np.all(m_hi <= n_hi)
+    r_lo, r_hi = reference.eval_interval_mean_value(s.tape, lo, hi)
+    np.testing.assert_allclose(m_lo, r_lo, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(m_hi, r_hi, rtol=1e-12, atol=1e-12)
+
+
+def test_mean_value_form_is_tighter_on_small_boxes():
+    s = implc.compile(x * (1 - x) + sin(x) * y - x * y)  # x and y repeat: the dependency problem
+    rng = np.random.default_rng(0)
+    lo = rng.uniform(-1, 1, (500, 3))
+    hi = lo + 1e-2
+    n_lo, n_hi = s.interval(lo, hi)
+    m_lo, m_hi = s.interval(lo, hi, mean_value=True)
+    assert np.mean(m_hi - m_lo) < 0.9 * np.mean(n_hi - n_lo)
+
+
+def test_jumps_never_use_the_mean_value_form():
+    step = implc.compile(Piecewise((1, x < 0), (-1, True)) + y / 100)
+    lo, hi = np.array([[-1e-3, 0, 0]]), np.array([[1e-3, 1e-3, 1e-3]])
+    f_lo, f_hi = step.interval(lo, hi, mean_value=True)
+    assert f_lo[0] <= -1 and f_hi[0] >= 1  # both sides of the jump
+    cut = implc.compile(atan2(y, x))
+    lo, hi = np.array([[-1.0, -1e-3, 0]]), np.array([[-0.999, 1e-3, 0]])
+    f_lo, f_hi = cut.interval(lo, hi, mean_value=True)
+    assert f_lo[0] <= -3.14 and f_hi[0] >= 3.14
+
+
+@pytest.mark.parametrize("name", sorted(OP_CASES))
 def test_compiled_matches_reference(name, surfaces):
     s = surfaces[name]
     rng = np.random.default_rng(7)

@@ -75,6 +75,17 @@ def test_no_cell_with_a_sign_change_is_missed(name, depth, compiled, over_inclus
     over_inclusion[(name, depth)] = len(voxels) / expected.sum()
 
 
+@pytest.mark.parametrize("name", sorted(SURFACES))
+def test_mean_value_leaves_miss_nothing_and_keep_fewer(name, compiled):
+    s = compiled[name]
+    natural = implc.voxelize(s, 7, storage="coords")
+    tight = implc.voxelize(s, 7, storage="coords", mean_value_levels=1)
+    expected = sign_change_cells(s, 7)
+    assert not np.any(expected & ~tight.to_dense()), f"{name}: the mean-value form lost a cell"
+    assert not np.any(tight.to_dense() & ~natural.to_dense())  # a subset of the natural voxels
+    np.testing.assert_array_equal(tight.coords, implc.voxelize(s, 7, workers=1, mean_value_levels=1).coords)
+
+
 def morton_keys(coords, depth):
     key = np.zeros(len(coords), dtype=np.uint64)
     c = coords.astype(np.uint64)
@@ -186,6 +197,8 @@ def test_bad_depth_names_the_range(depth):
 
 def test_bad_arguments():
     s = implc.compile(x - y)
+    with pytest.raises(ValueError, match="mean_value_levels"):
+        implc.voxelize(s, 5, mean_value_levels=-1)
     with pytest.raises(TypeError, match="implc.Surface"):
         implc.voxelize(x - y, 5)
     with pytest.raises(ValueError, match="unknown storage 'tree'"):

@@ -218,23 +218,35 @@ class IntervalEmitter:
         v = self.v
         return v.maximum(a[0][0], a[1][0]), v.maximum(a[0][1], a[1][1])
 
-    def select(self, true_for_sure, false_for_sure, a, b):
+    def select(self, true_for_sure, false_for_sure, a, b, attr):
         v = self.v
-        lo = v.select(true_for_sure, a[0], v.select(false_for_sure, b[0], v.minimum(a[0], b[0])))
-        hi = v.select(true_for_sure, a[1], v.select(false_for_sure, b[1], v.maximum(a[1], b[1])))
+        union_lo, union_hi = v.minimum(a[0], b[0]), v.maximum(a[1], b[1])
+        if attr == "jump":  # a possibly discontinuous select's derivative: unusable where undecided
+            union_lo = union_hi = v.splat(NAN)
+        lo = v.select(true_for_sure, a[0], v.select(false_for_sure, b[0], union_lo))
+        hi = v.select(true_for_sure, a[1], v.select(false_for_sure, b[1], union_hi))
         return lo, hi
 
     def i_select_lt(self, a, attr):
         v = self.v
         g, t, f = a
         zero = v.splat(0.0)
-        return self.select(v.cmp("<", g[1], zero), v.cmp(">=", g[0], zero), t, f)
+        return self.select(v.cmp("<", g[1], zero), v.cmp(">=", g[0], zero), t, f, attr)
 
     def i_select_le(self, a, attr):
         v = self.v
         g, t, f = a
         zero = v.splat(0.0)
-        return self.select(v.cmp("<=", g[1], zero), v.cmp(">", g[0], zero), t, f)
+        return self.select(v.cmp("<=", g[1], zero), v.cmp(">", g[0], zero), t, f, attr)
+
+    def straddles_cut(self, yy, xx):
+        v = self.v
+        zero = v.splat(0.0)
+        y0, y1 = v.add(yy[0], zero), v.add(yy[1], zero)
+        return v.and_(v.and_(v.cmp("<", xx[1], zero), v.cmp("<", y0, zero)), v.cmp(">=", y1, zero))
+
+    def i_cut_guard(self, a, attr):
+        return self.nan_where(self.straddles_cut(a[0], a[1]), a[2])
 
     def atan2(self, a, wrapped):
         v = self.v
@@ -246,7 +258,7 @@ class IntervalEmitter:
         lo = v.maximum(v.widen_down(self.min4(corners), R.LIBM), v.neg(pi_hi))
         hi = v.minimum(v.widen_up(self.max4(corners), R.LIBM), pi_hi)
         origin = v.and_(self.contains_zero((x0, x1)), self.contains_zero((y0, y1)))
-        cut = v.and_(v.and_(v.cmp("<", x1, zero), v.cmp("<", y0, zero)), v.cmp(">=", y1, zero))
+        cut = self.straddles_cut((y0, y1), (x0, x1))
         if wrapped:
             cut_lo = v.widen_down(v.libm("atan2", y1, x1), R.LIBM)
             cut_hi = v.widen_up(v.add(v.splat(R.TWO_PI_HI), v.widen_up(v.libm("atan2", y0, x1), R.LIBM)),
@@ -266,11 +278,8 @@ class IntervalEmitter:
         return self.atan2(a, wrapped=True)
 
 
-def emit_interval(vb: VectorBuilder, tape, lo_coords, hi_coords):
-    """Emit the enclosure of the tape's first output over boxes [lo_coords, hi_coords].
-
-    Returns (lo, hi) vectors; a possibly undefined (NaN) result comes out as the whole line.
-    """
+def emit_interval_outputs(vb: VectorBuilder, tape, lo_coords, hi_coords) -> list:
+    """Emit enclosures of every output of the tape over boxes [lo_coords, hi_coords]; NaN kept."""
     em = IntervalEmitter(vb)
     vals: list = []
     for op, args, attr in tape.nodes:
@@ -280,6 +289,38 @@ def emit_interval(vb: VectorBuilder, tape, lo_coords, hi_coords):
             vals.append((lo_coords[attr], hi_coords[attr]))
         else:
             vals.append(getattr(em, f"i_{op}")([vals[i] for i in args], attr))
-    lo, hi = vals[tape.outputs[0]]
+    return [vals[o] for o in tape.outputs]
+
+
+def whole_line_if_undefined(vb: VectorBuilder, lo, hi):
     undefined = vb.or_(vb.isnan(lo), vb.isnan(hi))
     return vb.select(undefined, vb.splat(-INF), lo), vb.select(undefined, vb.splat(INF), hi)
+
+
+def emit_interval(vb: VectorBuilder, tape, lo_coords, hi_coords):
+    """Emit the enclosure of the tape's first output over boxes [lo_coords, hi_coords].
+
+    Returns (lo, hi) vectors; a possibly undefined (NaN) result comes out as the whole line.
+    """
+    lo, hi = emit_interval_outputs(vb, tape, lo_coords, hi_coords)[0]
+    return whole_line_if_undefined(vb, lo, hi)
+
+
+def emit_mean_value(vb: VectorBuilder, value_tape, gradient_tape, lo_coords, hi_coords):
+    """The natural enclosure intersected with the mean-value form F(c) + ∇F(B)·(B − c), c the centre.
+
+    Mirrors :func:`implc.reference.eval_interval_mean_value`. The mean-value form is dropped wherever it
+    is NaN: a gradient enclosure that is unbounded, undefined, or crosses a possible discontinuity.
+    """
+    em = IntervalEmitter(vb)
+    (nat_lo, nat_hi), *grad = emit_interval_outputs(vb, gradient_tape, lo_coords, hi_coords)
+    centre = [vb.mul(vb.add(lo, hi), vb.splat(0.5)) for lo, hi in zip(lo_coords, hi_coords)]
+    acc = emit_interval_outputs(vb, value_tape, centre, centre)[0]
+    for axis in range(3):
+        offset = (vb.widen_down(vb.sub(lo_coords[axis], centre[axis]), R.ARITH),
+                  vb.widen_up(vb.sub(hi_coords[axis], centre[axis]), R.ARITH))
+        acc = em.i_add([acc, em.i_mul([grad[axis], offset], None)], None)
+    usable = vb.and_(vb.cmp("==", acc[0], acc[0]), vb.cmp("==", acc[1], acc[1]))  # not NaN
+    lo = vb.select(usable, vb.maximum(nat_lo, acc[0]), nat_lo)
+    hi = vb.select(usable, vb.minimum(nat_hi, acc[1]), nat_hi)
+    return whole_line_if_undefined(vb, lo, hi)

@@ -6,6 +6,8 @@ points and boxes as row-major (n, 3) float64 arrays:
 - ``implc_point(pts, out, n)``: F at each point.
 - ``implc_gradient(pts, out_value, out_grad, n)``: F and its analytic gradient (n, 3).
 - ``implc_interval(lo, hi, out_lo, out_hi, n)``: an enclosure of F over each box [lo, hi].
+- ``implc_interval_mvf(lo, hi, out_lo, out_hi, n)``: the same, intersected with the mean-value form
+  (tighter on small boxes, about five times the work), built by :func:`build_mean_value_module`.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from contextlib import contextmanager
 from llvmlite import ir
 
 from ..ir import Tape
-from .interval import emit_interval
+from .interval import emit_interval, emit_mean_value
 from .point import emit_point
 from .vector import DOUBLE, I64, VectorBuilder
 
@@ -26,7 +28,9 @@ KERNELS = {
     "implc_point": 2,       # pointer arguments before n
     "implc_gradient": 3,
     "implc_interval": 4,
+    "implc_interval_mvf": 4,
 }
+MEAN_VALUE_KERNEL = "implc_interval_mvf"
 
 _PTR = ir.PointerType(DOUBLE)
 
@@ -117,6 +121,21 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface") -
     lo, hi, out_lo, out_hi, _ = fn.args
     with for_range(b, blocks) as i:
         f_lo, f_hi = emit_interval(VectorBuilder(b, WIDTH), value_tape, _load_xyz(b, lo, i), _load_xyz(b, hi, i))
+        _store(b, out_lo, i, f_lo)
+        _store(b, out_hi, i, f_hi)
+    b.ret_void()
+    return str(module)
+
+
+def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface_mvf") -> str:
+    """The LLVM IR of the mean-value interval kernel, a module of its own: it is about three times the
+    size of the others together, so it is compiled only when first used."""
+    module = ir.Module(name=name)
+    fn, b, blocks = _kernel(module, MEAN_VALUE_KERNEL)
+    lo, hi, out_lo, out_hi, _ = fn.args
+    with for_range(b, blocks) as i:
+        f_lo, f_hi = emit_mean_value(VectorBuilder(b, WIDTH), value_tape, gradient_tape, _load_xyz(b, lo, i),
+                                     _load_xyz(b, hi, i))
         _store(b, out_lo, i, f_lo)
         _store(b, out_hi, i, f_hi)
     b.ret_void()

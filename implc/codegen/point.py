@@ -54,6 +54,8 @@ def _point(vb: VectorBuilder, op: str, a: list, attr):
         return vb.select(vb.cmp("<", a[0], vb.splat(0.0)), a[1], a[2])
     if op == "select_le":
         return vb.select(vb.cmp("<=", a[0], vb.splat(0.0)), a[1], a[2])
+    if op == "cut_guard":
+        return a[2]
     raise NotImplementedError(f"no point emitter for op {op}")
 
 

@@ -1,7 +1,8 @@
 """The generic native routines, one LLVM module shared by every surface.
 
 - ``implc_subdivide``: Fig. 1 of the paper as a loop over an explicit stack. It calls a surface's
-  interval kernel through a function pointer on the eight children of each octant (one vector step),
+  interval kernel through a function pointer on the eight children of each octant (one vector step;
+  a second, finer kernel, e.g. the mean-value form, from a given child level on),
   prunes children whose enclosure excludes 0, pushes the rest in reverse so that leaves come out in
   Morton order, and writes leaf coordinates. It is resumable: when the output buffer is full or the
   cancel flag is raised it returns with its stack intact.
@@ -46,7 +47,7 @@ GRADIENT_FN = ir.FunctionType(VOID, [PD, PD, PD, I64])
 POINT_FN = ir.FunctionType(VOID, [PD, PD, I64])
 
 SIGNATURES = {
-    "implc_subdivide": (I64, [I8P, PD, PI32, PI64, PI32, I64, PI64, PI32]),
+    "implc_subdivide": (I64, [I8P, I8P, I64, PD, PI32, PI64, PI32, I64, PI64, PI32]),
     "implc_normals": (VOID, [I8P, I8P, PD, PI32, I64, PF]),
     "implc_octree_insert": (I64, [PI32, I64, PI64, PI32, I64, I64]),
     "implc_octree_traverse": (I64, [PI32, I64, I64, PI32, PI64]),
@@ -79,8 +80,9 @@ def _bump(b, ptr, index, amount=1):
 
 def _subdivide(module):
     fn, b = _function(module, "implc_subdivide")
-    box_ptr, geom, stack, state, out, cap, stats, cancel = fn.args
+    box_ptr, fine_ptr, fine_level, geom, stack, state, out, cap, stats, cancel = fn.args
     box = b.bitcast(box_ptr, ir.PointerType(BOX_FN))
+    fine = b.bitcast(fine_ptr, ir.PointerType(BOX_FN))
     depth = b.trunc(_load(b, state, 1), I32)
     size = Local(b, I64, _load(b, state, 0), "size")
     count = Local(b, I64, 0, "count")
@@ -114,7 +116,8 @@ def _subdivide(module):
                 i_hi = b.uitofp(b.add(coords[a], const(I32, 1)), DOUBLE)
                 _store(b, b.fsub(b.fadd(origin[a], b.fmul(i_lo, h[a])), pad[a]), lo, 3 * c + a)
                 _store(b, b.fadd(b.fadd(origin[a], b.fmul(i_hi, h[a])), pad[a]), hi, 3 * c + a)
-        b.call(box, [lo, hi, flo, fhi, const(I64, 8)])
+        use_fine = b.icmp_signed(">=", b.zext(child_level, I64), fine_level)
+        b.call(b.select(use_fine, fine, box), [lo, hi, flo, fhi, const(I64, 8)])
         _bump(b, stats, 0, 8)
         stat_slot = b.add(level64, const(I64, 1))
 
