@@ -254,7 +254,7 @@ def kernels(args, out):
         s = implc.compile(sc.surface, sc.bounds)
         out_lo, out_hi, values, grads = np.empty(n), np.empty(n), np.empty(n), np.empty((n, 3))
         interval_s, _ = median_time(lambda: s._interval(lo.ctypes.data, hi.ctypes.data, out_lo.ctypes.data,
-                                                        out_hi.ctypes.data, n), args.repeats)
+                                                        out_hi.ctypes.data, n, None, None), args.repeats)
         gradient_s, _ = median_time(lambda: s._gradient(lo.ctypes.data, values.ctypes.data, grads.ctypes.data, n),
                                     args.repeats)
         saved = os.environ.get("IMPLC_CACHE_DIR")

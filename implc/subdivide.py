@@ -102,12 +102,14 @@ class _Worker:
 
     def __init__(self, depth):
         self.stack = np.zeros(4 * STACK_ENTRIES, dtype=np.int32)
+        self.masks = np.full(STACK_ENTRIES, -1, dtype=np.int64)  # live-term mask of each stack entry
         self.state = np.zeros(2, dtype=np.int64)
         self.out = np.empty((OUTPUT_CHUNK, 3), dtype=np.uint32)
         self.stats = np.zeros(MAX_DEPTH + 2, dtype=np.int64)
         self.depth = depth
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
         self.stack_ptr, self.state_ptr = self.stack.ctypes.data, self.state.ctypes.data
+        self.masks_ptr = self.masks.ctypes.data
         self.out_ptr, self.stats_ptr = self.out.ctypes.data, self.stats.ctypes.data
         self.busy = 0.0
         self.normals = 0.0
@@ -118,7 +120,7 @@ class Subdivider:
     """Runs one voxelization of ``surface`` to ``depth``; ``emit(coords, normals)`` receives the voxels."""
 
     def __init__(self, surface, depth: int, workers: int, runtime: Runtime, max_voxels: int | None = None,
-                 mean_value_levels: int = 0):
+                 mean_value_levels: int = 0, prune: bool = True):
         self.surface = surface
         self.depth = depth
         self.workers = workers
@@ -128,6 +130,7 @@ class Subdivider:
         leaf = self.geom[6 + 3 * depth: 9 + 3 * depth]
         self.leaf_geom = np.concatenate([self.geom[:3], leaf])
         self.box = surface.native.address("implc_interval")
+        self.prune = int(bool(prune))
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
         self.fine_box = surface.mean_value_address() if mean_value_levels > 0 else self.box
@@ -142,10 +145,12 @@ class Subdivider:
     def _run_task(self, w: _Worker, cell, level: int, depth: int, result: _TaskResult) -> None:
         """Append all kept cells at ``depth`` below ``cell`` (at ``level``) to ``result``, in Morton order."""
         w.stack[:4] = (*cell, level)
+        w.masks[0] = -1  # every term live at a task's root
         w.state[:] = (1, depth)
         while True:
-            n = self.runtime.subdivide(self.box, self.fine_box, self.fine_level, self.geom_ptr, w.stack_ptr,
-                                       w.state_ptr, w.out_ptr, OUTPUT_CHUNK, w.stats_ptr, self.cancel_ptr)
+            n = self.runtime.subdivide(self.box, self.fine_box, self.fine_level, self.prune, self.geom_ptr,
+                                       w.stack_ptr, w.masks_ptr, w.state_ptr, w.out_ptr, OUTPUT_CHUNK, w.stats_ptr,
+                                       self.cancel_ptr)
             if n:
                 result.append(w.out[:n])
             if w.state[0] == 0 or self.cancel[0]:

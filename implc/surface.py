@@ -66,7 +66,7 @@ class Surface:
                                    source_key=self.tape.fingerprint() + self.gradient_tape.fingerprint())
         self._point = self.native.function("implc_point", [_P, _P, _N])
         self._gradient = self.native.function("implc_gradient", [_P, _P, _P, _N])
-        self._interval = self.native.function("implc_interval", [_P, _P, _P, _P, _N])
+        self._interval = self.native.function("implc_interval", [_P, _P, _P, _P, _N, _P, _P])
         self.mean_value_native: NativeModule | None = None  # compiled on first use
         self._interval_mvf = None
 
@@ -76,7 +76,7 @@ class Surface:
             self.mean_value_native = NativeModule(
                 lambda: build_mean_value_module(self.tape, self.gradient_tape),
                 source_key="mvf" + self.tape.fingerprint() + self.gradient_tape.fingerprint())
-            self._interval_mvf = self.mean_value_native.function(MEAN_VALUE_KERNEL, [_P, _P, _P, _P, _N])
+            self._interval_mvf = self.mean_value_native.function(MEAN_VALUE_KERNEL, [_P, _P, _P, _P, _N, _P, _P])
         return self._interval_mvf
 
     def mean_value_address(self) -> int:
@@ -99,19 +99,20 @@ class Surface:
         return f"Surface({self.expr}, bounds={self.bounds}, {len(self.tape)} ops)"
 
     # -- batched evaluation -----------------------------------------------------------------------
-    def _run(self, kernel, inputs: list[np.ndarray], out_shapes: list[tuple]) -> list[np.ndarray]:
-        """Run ``kernel`` over whole vectors, then once more over the zero-padded tail."""
+    def _run(self, kernel, inputs: list[np.ndarray], out_shapes: list[tuple], extra=()) -> list[np.ndarray]:
+        """Run ``kernel`` over whole vectors, then once more over the zero-padded tail (``extra``: trailing
+        arguments, e.g. NULL live masks)."""
         n = len(inputs[0])
         outs = [np.empty((n, *shape), dtype=np.float64) for shape in out_shapes]
         main = n - n % WIDTH
         if main:
-            kernel(*[a.ctypes.data for a in inputs], *[o.ctypes.data for o in outs], main)
+            kernel(*[a.ctypes.data for a in inputs], *[o.ctypes.data for o in outs], main, *extra)
         if main < n:
             tail_in = [np.zeros((WIDTH, 3)) for _ in inputs]
             for pad, a in zip(tail_in, inputs):
                 pad[: n - main] = a[main:]
             tail_out = [np.empty((WIDTH, *shape)) for shape in out_shapes]
-            kernel(*[a.ctypes.data for a in tail_in], *[o.ctypes.data for o in tail_out], WIDTH)
+            kernel(*[a.ctypes.data for a in tail_in], *[o.ctypes.data for o in tail_out], WIDTH, *extra)
             for o, t in zip(outs, tail_out):
                 o[main:] = t[: n - main]
         return outs
@@ -143,7 +144,7 @@ class Surface:
             bad = int(np.argmin(np.all(lo <= hi, axis=1)))
             raise ValueError(f"box {bad} has lo > hi (or NaN): {lo[bad]} .. {hi[bad]}")
         kernel = self._mean_value_kernel() if mean_value else self._interval
-        f_lo, f_hi = self._run(kernel, [lo, hi], [(), ()])
+        f_lo, f_hi = self._run(kernel, [lo, hi], [(), ()], extra=(None, None))
         return f_lo, f_hi
 
 

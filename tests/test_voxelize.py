@@ -86,6 +86,23 @@ def test_mean_value_leaves_miss_nothing_and_keep_fewer(name, compiled):
     np.testing.assert_array_equal(tight.coords, implc.voxelize(s, 7, workers=1, mean_value_levels=1).coords)
 
 
+def test_pruning_dead_terms_changes_nothing_it_should_not(compiled):
+    import random
+    random.seed(3)
+    R = Rational
+    spheres = [shapes.sphere(R(1, 10), tuple(R(random.randint(-80, 80), 100) for _ in range(3))) for _ in range(30)]
+    union = implc.compile(shapes.union(*spheres))
+    for s in (compiled["paper_blobs"], compiled["csg"], compiled["min_of_blobs"], union):
+        plain = implc.voxelize(s, 7, prune=False, storage="coords")
+        pruned = implc.voxelize(s, 7, prune=True, storage="coords")
+        assert not np.any(pruned.to_dense() & ~plain.to_dense())  # dropping dead terms never adds a cell
+        assert not np.any(sign_change_cells(s, 7) & ~pruned.to_dense())  # ... nor loses one
+        assert pruned.stats.interval_evaluations <= plain.stats.interval_evaluations
+    # a blend sum: dead terms are exactly zero either way, so the voxels are identical
+    np.testing.assert_array_equal(implc.voxelize(compiled["paper_blobs"], 7, prune=False).coords,
+                                  implc.voxelize(compiled["paper_blobs"], 7, prune=True).coords)
+
+
 def morton_keys(coords, depth):
     key = np.zeros(len(coords), dtype=np.uint64)
     c = coords.astype(np.uint64)

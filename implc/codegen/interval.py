@@ -292,6 +292,80 @@ def emit_interval_outputs(vb: VectorBuilder, tape, lo_coords, hi_coords) -> list
     return [vals[o] for o in tape.outputs]
 
 
+def _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords):
+    op, args, attr = tape.nodes[i]
+    if op == "const":
+        vals[i] = (vb.splat(attr[1]), vb.splat(attr[2]))
+    elif op == "var":
+        vals[i] = (lo_coords[attr], hi_coords[attr])
+    else:
+        vals[i] = getattr(em, f"i_{op}")([vals[a] for a in args], attr)
+
+
+def emit_interval_regions(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask):
+    """Like :func:`emit_interval`, skipping the terms dead in the parent (``live_mask``, an i64 shared by
+    the W boxes) and returning, besides (lo, hi), each box's own live mask (a <W x i64> vector)."""
+    from llvmlite import ir
+
+    from .control import Local
+    b = vb.b
+    i64 = ir.IntType(64)
+    mask_type = ir.VectorType(i64, vb.width)
+    em = IntervalEmitter(vb)
+    vals: dict = {}
+    for i in plan.before:
+        _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
+    zero = vb.splat(0.0)
+    kills = Local(b, mask_type, ir.Constant(mask_type, [0] * vb.width))
+    for bit, term in enumerate(plan.terms):
+        dead_value = {"sum": 0.0, "min": INF, "max": -INF}[term.kind]
+        lo_local, hi_local = Local(b, vb.vtype), Local(b, vb.vtype)
+        live = b.icmp_unsigned("!=", b.and_(live_mask, ir.Constant(i64, 1 << bit)), ir.Constant(i64, 0))
+        with b.if_else(live) as (compute, skip):
+            with compute:
+                for i in term.private:
+                    _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
+                lo, hi = vals[term.root]
+                lo_local.set(lo)
+                hi_local.set(hi)
+                if term.kind == "sum":  # decided to the zero branch over the whole box: dead below it
+                    g = vals[term.condition]
+                    strict = tape.nodes[term.root][0] == "select_lt"
+                    if term.zero_when == "false":  # g < 0 (or <= 0) fails everywhere
+                        dead = vb.cmp(">=" if strict else ">", g[0], zero)
+                    else:
+                        dead = vb.cmp("<" if strict else "<=", g[1], zero)
+                    bits = ir.Constant(mask_type, [1 << bit] * vb.width)
+                    kills.set(b.or_(kills.get(), b.select(dead, bits, ir.Constant(mask_type, [0] * vb.width))))
+            with skip:
+                lo_local.set(vb.splat(dead_value))
+                hi_local.set(vb.splat(dead_value))
+        vals[term.root] = (lo_local.get(), hi_local.get())
+    if plan.chain_leaves:  # a leaf above another leaf's upper bound (min) can never be the minimum below
+        op = tape.nodes[tape.outputs[0]][0]
+        leaves = [vals[i] for i in plan.chain_leaves]
+        if op == "min":
+            bound = leaves[0][1]
+            for leaf in leaves[1:]:
+                bound = vb.minimum(bound, leaf[1])
+        else:
+            bound = leaves[0][0]
+            for leaf in leaves[1:]:
+                bound = vb.maximum(bound, leaf[0])
+        for bit, term in enumerate(plan.terms):
+            lo, hi = vals[term.root]
+            dead = vb.cmp(">", lo, bound) if op == "min" else vb.cmp("<", hi, bound)
+            bits = ir.Constant(mask_type, [1 << bit] * vb.width)
+            kills.set(b.or_(kills.get(), b.select(dead, bits, ir.Constant(mask_type, [0] * vb.width))))
+    for i in plan.after:
+        _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
+    lo, hi = whole_line_if_undefined(vb, *vals[tape.outputs[0]])
+    parent = b.insert_element(ir.Constant(mask_type, ir.Undefined), live_mask, ir.Constant(ir.IntType(32), 0))
+    parent = b.shuffle_vector(parent, ir.Constant(mask_type, ir.Undefined),
+                              ir.Constant(ir.VectorType(ir.IntType(32), vb.width), [0] * vb.width))
+    return lo, hi, b.and_(parent, b.not_(kills.get()))
+
+
 def whole_line_if_undefined(vb: VectorBuilder, lo, hi):
     undefined = vb.or_(vb.isnan(lo), vb.isnan(hi))
     return vb.select(undefined, vb.splat(-INF), lo), vb.select(undefined, vb.splat(INF), hi)

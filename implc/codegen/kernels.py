@@ -5,7 +5,10 @@ points and boxes as row-major (n, 3) float64 arrays:
 
 - ``implc_point(pts, out, n)``: F at each point.
 - ``implc_gradient(pts, out_value, out_grad, n)``: F and its analytic gradient (n, 3).
-- ``implc_interval(lo, hi, out_lo, out_hi, n)``: an enclosure of F over each box [lo, hi].
+- ``implc_interval(lo, hi, out_lo, out_hi, n, live_in, live_out)``: an enclosure of F over each box
+  [lo, hi]. ``live_in`` holds one live-term mask (:mod:`implc.regions`) per group of WIDTH boxes, the
+  children of one octant: terms dead there are skipped; ``live_out`` receives each box's own mask.
+  Either may be NULL: everything is live, and no mask is written.
 - ``implc_interval_mvf(lo, hi, out_lo, out_hi, n)``: the same, intersected with the mean-value form
   (tighter on small boxes, about five times the work), built by :func:`build_mean_value_module`.
 """
@@ -17,18 +20,19 @@ from contextlib import contextmanager
 from llvmlite import ir
 
 from ..ir import Tape
-from .interval import emit_interval, emit_mean_value
+from ..regions import plan_regions
+from .interval import emit_interval, emit_interval_regions, emit_mean_value
 from .point import emit_point
 from .vector import DOUBLE, I64, VectorBuilder
 
 WIDTH = 8
 """Lanes per vector: eight boxes (an octant's children) per kernel step."""
 
-KERNELS = {
-    "implc_point": 2,       # pointer arguments before n
-    "implc_gradient": 3,
-    "implc_interval": 4,
-    "implc_interval_mvf": 4,
+KERNELS = {  # (pointer arguments before n, pointer arguments after n)
+    "implc_point": (2, 0),
+    "implc_gradient": (3, 0),
+    "implc_interval": (4, 2),
+    "implc_interval_mvf": (4, 2),
 }
 MEAN_VALUE_KERNEL = "implc_interval_mvf"
 
@@ -89,13 +93,35 @@ def _store(builder, base, block, vector):
     builder.store(vector, _vector_ptr(builder, base, offset, WIDTH), align=8)
 
 
+_PI64 = ir.PointerType(I64)
+
+
 def _kernel(module, name):
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_PTR] * KERNELS[name] + [I64]), name=name)
-    for arg in fn.args[:-1]:
+    before, after = KERNELS[name]
+    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_PTR] * before + [I64] + [_PI64] * after), name=name)
+    for arg in fn.args[:before]:
         arg.add_attribute("noalias")
     builder = ir.IRBuilder(fn.append_basic_block("entry"))
-    blocks = builder.sdiv(fn.args[-1], ir.Constant(I64, WIDTH))
+    blocks = builder.sdiv(fn.args[before], ir.Constant(I64, WIDTH))
     return fn, builder, blocks
+
+
+def _live_masks(builder, live_in, live_out, block, masks):
+    """Store the boxes' live masks if live_out is not NULL."""
+    with builder.if_then(builder.icmp_unsigned("!=", live_out, ir.Constant(_PI64, None))):
+        offset = builder.mul(block, ir.Constant(I64, WIDTH))
+        ptr = builder.bitcast(builder.gep(live_out, [offset]), ir.PointerType(masks.type))
+        builder.store(masks, ptr, align=8)
+
+
+def _parent_mask(builder, live_in, block):
+    """The group's live mask, or all ones where live_in is NULL."""
+    is_null = builder.icmp_unsigned("==", live_in, ir.Constant(_PI64, None))
+    with builder.goto_entry_block():
+        all_live = builder.alloca(I64)
+    builder.store(ir.Constant(I64, -1), all_live)
+    ptr = builder.select(is_null, all_live, builder.gep(live_in, [block]))
+    return builder.load(ptr)
 
 
 def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface") -> str:
@@ -118,13 +144,28 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface") -
     b.ret_void()
 
     fn, b, blocks = _kernel(module, "implc_interval")
-    lo, hi, out_lo, out_hi, _ = fn.args
+    lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
+    plan = plan_regions(value_tape)
     with for_range(b, blocks) as i:
-        f_lo, f_hi = emit_interval(VectorBuilder(b, WIDTH), value_tape, _load_xyz(b, lo, i), _load_xyz(b, hi, i))
+        vb = VectorBuilder(b, WIDTH)
+        if plan.enabled:
+            f_lo, f_hi, masks = emit_interval_regions(vb, value_tape, plan, _load_xyz(b, lo, i), _load_xyz(b, hi, i),
+                                                      _parent_mask(b, live_in, i))
+        else:
+            f_lo, f_hi = emit_interval(vb, value_tape, _load_xyz(b, lo, i), _load_xyz(b, hi, i))
+            masks = _splat_mask(b, _parent_mask(b, live_in, i))
         _store(b, out_lo, i, f_lo)
         _store(b, out_hi, i, f_hi)
+        _live_masks(b, live_in, live_out, i, masks)
     b.ret_void()
     return str(module)
+
+
+def _splat_mask(builder, mask):
+    vec = ir.VectorType(I64, WIDTH)
+    one = builder.insert_element(ir.Constant(vec, ir.Undefined), mask, ir.Constant(ir.IntType(32), 0))
+    return builder.shuffle_vector(one, ir.Constant(vec, ir.Undefined),
+                                  ir.Constant(ir.VectorType(ir.IntType(32), WIDTH), [0] * WIDTH))
 
 
 def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface_mvf") -> str:
@@ -132,11 +173,12 @@ def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "
     size of the others together, so it is compiled only when first used."""
     module = ir.Module(name=name)
     fn, b, blocks = _kernel(module, MEAN_VALUE_KERNEL)
-    lo, hi, out_lo, out_hi, _ = fn.args
+    lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
     with for_range(b, blocks) as i:
         f_lo, f_hi = emit_mean_value(VectorBuilder(b, WIDTH), value_tape, gradient_tape, _load_xyz(b, lo, i),
                                      _load_xyz(b, hi, i))
         _store(b, out_lo, i, f_lo)
         _store(b, out_hi, i, f_hi)
+        _live_masks(b, live_in, live_out, i, _splat_mask(b, _parent_mask(b, live_in, i)))  # prunes nothing
     b.ret_void()
     return str(module)

@@ -42,12 +42,12 @@ LEVEL_COUNTS = 8
 PATH = LEVEL_COUNTS + MAX_DEPTH + 2
 OCTREE_STATE_WORDS = PATH + MAX_DEPTH + 2
 
-BOX_FN = ir.FunctionType(VOID, [PD, PD, PD, PD, I64])
+BOX_FN = ir.FunctionType(VOID, [PD, PD, PD, PD, I64, PI64, PI64])
 GRADIENT_FN = ir.FunctionType(VOID, [PD, PD, PD, I64])
 POINT_FN = ir.FunctionType(VOID, [PD, PD, I64])
 
 SIGNATURES = {
-    "implc_subdivide": (I64, [I8P, I8P, I64, PD, PI32, PI64, PI32, I64, PI64, PI32]),
+    "implc_subdivide": (I64, [I8P, I8P, I64, I64, PD, PI32, PI64, PI64, PI32, I64, PI64, PI32]),
     "implc_normals": (VOID, [I8P, I8P, PD, PI32, I64, PF]),
     "implc_octree_insert": (I64, [PI32, I64, PI64, PI32, I64, I64]),
     "implc_octree_traverse": (I64, [PI32, I64, I64, PI32, PI64]),
@@ -80,7 +80,7 @@ def _bump(b, ptr, index, amount=1):
 
 def _subdivide(module):
     fn, b = _function(module, "implc_subdivide")
-    box_ptr, fine_ptr, fine_level, geom, stack, state, out, cap, stats, cancel = fn.args
+    box_ptr, fine_ptr, fine_level, prune, geom, stack, masks, state, out, cap, stats, cancel = fn.args
     box = b.bitcast(box_ptr, ir.PointerType(BOX_FN))
     fine = b.bitcast(fine_ptr, ir.PointerType(BOX_FN))
     depth = b.trunc(_load(b, state, 1), I32)
@@ -88,6 +88,10 @@ def _subdivide(module):
     count = Local(b, I64, 0, "count")
     lo, hi = local_array(b, DOUBLE, 24, "lo"), local_array(b, DOUBLE, 24, "hi")
     flo, fhi = local_array(b, DOUBLE, 8, "flo"), local_array(b, DOUBLE, 8, "fhi")
+    child_masks = local_array(b, I64, 8, "child_masks")
+    parent_mask = local_array(b, I64, 1, "parent_mask")
+    pruning = b.icmp_signed("!=", prune, const(I64, 0))
+    null64 = ir.Constant(PI64, None)
     origin = [_load(b, geom, a) for a in range(3)]
     pad = [_load(b, geom, 3 + a) for a in range(3)]
     zero = const(DOUBLE, 0.0)
@@ -104,6 +108,7 @@ def _subdivide(module):
         no_room = b.icmp_signed(">", b.add(count.get(), const(I64, 8)), cap)
         loop.break_if(b.and_(leaf, no_room))
         size.set(b.sub(s, const(I64, 1)))
+        _store(b, _load(b, masks, b.sub(s, const(I64, 1))), parent_mask, 0)
 
         level64 = b.zext(child_level, I64)
         h = [_load(b, geom, b.add(b.mul(level64, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
@@ -117,7 +122,8 @@ def _subdivide(module):
                 _store(b, b.fsub(b.fadd(origin[a], b.fmul(i_lo, h[a])), pad[a]), lo, 3 * c + a)
                 _store(b, b.fadd(b.fadd(origin[a], b.fmul(i_hi, h[a])), pad[a]), hi, 3 * c + a)
         use_fine = b.icmp_signed(">=", b.zext(child_level, I64), fine_level)
-        b.call(b.select(use_fine, fine, box), [lo, hi, flo, fhi, const(I64, 8)])
+        b.call(b.select(use_fine, fine, box), [lo, hi, flo, fhi, const(I64, 8), b.select(pruning, parent_mask, null64),
+                                               b.select(pruning, child_masks, null64)])
         _bump(b, stats, 0, 8)
         stat_slot = b.add(level64, const(I64, 1))
 
@@ -141,6 +147,7 @@ def _subdivide(module):
                         for a in range(3):
                             _store(b, children[c][a], stack, b.add(base, const(I64, a)))
                         _store(b, child_level, stack, b.add(base, const(I64, 3)))
+                        _store(b, b.select(pruning, _load(b, child_masks, c), const(I64, -1)), masks, t)
                         size.set(b.add(t, const(I64, 1)))
                         _bump(b, stats, stat_slot)
     _store(b, size.get(), state, 0)

@@ -1,0 +1,33 @@
+"""The region plan: which terms can be dropped per octant, and how the tape is split around them."""
+
+import sympy
+from sympy import Rational
+
+from implc import scene, shapes, x, y, z
+from implc.lower import lower
+from implc.regions import plan_regions
+
+
+def test_blend_sum_terms_are_found_and_self_contained():
+    tape = lower(scene.load("paper_blobs").surface)
+    plan = plan_regions(tape)
+    assert len(plan.terms) == 10 and all(t.kind == "sum" and t.zero_when == "false" for t in plan.terms)
+    roots = {t.root for t in plan.terms}
+    for term in plan.terms:
+        assert term.root in term.private and term.condition in term.private
+        assert not roots & (set(term.private) - {term.root})  # no term inside another
+    # everything before the terms is an input or a constant: a dead term costs nothing
+    assert {tape.nodes[i][0] for i in plan.before} <= {"var", "const"}
+    assert tape.outputs[0] in plan.after
+
+
+def test_min_chain_leaves_are_terms():
+    f = shapes.union(*[shapes.sphere(Rational(1, 5), (Rational(k, 5), 0, 0)) for k in range(-2, 3)])
+    plan = plan_regions(lower(f))
+    assert len(plan.terms) == 5 and {t.kind for t in plan.terms} == {"min"}
+    assert len(plan.chain_leaves) == 5
+
+
+def test_nothing_to_prune():
+    assert not plan_regions(lower(x**2 + y**2 + z**2 - 1)).enabled
+    assert not plan_regions(lower(sympy.sin(4 * sympy.Symbol("theta")) - sympy.Symbol("r"))).enabled
