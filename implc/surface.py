@@ -12,7 +12,7 @@ import math
 import numpy as np
 import sympy
 
-from .codegen.kernels import MEAN_VALUE_KERNEL, WIDTH, build_mean_value_module, build_module
+from .codegen.kernels import MEAN_VALUE_KERNEL, WIDTH, WIDTHS, build_mean_value_module, build_module
 from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape
@@ -57,13 +57,15 @@ def _rows(name: str, array) -> np.ndarray:
 class Surface:
     """A compiled implicit surface F(x, y, z) = 0 (F < 0 inside) over a bounding box."""
 
-    def __init__(self, expr: sympy.Expr, bounds, tape: Tape):
+    def __init__(self, expr: sympy.Expr, bounds, tape: Tape, vector_width: int = WIDTH):
         self.expr = expr
         self.bounds = bounds
         self.tape = tape
+        self.width = vector_width
         self.gradient_tape = with_gradient(tape)
-        self.native = NativeModule(lambda: build_module(self.tape, self.gradient_tape),
-                                   source_key=self.tape.fingerprint() + self.gradient_tape.fingerprint())
+        self._key = f"w{self.width}" + self.tape.fingerprint() + self.gradient_tape.fingerprint()
+        self.native = NativeModule(lambda: build_module(self.tape, self.gradient_tape, width=self.width),
+                                   source_key=self._key)
         self._point = self.native.function("implc_point", [_P, _P, _N])
         self._gradient = self.native.function("implc_gradient", [_P, _P, _P, _N])
         self._interval = self.native.function("implc_interval", [_P, _P, _P, _P, _N, _P, _P])
@@ -74,8 +76,8 @@ class Surface:
         """The mean-value interval kernel, compiled (or loaded from the cache) on first use."""
         if self._interval_mvf is None:
             self.mean_value_native = NativeModule(
-                lambda: build_mean_value_module(self.tape, self.gradient_tape),
-                source_key="mvf" + self.tape.fingerprint() + self.gradient_tape.fingerprint())
+                lambda: build_mean_value_module(self.tape, self.gradient_tape, width=self.width),
+                source_key="mvf" + self._key)
             self._interval_mvf = self.mean_value_native.function(MEAN_VALUE_KERNEL, [_P, _P, _P, _P, _N, _P, _P])
         return self._interval_mvf
 
@@ -93,7 +95,7 @@ class Surface:
     @property
     def llvm_ir(self) -> str:
         """The LLVM IR of the kernels as generated (before optimisation)."""
-        return build_module(self.tape, self.gradient_tape)
+        return build_module(self.tape, self.gradient_tape, width=self.width)
 
     def __repr__(self) -> str:
         return f"Surface({self.expr}, bounds={self.bounds}, {len(self.tape)} ops)"
@@ -104,15 +106,16 @@ class Surface:
         arguments, e.g. NULL live masks)."""
         n = len(inputs[0])
         outs = [np.empty((n, *shape), dtype=np.float64) for shape in out_shapes]
-        main = n - n % WIDTH
+        width = self.width
+        main = n - n % width
         if main:
             kernel(*[a.ctypes.data for a in inputs], *[o.ctypes.data for o in outs], main, *extra)
         if main < n:
-            tail_in = [np.zeros((WIDTH, 3)) for _ in inputs]
+            tail_in = [np.zeros((width, 3)) for _ in inputs]
             for pad, a in zip(tail_in, inputs):
                 pad[: n - main] = a[main:]
-            tail_out = [np.empty((WIDTH, *shape)) for shape in out_shapes]
-            kernel(*[a.ctypes.data for a in tail_in], *[o.ctypes.data for o in tail_out], WIDTH, *extra)
+            tail_out = [np.empty((width, *shape)) for shape in out_shapes]
+            kernel(*[a.ctypes.data for a in tail_in], *[o.ctypes.data for o in tail_out], width, *extra)
             for o, t in zip(outs, tail_out):
                 o[main:] = t[: n - main]
         return outs
@@ -148,8 +151,12 @@ class Surface:
         return f_lo, f_hi
 
 
-def compile(expr, bounds=DEFAULT_BOUNDS) -> Surface:  # noqa: A001 - the public name the API promises
-    """Compile the surface ``expr = 0`` (a SymPy expression in x, y, z, r, theta, phi) over ``bounds``."""
+def compile(expr, bounds=DEFAULT_BOUNDS, *, vector_width: int = WIDTH) -> Surface:  # noqa: A001 - the public name
+    """Compile the surface ``expr = 0`` (a SymPy expression in x, y, z, r, theta, phi) over ``bounds``.
+
+    ``vector_width``: lanes per kernel step (8 by default: an octant's children at once; 1 for scalar
+    code, to measure what vectors bring).
+    """
     if not isinstance(expr, sympy.Basic):
         raise TypeError(f"implc.compile expects a SymPy expression, got {type(expr).__name__}")
     if isinstance(expr, sympy.Equality):
@@ -158,4 +165,6 @@ def compile(expr, bounds=DEFAULT_BOUNDS) -> Surface:  # noqa: A001 - the public 
                          sympy.logic.boolalg.BooleanAtom)):
         raise CompileError(f"expected a real-valued expression F (the surface is F = 0), got {expr}")
     checked = check_bounds(bounds)
-    return Surface(expr, checked, lower(expr))
+    if vector_width not in WIDTHS:
+        raise CompileError(f"vector_width must be one of {WIDTHS}, got {vector_width!r}")
+    return Surface(expr, checked, lower(expr), vector_width)

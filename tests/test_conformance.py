@@ -145,6 +145,19 @@ def test_compiled_matches_reference(name, surfaces):
     np.testing.assert_allclose(f_hi, r_hi, rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("width", [1, 2, 4])
+@pytest.mark.parametrize("name", ["spherical", "select_le", "atan2_wrapped", "powi_even", "div_pole", "min"])
+def test_every_vector_width_computes_the_same(name, width, surfaces):
+    s8, s = surfaces[name], implc.compile(OP_CASES[name], vector_width=width)
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(-1.5, 1.5, (37, 3))
+    np.testing.assert_array_equal(s.eval(pts), s8.eval(pts))
+    np.testing.assert_array_equal(s.gradient(pts), s8.gradient(pts))
+    lo, hi = adversarial_boxes(rng, 37)
+    for mean_value in (False, True):
+        np.testing.assert_array_equal(s.interval(lo, hi, mean_value), s8.interval(lo, hi, mean_value))
+
+
 @pytest.mark.parametrize("name", sorted(OP_CASES))
 def test_gradient_matches_differences(name, surfaces):
     s = surfaces[name]

@@ -52,6 +52,11 @@ def test_bad_bounds_are_named(bounds, message):
         implc.compile(x + y, bounds=bounds)
 
 
+def test_bad_vector_width_is_named():
+    with pytest.raises(CompileError, match="vector_width must be one of"):
+        implc.compile(x + y, vector_width=3)
+
+
 def test_bad_arrays_are_named():
     s = implc.compile(x**2 + y**2 + z**2 - 1)
     with pytest.raises(ValueError, match=r"points must be an \(N, 3\) array"):

@@ -98,6 +98,8 @@ def test_pruning_dead_terms_changes_nothing_it_should_not(compiled):
         assert not np.any(pruned.to_dense() & ~plain.to_dense())  # dropping dead terms never adds a cell
         assert not np.any(sign_change_cells(s, 7) & ~pruned.to_dense())  # ... nor loses one
         assert pruned.stats.interval_evaluations <= plain.stats.interval_evaluations
+    scalar = implc.compile(shapes.union(*spheres), vector_width=1)  # pruning with one lane per step
+    np.testing.assert_array_equal(implc.voxelize(scalar, 7).coords, implc.voxelize(union, 7).coords)
     # a blend sum: dead terms are exactly zero either way, so the voxels are identical
     np.testing.assert_array_equal(implc.voxelize(compiled["paper_blobs"], 7, prune=False).coords,
                                   implc.voxelize(compiled["paper_blobs"], 7, prune=True).coords)

@@ -26,7 +26,9 @@ from .point import emit_point
 from .vector import DOUBLE, I64, VectorBuilder
 
 WIDTH = 8
-"""Lanes per vector: eight boxes (an octant's children) per kernel step."""
+"""Default lanes per vector: eight boxes (an octant's children) per kernel step. 1, 2 and 4 are allowed
+(``implc.compile(..., vector_width=1)``), to measure what the vectors bring."""
+WIDTHS = (1, 2, 4, 8)
 
 KERNELS = {  # (pointer arguments before n, pointer arguments after n)
     "implc_point": (2, 0),
@@ -63,122 +65,126 @@ def _vector_ptr(builder, base, offset, lanes):
     return builder.bitcast(ptr, ir.PointerType(ir.VectorType(DOUBLE, lanes)))
 
 
-def _load_xyz(builder, base, block):
-    """Three WIDTH-vectors (x, y, z) from WIDTH consecutive rows of an (n, 3) array."""
-    offset = builder.mul(block, ir.Constant(I64, 3 * WIDTH))
-    rows = builder.load(_vector_ptr(builder, base, offset, 3 * WIDTH), align=8)
+def _load_xyz(builder, base, block, width):
+    """Three vectors (x, y, z) of ``width`` lanes from as many consecutive rows of an (n, 3) array."""
+    offset = builder.mul(block, ir.Constant(I64, 3 * width))
+    rows = builder.load(_vector_ptr(builder, base, offset, 3 * width), align=8)
     return [builder.shuffle_vector(rows, ir.Constant(rows.type, ir.Undefined),
-                                   ir.Constant(ir.VectorType(ir.IntType(32), WIDTH),
-                                               [3 * lane + axis for lane in range(WIDTH)]))
+                                   ir.Constant(ir.VectorType(ir.IntType(32), width),
+                                               [3 * lane + axis for lane in range(width)]))
             for axis in range(3)]
 
 
-def _store_xyz(builder, base, block, vectors):
-    """Interleave three WIDTH-vectors back into WIDTH rows of an (n, 3) array."""
+def _store_xyz(builder, base, block, vectors, width):
+    """Interleave three vectors of ``width`` lanes back into as many rows of an (n, 3) array."""
     i32 = ir.IntType(32)
-    pair = builder.shuffle_vector(vectors[0], vectors[1], ir.Constant(ir.VectorType(i32, 2 * WIDTH),
-                                                                      list(range(2 * WIDTH))))
+    pair = builder.shuffle_vector(vectors[0], vectors[1], ir.Constant(ir.VectorType(i32, 2 * width),
+                                                                      list(range(2 * width))))
     third = builder.shuffle_vector(vectors[2], ir.Constant(vectors[2].type, ir.Undefined),
-                                   ir.Constant(ir.VectorType(i32, 2 * WIDTH),
-                                               list(range(WIDTH)) + [0] * WIDTH))
-    order = [axis * WIDTH + lane if axis < 2 else 2 * WIDTH + lane
-             for lane in range(WIDTH) for axis in range(3)]
-    rows = builder.shuffle_vector(pair, third, ir.Constant(ir.VectorType(i32, 3 * WIDTH), order))
-    offset = builder.mul(block, ir.Constant(I64, 3 * WIDTH))
-    builder.store(rows, _vector_ptr(builder, base, offset, 3 * WIDTH), align=8)
+                                   ir.Constant(ir.VectorType(i32, 2 * width),
+                                               list(range(width)) + [0] * width))
+    order = [axis * width + lane if axis < 2 else 2 * width + lane
+             for lane in range(width) for axis in range(3)]
+    rows = builder.shuffle_vector(pair, third, ir.Constant(ir.VectorType(i32, 3 * width), order))
+    offset = builder.mul(block, ir.Constant(I64, 3 * width))
+    builder.store(rows, _vector_ptr(builder, base, offset, 3 * width), align=8)
 
 
-def _store(builder, base, block, vector):
-    offset = builder.mul(block, ir.Constant(I64, WIDTH))
-    builder.store(vector, _vector_ptr(builder, base, offset, WIDTH), align=8)
+def _store(builder, base, block, vector, width):
+    offset = builder.mul(block, ir.Constant(I64, width))
+    builder.store(vector, _vector_ptr(builder, base, offset, width), align=8)
 
 
 _PI64 = ir.PointerType(I64)
 
 
-def _kernel(module, name):
+def _kernel(module, name, width):
     before, after = KERNELS[name]
     fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_PTR] * before + [I64] + [_PI64] * after), name=name)
     for arg in fn.args[:before]:
         arg.add_attribute("noalias")
     builder = ir.IRBuilder(fn.append_basic_block("entry"))
-    blocks = builder.sdiv(fn.args[before], ir.Constant(I64, WIDTH))
+    blocks = builder.sdiv(fn.args[before], ir.Constant(I64, width))
     return fn, builder, blocks
 
 
-def _live_masks(builder, live_in, live_out, block, masks):
+def _live_masks(builder, live_in, live_out, block, masks, width):
     """Store the boxes' live masks if live_out is not NULL."""
     with builder.if_then(builder.icmp_unsigned("!=", live_out, ir.Constant(_PI64, None))):
-        offset = builder.mul(block, ir.Constant(I64, WIDTH))
+        offset = builder.mul(block, ir.Constant(I64, width))
         ptr = builder.bitcast(builder.gep(live_out, [offset]), ir.PointerType(masks.type))
         builder.store(masks, ptr, align=8)
 
 
-def _parent_mask(builder, live_in, block):
-    """The group's live mask, or all ones where live_in is NULL."""
+def _parent_mask(builder, live_in, block, width):
+    """The live mask of the octant whose children these are (one per 8 boxes), or all ones where
+    live_in is NULL."""
     is_null = builder.icmp_unsigned("==", live_in, ir.Constant(_PI64, None))
     with builder.goto_entry_block():
         all_live = builder.alloca(I64)
     builder.store(ir.Constant(I64, -1), all_live)
-    ptr = builder.select(is_null, all_live, builder.gep(live_in, [block]))
+    group = builder.sdiv(builder.mul(block, ir.Constant(I64, width)), ir.Constant(I64, 8))
+    ptr = builder.select(is_null, all_live, builder.gep(live_in, [group]))
     return builder.load(ptr)
 
 
-def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface") -> str:
-    """The LLVM IR text of the three kernels for a surface."""
+def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", width: int = WIDTH) -> str:
+    """The LLVM IR text of the point, gradient and interval kernels for a surface."""
     module = ir.Module(name=name)
 
-    fn, b, blocks = _kernel(module, "implc_point")
+    fn, b, blocks = _kernel(module, "implc_point", width)
     pts, out, _ = fn.args
     with for_range(b, blocks) as i:
-        (value,) = emit_point(VectorBuilder(b, WIDTH), value_tape, _load_xyz(b, pts, i))
-        _store(b, out, i, value)
+        (value,) = emit_point(VectorBuilder(b, width), value_tape, _load_xyz(b, pts, i, width))
+        _store(b, out, i, value, width)
     b.ret_void()
 
-    fn, b, blocks = _kernel(module, "implc_gradient")
+    fn, b, blocks = _kernel(module, "implc_gradient", width)
     pts, out_value, out_grad, _ = fn.args
     with for_range(b, blocks) as i:
-        value, *grad = emit_point(VectorBuilder(b, WIDTH), gradient_tape, _load_xyz(b, pts, i))
-        _store(b, out_value, i, value)
-        _store_xyz(b, out_grad, i, grad)
+        value, *grad = emit_point(VectorBuilder(b, width), gradient_tape, _load_xyz(b, pts, i, width))
+        _store(b, out_value, i, value, width)
+        _store_xyz(b, out_grad, i, grad, width)
     b.ret_void()
 
-    fn, b, blocks = _kernel(module, "implc_interval")
+    fn, b, blocks = _kernel(module, "implc_interval", width)
     lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
     plan = plan_regions(value_tape)
     with for_range(b, blocks) as i:
-        vb = VectorBuilder(b, WIDTH)
+        vb = VectorBuilder(b, width)
         if plan.enabled:
-            f_lo, f_hi, masks = emit_interval_regions(vb, value_tape, plan, _load_xyz(b, lo, i), _load_xyz(b, hi, i),
-                                                      _parent_mask(b, live_in, i))
+            f_lo, f_hi, masks = emit_interval_regions(vb, value_tape, plan, _load_xyz(b, lo, i, width),
+                                                      _load_xyz(b, hi, i, width), _parent_mask(b, live_in, i, width))
         else:
-            f_lo, f_hi = emit_interval(vb, value_tape, _load_xyz(b, lo, i), _load_xyz(b, hi, i))
-            masks = _splat_mask(b, _parent_mask(b, live_in, i))
-        _store(b, out_lo, i, f_lo)
-        _store(b, out_hi, i, f_hi)
-        _live_masks(b, live_in, live_out, i, masks)
+            f_lo, f_hi = emit_interval(vb, value_tape, _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width))
+            masks = _splat_mask(b, _parent_mask(b, live_in, i, width), width)
+        _store(b, out_lo, i, f_lo, width)
+        _store(b, out_hi, i, f_hi, width)
+        _live_masks(b, live_in, live_out, i, masks, width)
     b.ret_void()
     return str(module)
 
 
-def _splat_mask(builder, mask):
-    vec = ir.VectorType(I64, WIDTH)
+def _splat_mask(builder, mask, width):
+    vec = ir.VectorType(I64, width)
     one = builder.insert_element(ir.Constant(vec, ir.Undefined), mask, ir.Constant(ir.IntType(32), 0))
     return builder.shuffle_vector(one, ir.Constant(vec, ir.Undefined),
-                                  ir.Constant(ir.VectorType(ir.IntType(32), WIDTH), [0] * WIDTH))
+                                  ir.Constant(ir.VectorType(ir.IntType(32), width), [0] * width))
 
 
-def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface_mvf") -> str:
+def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface_mvf",
+                            width: int = WIDTH) -> str:
     """The LLVM IR of the mean-value interval kernel, a module of its own: it is about three times the
     size of the others together, so it is compiled only when first used."""
     module = ir.Module(name=name)
-    fn, b, blocks = _kernel(module, MEAN_VALUE_KERNEL)
+    fn, b, blocks = _kernel(module, MEAN_VALUE_KERNEL, width)
     lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
     with for_range(b, blocks) as i:
-        f_lo, f_hi = emit_mean_value(VectorBuilder(b, WIDTH), value_tape, gradient_tape, _load_xyz(b, lo, i),
-                                     _load_xyz(b, hi, i))
-        _store(b, out_lo, i, f_lo)
-        _store(b, out_hi, i, f_hi)
-        _live_masks(b, live_in, live_out, i, _splat_mask(b, _parent_mask(b, live_in, i)))  # prunes nothing
+        f_lo, f_hi = emit_mean_value(VectorBuilder(b, width), value_tape, gradient_tape,
+                                     _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width))
+        _store(b, out_lo, i, f_lo, width)
+        _store(b, out_hi, i, f_hi, width)
+        masks = _splat_mask(b, _parent_mask(b, live_in, i, width), width)  # prunes nothing
+        _live_masks(b, live_in, live_out, i, masks, width)
     b.ret_void()
     return str(module)
