@@ -166,7 +166,8 @@ class Subdivider:
     # -- orchestration ---------------------------------------------------------------------------
     def plan(self) -> tuple[np.ndarray, int]:
         """Tasks: the cells at a coarse level that may meet the surface (and that level)."""
-        level = min(self.depth, 3 if self.workers <= 4 else 4)
+        # enough tasks to balance the workers (~25 per worker), few enough that per-task overhead stays small
+        level = min(self.depth, 2 if self.workers <= 2 else 3 if self.workers <= 16 else 4)
         w = _Worker(level)
         t0 = time.perf_counter()
         result = _TaskResult()

@@ -8,7 +8,10 @@ from __future__ import annotations
 
 import math
 
+from llvmlite import ir
+
 from .. import rounding as R
+from .control import Local
 from .point import powi
 from .vector import VectorBuilder
 
@@ -281,14 +284,9 @@ class IntervalEmitter:
 def emit_interval_outputs(vb: VectorBuilder, tape, lo_coords, hi_coords) -> list:
     """Emit enclosures of every output of the tape over boxes [lo_coords, hi_coords]; NaN kept."""
     em = IntervalEmitter(vb)
-    vals: list = []
-    for op, args, attr in tape.nodes:
-        if op == "const":
-            vals.append((vb.splat(attr[1]), vb.splat(attr[2])))
-        elif op == "var":
-            vals.append((lo_coords[attr], hi_coords[attr]))
-        else:
-            vals.append(getattr(em, f"i_{op}")([vals[i] for i in args], attr))
+    vals: dict = {}
+    for i in range(len(tape.nodes)):
+        _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
     return [vals[o] for o in tape.outputs]
 
 
@@ -305,9 +303,6 @@ def _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords):
 def emit_interval_regions(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask):
     """Like :func:`emit_interval`, skipping the terms dead in the parent (``live_mask``, an i64 shared by
     the W boxes) and returning, besides (lo, hi), each box's own live mask (a <W x i64> vector)."""
-    from llvmlite import ir
-
-    from .control import Local
     b = vb.b
     i64 = ir.IntType(64)
     mask_type = ir.VectorType(i64, vb.width)

@@ -15,12 +15,11 @@ points and boxes as row-major (n, 3) float64 arrays:
 
 from __future__ import annotations
 
-from contextlib import contextmanager
-
 from llvmlite import ir
 
 from ..ir import Tape
 from ..regions import plan_regions
+from .control import for_range
 from .interval import emit_interval, emit_interval_regions, emit_mean_value
 from .point import emit_point
 from .vector import DOUBLE, I64, VectorBuilder
@@ -39,25 +38,6 @@ KERNELS = {  # (pointer arguments before n, pointer arguments after n)
 MEAN_VALUE_KERNEL = "implc_interval_mvf"
 
 _PTR = ir.PointerType(DOUBLE)
-
-
-@contextmanager
-def for_range(builder: ir.IRBuilder, count):
-    """``for i in range(count)`` in IR; yields the i64 loop index."""
-    entry = builder.block
-    header = builder.append_basic_block("loop.header")
-    body = builder.append_basic_block("loop.body")
-    done = builder.append_basic_block("loop.done")
-    builder.branch(header)
-    builder.position_at_end(header)
-    index = builder.phi(I64, name="i")
-    index.add_incoming(ir.Constant(I64, 0), entry)
-    builder.cbranch(builder.icmp_signed("<", index, count), body, done)
-    builder.position_at_end(body)
-    yield index
-    index.add_incoming(builder.add(index, ir.Constant(I64, 1)), builder.block)
-    builder.branch(header)
-    builder.position_at_end(done)
 
 
 def _vector_ptr(builder, base, offset, lanes):
