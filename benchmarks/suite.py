@@ -192,6 +192,7 @@ GROWTH_SCRIPT = """
 import json, resource, sys, time, implc
 from implc import scene
 sc = scene.load(sys.argv[1]); s = implc.compile(sc.surface, sc.bounds)
+implc.voxelize(s, 5)  # load the runtime module: the figure is the voxelization alone
 t0 = time.perf_counter(); v = implc.voxelize(s, int(sys.argv[2])); seconds = time.perf_counter() - t0
 print(json.dumps({"seconds": seconds, "voxels": len(v),
                   "peak_rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
