@@ -92,6 +92,7 @@ def dense_sign_changes(evaluate, bounds, depth) -> int:
 
 def numpy_evaluator(expr):
     import sympy
+
     from implc.symbols import cartesian_form, x, y, z
     fn = sympy.lambdify((x, y, z), cartesian_form(expr), modules="numpy")
 
@@ -189,11 +190,16 @@ def baselines(args, out):
 
 
 GROWTH_SCRIPT = """
-import json, resource, sys, time, implc
+import json, resource, statistics, sys, time, implc
 from implc import scene
 sc = scene.load(sys.argv[1]); s = implc.compile(sc.surface, sc.bounds)
 implc.voxelize(s, 5)  # load the runtime module: the figure is the voxelization alone
-t0 = time.perf_counter(); v = implc.voxelize(s, int(sys.argv[2])); seconds = time.perf_counter() - t0
+times = []
+for _ in range(int(sys.argv[3])):
+    t0 = time.perf_counter(); v = implc.voxelize(s, int(sys.argv[2])); times.append(time.perf_counter() - t0)
+    del v
+v = implc.voxelize(s, int(sys.argv[2]))
+seconds = statistics.median(times)
 print(json.dumps({"seconds": seconds, "voxels": len(v),
                   "peak_rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
 """
@@ -204,14 +210,16 @@ def growth(args, out):
     for name in args.growth_scenes:
         previous = None
         for depth in args.growth_depths:
-            proc = subprocess.run([sys.executable, "-c", GROWTH_SCRIPT, name, str(depth)], capture_output=True,
-                                  text=True, check=True)
+            repeats = max(1, min(args.repeats, 3))
+            proc = subprocess.run([sys.executable, "-c", GROWTH_SCRIPT, name, str(depth), str(repeats)],
+                                  capture_output=True, text=True, check=True)
             r = json.loads(proc.stdout)
             r.update(scene=name, depth=depth, ratio=(r["seconds"] / previous["seconds"]) if previous else None)
             rows.append(r)
             previous = r
     out["growth"] = rows
-    md = ["### Growth with resolution (one process per run; ideal ratio per doubling for a surface: 4)", "",
+    md = ["### Growth with resolution (a process per depth, median of up to 3 runs; ideal ratio per doubling "
+          "for a surface: 4)", "",
           "| scene | grid | seconds | voxels | peak memory | time ratio per doubling |", "|---|---|---|---|---|---|"]
     for r in rows:
         ratio = f"{r['ratio']:.2f}" if r["ratio"] else "-"
@@ -286,7 +294,7 @@ def sphere_union(count=50, seed=7):
 
     from implc import shapes
     rng = random.Random(seed)
-    centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))  # noqa: E731
+    centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
     return shapes.union(*[shapes.sphere(sympy.Rational(rng.randint(6, 14), 100), centre()) for _ in range(count)])
 
 

@@ -6,6 +6,18 @@ from .surface import Surface, compile
 from .symbols import phi, r, theta, x, y, z
 from .voxelize import Voxels, voxelize
 
-__all__ = ["CompileError", "Surface", "Voxels", "compile", "shapes", "voxelize", "x", "y", "z", "r", "theta",
-           "phi"]
+__all__ = [
+           "CompileError",
+           "Surface",
+           "Voxels",
+           "compile",
+           "phi",
+           "r",
+           "shapes",
+           "theta",
+           "voxelize",
+           "x",
+           "y",
+           "z",
+]
 __version__ = "0.1.0"

@@ -232,7 +232,7 @@ class Tape:
             return nn(args[2])
         return False
 
-    def compacted(self) -> "Tape":
+    def compacted(self) -> Tape:
         """A copy holding only the nodes the outputs depend on (same order, renumbered)."""
         live = set(self.outputs)
         for i in range(len(self.nodes) - 1, -1, -1):

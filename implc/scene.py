@@ -10,6 +10,7 @@ import runpy
 from dataclasses import dataclass
 from pathlib import Path
 
+
 def _scenes_dir() -> Path:
     """The project's scenes/ folder (installed as the implc.scenes package)."""
     try:

@@ -151,7 +151,7 @@ class Surface:
         return f_lo, f_hi
 
 
-def compile(expr, bounds=DEFAULT_BOUNDS, *, vector_width: int = WIDTH) -> Surface:  # noqa: A001 - the public name
+def compile(expr, bounds=DEFAULT_BOUNDS, *, vector_width: int = WIDTH) -> Surface:
     """Compile the surface ``expr = 0`` (a SymPy expression in x, y, z, r, theta, phi) over ``bounds``.
 
     ``vector_width``: lanes per kernel step (8 by default: an octant's children at once; 1 for scalar

@@ -7,6 +7,7 @@ rounding of its corners) contains 0: no cell where F changes sign is ever missed
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -15,7 +16,7 @@ from .runtime import Runtime
 from .storage import bytes_per_voxel, make_backend
 from .storage.grid import dense_bytes
 from .storage.octree import Octree, OctreeBuilder
-from .subdivide import SubdivisionStats, Subdivider, default_workers
+from .subdivide import Subdivider, SubdivisionStats, default_workers
 from .surface import Surface
 
 MIN_DEPTH, MAX_DEPTH = 1, 21
@@ -30,7 +31,6 @@ def available_memory() -> int:
                     return int(line.split()[1]) * 1024
     except OSError:  # pragma: no cover - non-Linux
         pass
-    import os
     return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
 
 

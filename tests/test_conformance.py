@@ -4,8 +4,27 @@ high-precision true values over adversarial boxes, and gradients match differenc
 import numpy as np
 import pytest
 import sympy
-from sympy import Abs, Max, Min, Piecewise, Rational, acos, asin, atan, atan2, cbrt, cos, cosh, exp, log, sin
-from sympy import sinh, sqrt, tan, tanh
+from sympy import (
+    Abs,
+    Max,
+    Min,
+    Piecewise,
+    Rational,
+    acos,
+    asin,
+    atan,
+    atan2,
+    cbrt,
+    cos,
+    cosh,
+    exp,
+    log,
+    sin,
+    sinh,
+    sqrt,
+    tan,
+    tanh,
+)
 
 import implc
 from implc import ir, reference

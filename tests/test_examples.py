@@ -1,6 +1,5 @@
 """Every example script runs at a small depth and writes what it promises."""
 
-import os
 import runpy
 from pathlib import Path
 

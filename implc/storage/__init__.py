@@ -53,5 +53,13 @@ def bytes_per_voxel(storage) -> float:
     return {"octree": 24 + 14, "coords": 24}.get(storage, 24) if isinstance(storage, str) else 24
 
 
-__all__ = ["BACKENDS", "CallbackStorage", "CoordinateList", "DenseGrid", "Octree", "OctreeBuilder",
-           "make_backend", "bytes_per_voxel"]
+__all__ = [
+    "BACKENDS",
+    "CallbackStorage",
+    "CoordinateList",
+    "DenseGrid",
+    "Octree",
+    "OctreeBuilder",
+    "bytes_per_voxel",
+    "make_backend",
+]

@@ -47,7 +47,7 @@ class Octree:
                  depth=self.depth, bounds=np.asarray(self.bounds, dtype=np.float64))
 
     @classmethod
-    def load(cls, path) -> "Octree":
+    def load(cls, path) -> Octree:
         with np.load(path) as data:
             return cls(int(data["depth"]), tuple(map(tuple, data["bounds"].tolist())), data["nodes"],
                        data["normals"], data["level_counts"])
