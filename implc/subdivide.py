@@ -72,7 +72,7 @@ def geometry(bounds, depth: int) -> np.ndarray:
     for a, (lo, hi) in enumerate(bounds):
         geom[a] = lo
         geom[3 + a] = (abs(lo) + abs(hi)) * 2.0**-50  # covers the rounding of lo + i·h
-        for level in range(MAX_DEPTH + 1):
+        for level in range(MAX_DEPTH + 2):
             geom[6 + 3 * level + a] = (hi - lo) / 2.0**level
     return geom
 
@@ -120,7 +120,7 @@ class Subdivider:
     """Runs one voxelization of ``surface`` to ``depth``; ``emit(coords, normals)`` receives the voxels."""
 
     def __init__(self, surface, depth: int, workers: int, runtime: Runtime, max_voxels: int | None = None,
-                 mean_value_levels: int = 0, prune: bool = True):
+                 mean_value_levels: int = 0, prune: bool = True, refine_leaves: bool = False):
         self.surface = surface
         self.depth = depth
         self.workers = workers
@@ -131,6 +131,7 @@ class Subdivider:
         self.leaf_geom = np.concatenate([self.geom[:3], leaf])
         self.box = surface.native.address("implc_interval")
         self.prune = int(bool(prune))
+        self.refine = int(bool(refine_leaves))
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
         self.fine_box = surface.mean_value_address() if mean_value_levels > 0 else self.box
@@ -148,8 +149,8 @@ class Subdivider:
         w.masks[0] = -1  # every term live at a task's root
         w.state[:] = (1, depth)
         while True:
-            n = self.runtime.subdivide(self.box, self.fine_box, self.fine_level, self.prune, self.geom_ptr,
-                                       w.stack_ptr, w.masks_ptr, w.state_ptr, w.out_ptr, OUTPUT_CHUNK, w.stats_ptr,
+            n = self.runtime.subdivide(self.box, self.fine_box, self.fine_level, self.prune, self.refine,
+                                       self.geom_ptr, w.stack_ptr, w.masks_ptr, w.state_ptr, w.out_ptr, OUTPUT_CHUNK, w.stats_ptr,
                                        self.cancel_ptr)
             if n:
                 result.append(w.out[:n])

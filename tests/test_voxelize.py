@@ -75,15 +75,28 @@ def test_no_cell_with_a_sign_change_is_missed(name, depth, compiled, over_inclus
     over_inclusion[(name, depth)] = len(voxels) / expected.sum()
 
 
+@pytest.mark.parametrize("options", [{"mean_value_levels": 1}, {"refine_leaves": True},
+                                     {"mean_value_levels": 1, "refine_leaves": True}], ids=["mvf", "refine", "both"])
 @pytest.mark.parametrize("name", sorted(SURFACES))
-def test_mean_value_leaves_miss_nothing_and_keep_fewer(name, compiled):
+def test_tighter_leaves_miss_nothing_and_keep_fewer(name, options, compiled):
     s = compiled[name]
     natural = implc.voxelize(s, 7, storage="coords")
-    tight = implc.voxelize(s, 7, storage="coords", mean_value_levels=1)
+    tight = implc.voxelize(s, 7, storage="coords", **options)
     expected = sign_change_cells(s, 7)
-    assert not np.any(expected & ~tight.to_dense()), f"{name}: the mean-value form lost a cell"
+    assert not np.any(expected & ~tight.to_dense()), f"{name}: {options} lost a cell"
     assert not np.any(tight.to_dense() & ~natural.to_dense())  # a subset of the natural voxels
-    np.testing.assert_array_equal(tight.coords, implc.voxelize(s, 7, workers=1, mean_value_levels=1).coords)
+    np.testing.assert_array_equal(tight.coords, implc.voxelize(s, 7, workers=1, **options).coords)
+
+
+def test_tightest_settings_reach_the_paper_scenes_targets(compiled):
+    """voxels / sign-change cells at 256³ with mean-value leaves refined once: <= 1.03 for Scene 1,
+    <= 1.08 for the spherical scenes (measured 1.018, 1.051, 1.043)."""
+    for name, bound in (("paper_blobs", 1.03), ("paper_sin4_sin8", 1.08), ("paper_sin3_sin4", 1.08)):
+        s = compiled[name]
+        v = implc.voxelize(s, 8, storage="coords", mean_value_levels=1, refine_leaves=True)
+        cells = sign_change_cells(s, 8)
+        assert not np.any(cells & ~v.to_dense())
+        assert len(v) / cells.sum() <= bound, (name, len(v) / cells.sum())
 
 
 def test_pruning_dead_terms_changes_nothing_it_should_not(compiled):

@@ -2,7 +2,8 @@
 
 - ``implc_subdivide``: Fig. 1 of the paper as a loop over an explicit stack. It calls a surface's
   interval kernel through a function pointer on the eight children of each octant (one vector step;
-  a second, finer kernel, e.g. the mean-value form, from a given child level on),
+  a second, finer kernel, e.g. the mean-value form, from a given child level on; optionally a leaf is
+  kept only if one of its eight halves-per-axis may meet the surface),
   prunes children whose enclosure excludes 0, pushes the rest in reverse so that leaves come out in
   Morton order, and writes leaf coordinates. It is resumable: when the output buffer is full or the
   cancel flag is raised it returns with its stack intact.
@@ -33,8 +34,9 @@ MAX_DEPTH = 21
 STACK_ENTRIES = 7 * (MAX_DEPTH + 1) + 8
 """Depth-first stack bound: at most 7 pending siblings per level plus one octant's 8 children."""
 
-GEOMETRY_DOUBLES = 6 + 3 * (MAX_DEPTH + 1)
-"""Subdivision geometry: origin (3), outward pad (3), then cell size per level (3 per level)."""
+GEOMETRY_DOUBLES = 6 + 3 * (MAX_DEPTH + 2)
+"""Subdivision geometry: origin (3), outward pad (3), then cell size per level (3 per level, one level
+past the deepest grid for leaf refinement)."""
 
 # octree state layout (i64 words)
 NODE_COUNT, DEPTH, STARTED, PREV = 0, 1, 2, 3
@@ -47,7 +49,7 @@ GRADIENT_FN = ir.FunctionType(VOID, [PD, PD, PD, I64])
 POINT_FN = ir.FunctionType(VOID, [PD, PD, I64])
 
 SIGNATURES = {
-    "implc_subdivide": (I64, [I8P, I8P, I64, I64, PD, PI32, PI64, PI64, PI32, I64, PI64, PI32]),
+    "implc_subdivide": (I64, [I8P, I8P, I64, I64, I64, PD, PI32, PI64, PI64, PI32, I64, PI64, PI32]),
     "implc_normals": (VOID, [I8P, I8P, PD, PI32, I64, PF]),
     "implc_octree_insert": (I64, [PI32, I64, PI64, PI32, I64, I64]),
     "implc_octree_traverse": (I64, [PI32, I64, I64, PI32, PI64]),
@@ -80,7 +82,7 @@ def _bump(b, ptr, index, amount=1):
 
 def _subdivide(module):
     fn, b = _function(module, "implc_subdivide")
-    box_ptr, fine_ptr, fine_level, prune, geom, stack, masks, state, out, cap, stats, cancel = fn.args
+    box_ptr, fine_ptr, fine_level, prune, refine, geom, stack, masks, state, out, cap, stats, cancel = fn.args
     box = b.bitcast(box_ptr, ir.PointerType(BOX_FN))
     fine = b.bitcast(fine_ptr, ir.PointerType(BOX_FN))
     depth = b.trunc(_load(b, state, 1), I32)
@@ -91,6 +93,9 @@ def _subdivide(module):
     child_masks = local_array(b, I64, 8, "child_masks")
     parent_mask = local_array(b, I64, 1, "parent_mask")
     pruning = b.icmp_signed("!=", prune, const(I64, 0))
+    refining = b.icmp_signed("!=", refine, const(I64, 0))
+    sub_lo, sub_hi = local_array(b, DOUBLE, 24, "sub_lo"), local_array(b, DOUBLE, 24, "sub_hi")
+    sub_flo, sub_fhi = local_array(b, DOUBLE, 8, "sub_flo"), local_array(b, DOUBLE, 8, "sub_fhi")
     null64 = ir.Constant(PI64, None)
     origin = [_load(b, geom, a) for a in range(3)]
     pad = [_load(b, geom, 3 + a) for a in range(3)]
@@ -124,16 +129,41 @@ def _subdivide(module):
         use_fine = b.icmp_signed(">=", b.zext(child_level, I64), fine_level)
         b.call(b.select(use_fine, fine, box), [lo, hi, flo, fhi, const(I64, 8), b.select(pruning, parent_mask, null64),
                                                b.select(pruning, child_masks, null64)])
+        kernel = b.select(use_fine, fine, box)
         _bump(b, stats, 0, 8)
         stat_slot = b.add(level64, const(I64, 1))
 
         def keep(c):
             return b.and_(b.fcmp_ordered("<=", _load(b, flo, c), zero), b.fcmp_ordered(">=", _load(b, fhi, c), zero))
 
+
+        def refined_keep(c):
+            """Whether some eighth of leaf c may meet the surface (one more level, for tightness)."""
+            sub_level = b.add(level64, const(I64, 1))
+            hs = [_load(b, geom, b.add(b.mul(sub_level, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
+            for k in range(8):
+                for a in range(3):
+                    i_lo = b.uitofp(b.add(b.shl(children[c][a], const(I32, 1)), const(I32, (k >> a) & 1)), DOUBLE)
+                    _store(b, b.fsub(b.fadd(origin[a], b.fmul(i_lo, hs[a])), pad[a]), sub_lo, 3 * k + a)
+                    i_hi = b.fadd(i_lo, const(DOUBLE, 1.0))
+                    _store(b, b.fadd(b.fadd(origin[a], b.fmul(i_hi, hs[a])), pad[a]), sub_hi, 3 * k + a)
+            live = b.select(pruning, _at(b, child_masks, c), null64)
+            b.call(kernel, [sub_lo, sub_hi, sub_flo, sub_fhi, const(I64, 8), live, null64])
+            _bump(b, stats, 0, 8)
+            hit = None
+            for k in range(8):
+                here = b.and_(b.fcmp_ordered("<=", _load(b, sub_flo, k), zero),
+                              b.fcmp_ordered(">=", _load(b, sub_fhi, k), zero))
+                hit = here if hit is None else b.or_(hit, here)
+            return hit
+
         with b.if_else(leaf) as (then, otherwise):
             with then:  # emit kept leaves in Morton order
                 for c in range(8):
-                    with if_(b, keep(c)):
+                    kept = Local(b, ir.IntType(1), keep(c))
+                    with if_(b, b.and_(kept.get(), refining)):
+                        kept.set(refined_keep(c))
+                    with if_(b, kept.get()):
                         n = count.get()
                         for a in range(3):
                             _store(b, children[c][a], out, b.add(b.mul(n, const(I64, 3)), const(I64, a)))
