@@ -186,14 +186,18 @@ class Subdivider:
             self.stats.kept_per_level[level] += int(w.stats[level + 1])
         w.stats[:] = 0
 
-    def run(self, emit, progress=None) -> SubdivisionStats:
-        cells, level = self.plan()
+    def run(self, emit, progress=None, plan=None) -> SubdivisionStats:
+        """Voxelize, handing Morton-ordered batches to ``emit``; ``plan``: the result of :meth:`plan` when
+        the caller already made it."""
+        cells, level = plan if plan is not None else self.plan()
         if level == self.depth:  # the plan already reached the leaves
             t0 = time.perf_counter()
-            emit(cells, self._normals(cells, np.empty((len(cells), 3), dtype=np.float32)))
+            normals = self._normals(cells, np.empty((len(cells), 3), dtype=np.float32))
+            t1 = time.perf_counter()
+            emit(cells, normals)
             self.stats.seconds["subdivide"] = time.perf_counter() - t0
-            self.stats.worker_busy = [self.stats.seconds["subdivide"]]
-            self.stats.worker_normals = [self.stats.seconds["subdivide"]]
+            self.stats.worker_busy = [t1 - t0]
+            self.stats.worker_normals = [t1 - t0]
             self.stats.worker_tasks = [len(cells)]
             return self.stats
         self._parallel(cells, level, emit, progress)
@@ -203,7 +207,7 @@ class Subdivider:
         n_tasks = len(cells)
         results: dict[int, tuple] = {}
         errors: list[BaseException] = []
-        cond = threading.Condition()
+        lock = threading.Lock()
         finished = threading.Event()  # all tasks stored, or an error: the only thing the caller waits for
         next_task, next_emit, committing, produced = [0], [0], [False], [0]
         storage_seconds = [0.0]
@@ -215,7 +219,7 @@ class Subdivider:
             """Hand finished tasks to the backend in task order; whichever worker finds the next one ready
             does it, so storage needs no extra thread competing for the cores."""
             while True:
-                with cond:
+                with lock:
                     t = next_emit[0]
                     if committing[0] or t not in results or self.cancel[0]:
                         return
@@ -229,7 +233,7 @@ class Subdivider:
                         progress.update(1)
                 finally:
                     in_flight.release()
-                    with cond:
+                    with lock:
                         pool.append(result)
                         next_emit[0] = t + 1
                         committing[0] = False
@@ -240,13 +244,13 @@ class Subdivider:
             try:
                 while not self.cancel[0]:
                     in_flight.acquire()
-                    with cond:
+                    with lock:
                         t = next_task[0]
                         next_task[0] += 1
                     if t >= n_tasks:
                         in_flight.release()
                         return
-                    with cond:
+                    with lock:
                         result = pool.pop() if pool else _TaskResult()
                     result.count = 0
                     t0 = time.perf_counter()
@@ -257,7 +261,7 @@ class Subdivider:
                     w.busy += t2 - t0
                     w.normals += t2 - t1
                     w.tasks += 1
-                    with cond:
+                    with lock:
                         produced[0] += result.count
                         if self.max_voxels is not None and produced[0] > self.max_voxels:
                             raise MemoryError(f"more than max_voxels={self.max_voxels} voxels at depth {self.depth}")
@@ -265,7 +269,7 @@ class Subdivider:
                     commit_ready()
             except BaseException as exc:  # noqa: BLE001 - any failure must reach the caller
                 self.cancel[0] = 1
-                with cond:
+                with lock:
                     errors.append(exc)
                 finished.set()
 

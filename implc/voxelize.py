@@ -143,6 +143,8 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     workers = default_workers() if workers is None else int(workers)
     if workers < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
+    if isinstance(mean_value_levels, bool) or not isinstance(mean_value_levels, int) or mean_value_levels < 0:
+        raise ValueError(f"mean_value_levels must be a whole number >= 0, got {mean_value_levels!r}")
     available = available_memory()
     if max_voxels is None:
         max_voxels = int(available * 0.8 / bytes_per_voxel(storage))
@@ -150,15 +152,12 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     t_start = time.perf_counter()
     runtime = Runtime()
     backend = OctreeBuilder(keep_normals=False, runtime=runtime) if storage == "octree" else make_backend(storage)
-    if isinstance(mean_value_levels, bool) or not isinstance(mean_value_levels, int) or mean_value_levels < 0:
-        raise ValueError(f"mean_value_levels must be a whole number >= 0, got {mean_value_levels!r}")
     subdivider = Subdivider(surface, depth, workers, runtime, max_voxels=max_voxels,
                             mean_value_levels=min(mean_value_levels, depth), prune=prune,
                             refine_leaves=refine_leaves)
     cells, level = subdivider.plan()
     estimate = _estimate_voxels(len(cells), level, depth)
     _check_memory(depth, storage, estimate, available)
-    subdivider.plan = lambda: (cells, level)  # run() reuses the plan just made
 
     t0 = time.perf_counter()
     backend.begin(depth, surface.bounds)
@@ -171,7 +170,7 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
         from tqdm import tqdm
         bar = tqdm(total=len(cells), unit="octant", desc=f"voxelize {1 << depth}³", leave=False)
     try:
-        stats = subdivider.run(collect, progress=bar)
+        stats = subdivider.run(collect, progress=bar, plan=(cells, level))
     finally:
         if bar is not None:
             bar.close()

@@ -110,7 +110,9 @@ class OctreeBuilder:
 
     def reserve(self, voxels: int):
         """Size the node array for about ``voxels`` voxels (a surface needs ~1/3 node per voxel)."""
-        rows = max(1024, int(voxels * 0.4))
+        self._grow_to(int(voxels * 0.4))
+
+    def _grow_to(self, rows: int):
         if rows > len(self.nodes):
             grown = np.zeros((rows, 8), dtype=np.int32)
             grown[: len(self.nodes)] = self.nodes
@@ -125,7 +127,7 @@ class OctreeBuilder:
                 coords[done:].ctypes.data, len(coords) - done, self.count + done)
             done += inserted
             if done < len(coords):  # out of nodes: grow and go on where it stopped
-                self.reserve(int(len(self.nodes) * 2 / 0.4))
+                self._grow_to(2 * len(self.nodes))
         self.count += len(coords)
         if self.keep_normals:
             self._normals.append(np.asarray(normals, dtype=np.float32))
