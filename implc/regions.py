@@ -27,12 +27,39 @@ class Term:
     zero_when: str | None = None  # sum terms: "true" or "false", the condition outcome that gives 0
 
 
+@dataclass(frozen=True)
+class FoldStep:
+    """One term's entry into the fold: ``node`` combines the accumulator with the term's value (after its
+    ``wrappers``, neg/scale nodes in tape order); ``node`` is None for the innermost term of a fold with no
+    base, which starts the accumulator."""
+
+    term: int  # index into RegionPlan.terms (its live bit)
+    node: int | None
+    wrappers: tuple[int, ...] = ()
+    term_left: bool = False  # the term's value is the node's first argument
+
+
+@dataclass(frozen=True)
+class Fold:
+    """The combining chain as a left fold over the terms in bit order, so that a kernel can loop over the
+    live bits only and pay nothing per dead term. ``base``: the non-term value the accumulator starts from
+    (None: the first live term starts it); ``top``: the node whose value the finished accumulator is;
+    ``tail``: the rest of ``after`` (nodes above ``top`` that combine it with non-term values)."""
+
+    op: str  # "sum", "min" or "max"
+    base: int | None
+    steps: tuple[FoldStep, ...]
+    top: int
+    tail: tuple[int, ...]
+
+
 @dataclass
 class RegionPlan:
     terms: list[Term] = field(default_factory=list)
     before: list[int] = field(default_factory=list)  # computed first (needed by several terms or the chain)
     after: list[int] = field(default_factory=list)  # the chain combining the terms
     chain_leaves: list[int] = field(default_factory=list)  # min/max chains: every leaf, term or not
+    fold: Fold | None = None  # the chain as a fold over the terms, where it is one
 
     @property
     def enabled(self) -> bool:
@@ -131,4 +158,81 @@ def plan_regions(tape) -> RegionPlan:
     info = {c[0]: c for c in candidates}
     terms = [Term(root=r, kind=info[r][1], private=tuple(private[r]), condition=info[r][2], zero_when=info[r][3])
              for r in roots]
-    return RegionPlan(terms=terms, before=before, after=after, chain_leaves=chain_leaves)
+    plan = RegionPlan(terms=terms, before=before, after=after, chain_leaves=chain_leaves)
+    plan.fold = _fold(tape, plan)
+    return plan
+
+
+_FOLD_OPS = {"sum": ("add", "sub"), "min": ("min",), "max": ("max",)}
+
+
+def _fold(tape, plan: RegionPlan) -> Fold | None:
+    """The chain as a left fold over the terms in bit order, or None when it has another shape (then the
+    kernel tests every term's bit in turn)."""
+    kind = plan.terms[0].kind
+    bit_of = {t.root: k for k, t in enumerate(plan.terms)}
+    with_terms = _closure_users(tape, bit_of)
+
+    def unwrap(i):
+        """(bit, wrappers) when node i is a term root under neg/scale nodes (sums only), else None."""
+        chain = []
+        while i not in bit_of:
+            op, args, _ = tape.nodes[i]
+            if kind != "sum" or op not in ("neg", "scale"):
+                return None
+            chain.append(i)
+            i = args[0]
+        return bit_of[i], tuple(reversed(chain))
+
+    ops = _FOLD_OPS[kind]
+    tail, node = [], tape.outputs[0]
+    while True:  # above the fold: nodes combining it with values that involve no term
+        op, args, _ = tape.nodes[node]
+        if op not in ops or unwrap(args[0]) or unwrap(args[1]):
+            break
+        inner = [a for a in args if a in with_terms]
+        if len(inner) != 1 or (op == "sub" and inner[0] != args[0]):
+            return None
+        tail.append(node)
+        node = inner[0]
+    top, steps, base = node, [], None
+    while True:
+        op, args, _ = tape.nodes[node]
+        if op not in ops:
+            if node in with_terms:
+                return None
+            base = node
+            break
+        left, right = unwrap(args[0]), unwrap(args[1])
+        if right is not None and left is not None:
+            steps += [FoldStep(right[0], node, right[1]), FoldStep(left[0], None, left[1])]
+            break
+        if right is not None:
+            steps.append(FoldStep(right[0], node, right[1]))
+            node = args[0]
+        elif left is not None and op != "sub":
+            steps.append(FoldStep(left[0], node, left[1], term_left=True))
+            node = args[1]
+        else:
+            return None
+    steps.reverse()
+    if [s.term for s in steps] != list(range(len(plan.terms))):
+        return None  # not every term once, in bit order
+    # the spine and wrappers feed only the next spine node: nothing else reads a partial fold
+    owned = {s.node for s in steps if s.node is not None} | {w for s in steps for w in s.wrappers}
+    consumers = {top} | {s.node for s in steps if s.node is not None} | set(tail)
+    for i, (_, args, _) in enumerate(tape.nodes):
+        if i not in consumers and i not in owned and any(a in owned or a in bit_of for a in args):
+            return None
+    if set(plan.after) != owned | set(tail) - set(bit_of):
+        return None
+    return Fold(op=kind, base=base, steps=tuple(steps), top=top, tail=tuple(reversed(tail)))
+
+
+def _closure_users(tape, roots) -> set[int]:
+    """Nodes that depend on any of ``roots`` (the roots included)."""
+    found = set(roots)
+    for i, (_, args, _) in enumerate(tape.nodes):
+        if any(a in found for a in args):
+            found.add(i)
+    return found

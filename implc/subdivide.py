@@ -83,17 +83,19 @@ class _TaskResult:
 
     def __init__(self):
         self.coords = np.empty((OUTPUT_CHUNK, 3), dtype=np.uint32)
+        self.masks = np.empty(OUTPUT_CHUNK, dtype=np.int64)  # each voxel's live-term mask
         self.normals = np.empty((OUTPUT_CHUNK, 3), dtype=np.float32)
         self.count = 0
 
-    def append(self, chunk):
-        end = self.count + len(chunk)
+    def append(self, coords, masks):
+        end = self.count + len(coords)
         if end > len(self.coords):
-            grown = np.empty((max(end, 2 * len(self.coords)), 3), dtype=np.uint32)
-            grown[: self.count] = self.coords[: self.count]
-            self.coords = grown
-            self.normals = np.empty_like(grown, dtype=np.float32)
-        self.coords[self.count:end] = chunk
+            size = max(end, 2 * len(self.coords))
+            self.coords = np.resize(self.coords, (size, 3))
+            self.masks = np.resize(self.masks, size)
+            self.normals = np.empty((size, 3), dtype=np.float32)
+        self.coords[self.count:end] = coords
+        self.masks[self.count:end] = masks
         self.count = end
 
 
@@ -105,12 +107,14 @@ class _Worker:
         self.masks = np.full(STACK_ENTRIES, -1, dtype=np.int64)  # live-term mask of each stack entry
         self.state = np.zeros(2, dtype=np.int64)
         self.out = np.empty((OUTPUT_CHUNK, 3), dtype=np.uint32)
+        self.out_masks = np.empty(OUTPUT_CHUNK, dtype=np.int64)
         self.stats = np.zeros(MAX_DEPTH + 2, dtype=np.int64)
         self.depth = depth
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
         self.stack_ptr, self.state_ptr = self.stack.ctypes.data, self.state.ctypes.data
         self.masks_ptr = self.masks.ctypes.data
         self.out_ptr, self.stats_ptr = self.out.ctypes.data, self.stats.ctypes.data
+        self.out_masks_ptr = self.out_masks.ctypes.data
         self.busy = 0.0
         self.normals = 0.0
         self.tasks = 0
@@ -129,12 +133,12 @@ class Subdivider:
         self.geom = geometry(surface.bounds, depth)
         leaf = self.geom[6 + 3 * depth: 9 + 3 * depth]
         self.leaf_geom = np.concatenate([self.geom[:3], leaf])
-        self.box = surface.native.address("implc_interval")
+        self.box = surface.octant_address()
         self.prune = int(bool(prune))
         self.refine = int(bool(refine_leaves))
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
-        self.fine_box = surface.mean_value_address() if mean_value_levels > 0 else self.box
+        self.fine_box = surface.octant_address(mean_value=True) if mean_value_levels > 0 else self.box
         self.gradient = surface.native.address("implc_gradient")
         self.point = surface.native.address("implc_point")
         self.cancel = np.zeros(1, dtype=np.int32)
@@ -150,10 +154,10 @@ class Subdivider:
         w.state[:] = (1, depth)
         while True:
             n = self.runtime.subdivide(self.box, self.fine_box, self.fine_level, self.prune, self.refine,
-                                       self.geom_ptr, w.stack_ptr, w.masks_ptr, w.state_ptr, w.out_ptr, OUTPUT_CHUNK, w.stats_ptr,
-                                       self.cancel_ptr)
+                                       self.geom_ptr, w.stack_ptr, w.masks_ptr, w.state_ptr, w.out_ptr,
+                                       w.out_masks_ptr, OUTPUT_CHUNK, w.stats_ptr, self.cancel_ptr)
             if n:
-                result.append(w.out[:n])
+                result.append(w.out[:n], w.out_masks[:n])
             if w.state[0] == 0 or self.cancel[0]:
                 break
 

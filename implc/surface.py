@@ -12,7 +12,7 @@ import math
 import numpy as np
 import sympy
 
-from .codegen.kernels import MEAN_VALUE_KERNEL, WIDTH, WIDTHS, build_mean_value_module, build_module
+from .codegen.kernels import MEAN_VALUE_KERNEL, MEAN_VALUE_OCTANT_KERNEL, OCTANT_KERNEL, WIDTH, WIDTHS, build_mean_value_module, build_module
 from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape
@@ -81,10 +81,13 @@ class Surface:
             self._interval_mvf = self.mean_value_native.function(MEAN_VALUE_KERNEL, [_P, _P, _P, _P, _N, _P, _P])
         return self._interval_mvf
 
-    def mean_value_address(self) -> int:
-        """Address of the mean-value kernel, for native callers (valid while this Surface lives)."""
+    def octant_address(self, mean_value: bool = False) -> int:
+        """Address of the octant kernel (natural or mean-value enclosures of an octant's eight children),
+        for the native subdivider; valid while this Surface lives."""
+        if not mean_value:
+            return self.native.address(OCTANT_KERNEL)
         self._mean_value_kernel()
-        return self.mean_value_native.address(MEAN_VALUE_KERNEL)
+        return self.mean_value_native.address(MEAN_VALUE_OCTANT_KERNEL)
 
     # -- inspection ----------------------------------------------------------------------------
     @property

@@ -62,6 +62,43 @@ def for_range(builder: ir.IRBuilder, count, start=None, step=1):
     builder.position_at_end(done)
 
 
+@contextmanager
+def for_set_bits(builder: ir.IRBuilder, mask):
+    """``for bit in the set bits of mask`` (an integer, ascending): the loop runs once per set bit, so
+    what the body skips for clear bits costs nothing. Yields the bit index (same type as mask)."""
+    cttz = builder.module.globals.get(f"llvm.cttz.{mask.type}") or ir.Function(
+        builder.module, ir.FunctionType(mask.type, [mask.type, I1]), name=f"llvm.cttz.{mask.type}")
+    remaining = Local(builder, mask.type, mask, "bits")
+    header = builder.append_basic_block("bits.header")
+    body = builder.append_basic_block("bits.body")
+    done = builder.append_basic_block("bits.done")
+    builder.branch(header)
+    builder.position_at_end(header)
+    r = remaining.get()
+    builder.cbranch(builder.icmp_unsigned("==", r, const(mask.type, 0)), done, body)
+    builder.position_at_end(body)
+    remaining.set(builder.and_(r, builder.sub(r, const(mask.type, 1))))
+    yield builder.call(cttz, [r, const(I1, 1)])
+    if not builder.block.is_terminated:
+        builder.branch(header)
+    builder.position_at_end(done)
+
+
+class _VolatileLoad(ir.LoadInstr):
+    def descr(self, buf):
+        text = []
+        super().descr(text)
+        buf.append("".join(text).replace("load ", "load volatile ", 1))
+
+
+def volatile_load(builder: ir.IRBuilder, ptr):
+    """A load the optimiser may neither remove nor move: a value read in a conditional block through it
+    keeps everything computed from it there (llvmlite's ``load`` has no volatile flag)."""
+    instr = _VolatileLoad(builder.block, ptr)
+    builder._insert(instr)
+    return instr
+
+
 class _While:
     def __init__(self, builder, exit_block):
         self.b = builder

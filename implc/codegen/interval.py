@@ -11,7 +11,7 @@ import math
 from llvmlite import ir
 
 from .. import rounding as R
-from .control import Local
+from .control import Local, for_set_bits, volatile_load
 from .point import powi
 from .vector import VectorBuilder
 
@@ -302,39 +302,87 @@ def _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords):
 
 def emit_interval_regions(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask):
     """Like :func:`emit_interval`, skipping the terms dead in the parent (``live_mask``, an i64 shared by
-    the W boxes) and returning, besides (lo, hi), each box's own live mask (a <W x i64> vector)."""
+    the W boxes) and returning, besides (lo, hi), each box's own live mask (a <W x i64> vector).
+
+    Where the chain is a fold over the terms (:class:`implc.regions.Fold`), a loop visits the live bits
+    only, so a dead term costs nothing at all; otherwise every term's bit is tested in turn. With every
+    term live both compute exactly what :func:`emit_interval` does; with dead terms the fold skips their
+    exact zeros (or infinities) instead of adding them, so its sums are equal or tighter.
+    """
     b = vb.b
-    i64 = ir.IntType(64)
-    mask_type = ir.VectorType(i64, vb.width)
     em = IntervalEmitter(vb)
     vals: dict = {}
     for i in plan.before:
         _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
-    zero = vb.splat(0.0)
-    kills = Local(b, mask_type, ir.Constant(mask_type, [0] * vb.width))
+    kills = _Kills(vb)
+    if plan.fold is not None:
+        _emit_fold(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills)
+    else:
+        _emit_term_by_term(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills)
+    lo, hi = whole_line_if_undefined(vb, *vals[tape.outputs[0]])
+    return lo, hi, b.and_(_splat_i64(vb, live_mask), b.not_(kills.get()))
+
+
+class _Kills:
+    """The <W x i64> mask of the terms found dead per box, built up bit by bit."""
+
+    def __init__(self, vb):
+        self.vb = vb
+        self.type = ir.VectorType(ir.IntType(64), vb.width)
+        self.local = Local(vb.b, self.type, ir.Constant(self.type, [0] * vb.width))
+
+    def add(self, dead, bits):
+        """Mark ``bits`` (an i64, constant or not) dead in the boxes where ``dead`` holds."""
+        b = self.vb.b
+        bits = _splat_i64(self.vb, bits) if bits.type == ir.IntType(64) else bits
+        self.local.set(b.or_(self.local.get(), b.select(dead, bits, ir.Constant(self.type, [0] * self.vb.width))))
+
+    def get(self):
+        return self.local.get()
+
+
+def _splat_i64(vb, value):
+    b = vb.b
+    vec = ir.VectorType(ir.IntType(64), vb.width)
+    one = b.insert_element(ir.Constant(vec, ir.Undefined), value, ir.Constant(ir.IntType(32), 0))
+    return b.shuffle_vector(one, ir.Constant(vec, ir.Undefined),
+                            ir.Constant(ir.VectorType(ir.IntType(32), vb.width), [0] * vb.width))
+
+
+def _emit_term(em, vb, tape, vals, term, bit, kills, lo_coords, hi_coords):
+    """A term's own nodes; a sum term whose zero branch is decided over a whole box is marked dead there."""
+    for i in term.private:
+        _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
+    if term.kind == "sum":
+        g = vals[term.condition]
+        strict = tape.nodes[term.root][0] == "select_lt"
+        zero = vb.splat(0.0)
+        if term.zero_when == "false":  # g < 0 (or <= 0) fails everywhere
+            dead = vb.cmp(">=" if strict else ">", g[0], zero)
+        else:
+            dead = vb.cmp("<" if strict else "<=", g[1], zero)
+        kills.add(dead, bit if isinstance(bit, ir.Value) else ir.Constant(ir.IntType(64), 1 << bit))
+    return vals[term.root]
+
+
+_IDENTITY = {"sum": 0.0, "min": INF, "max": -INF}
+
+
+def _emit_term_by_term(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills):
+    """Each term in an if/else on its bit (dead: the identity of its chain); then the chain as written."""
+    b = vb.b
+    i64 = ir.IntType(64)
     for bit, term in enumerate(plan.terms):
-        dead_value = {"sum": 0.0, "min": INF, "max": -INF}[term.kind]
         lo_local, hi_local = Local(b, vb.vtype), Local(b, vb.vtype)
         live = b.icmp_unsigned("!=", b.and_(live_mask, ir.Constant(i64, 1 << bit)), ir.Constant(i64, 0))
         with b.if_else(live) as (compute, skip):
             with compute:
-                for i in term.private:
-                    _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
-                lo, hi = vals[term.root]
+                lo, hi = _emit_term(em, vb, tape, vals, term, bit, kills, lo_coords, hi_coords)
                 lo_local.set(lo)
                 hi_local.set(hi)
-                if term.kind == "sum":  # decided to the zero branch over the whole box: dead below it
-                    g = vals[term.condition]
-                    strict = tape.nodes[term.root][0] == "select_lt"
-                    if term.zero_when == "false":  # g < 0 (or <= 0) fails everywhere
-                        dead = vb.cmp(">=" if strict else ">", g[0], zero)
-                    else:
-                        dead = vb.cmp("<" if strict else "<=", g[1], zero)
-                    bits = ir.Constant(mask_type, [1 << bit] * vb.width)
-                    kills.set(b.or_(kills.get(), b.select(dead, bits, ir.Constant(mask_type, [0] * vb.width))))
             with skip:
-                lo_local.set(vb.splat(dead_value))
-                hi_local.set(vb.splat(dead_value))
+                lo_local.set(vb.splat(_IDENTITY[term.kind]))
+                hi_local.set(vb.splat(_IDENTITY[term.kind]))
         vals[term.root] = (lo_local.get(), hi_local.get())
     if plan.chain_leaves:  # a leaf above another leaf's upper bound (min) can never be the minimum below
         op = tape.nodes[tape.outputs[0]][0]
@@ -349,16 +397,87 @@ def emit_interval_regions(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, l
                 bound = vb.maximum(bound, leaf[0])
         for bit, term in enumerate(plan.terms):
             lo, hi = vals[term.root]
-            dead = vb.cmp(">", lo, bound) if op == "min" else vb.cmp("<", hi, bound)
-            bits = ir.Constant(mask_type, [1 << bit] * vb.width)
-            kills.set(b.or_(kills.get(), b.select(dead, bits, ir.Constant(mask_type, [0] * vb.width))))
+            kills.add(vb.cmp(">", lo, bound) if op == "min" else vb.cmp("<", hi, bound),
+                      ir.Constant(i64, 1 << bit))
     for i in plan.after:
         _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
-    lo, hi = whole_line_if_undefined(vb, *vals[tape.outputs[0]])
-    parent = b.insert_element(ir.Constant(mask_type, ir.Undefined), live_mask, ir.Constant(ir.IntType(32), 0))
-    parent = b.shuffle_vector(parent, ir.Constant(mask_type, ir.Undefined),
-                              ir.Constant(ir.VectorType(ir.IntType(32), vb.width), [0] * vb.width))
-    return lo, hi, b.and_(parent, b.not_(kills.get()))
+
+
+def _low_bits(mask, count, b):
+    return b.and_(mask, ir.Constant(mask.type, (1 << count) - 1 if count < 64 else -1))
+
+
+def _emit_fold(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills):
+    """The chain as a loop over the live terms only (see :class:`implc.regions.Fold`)."""
+    b = vb.b
+    fold = plan.fold
+    i64 = ir.IntType(64)
+    identity = vb.splat(_IDENTITY[fold.op])
+    start = vals[fold.base] if fold.base is not None else (identity, identity)
+    acc = [Local(b, vb.vtype, start[0]), Local(b, vb.vtype, start[1])]
+    empty = Local(b, ir.IntType(1), ir.Constant(ir.IntType(1), int(fold.base is None)))
+    minmax = fold.op != "sum"
+    if minmax:  # the kill bound: min of the leaves' upper bounds (max of lower bounds for max)
+        side, pick = (1, vb.minimum) if fold.op == "min" else (0, vb.maximum)
+        roots = {t.root for t in plan.terms}
+        bound_value = identity
+        for leaf in plan.chain_leaves:
+            if leaf not in roots:
+                bound_value = pick(bound_value, vals[leaf][side])
+        bound = Local(b, vb.vtype, bound_value)
+        with b.goto_entry_block():
+            kept = b.alloca(ir.ArrayType(vb.vtype, len(plan.terms)), name="kept")  # the other side, per term
+    # The terms read the coordinates through volatile loads inside their case: without that, the
+    # optimiser hoists every term's (loop-invariant) code out of the loop and computes all of them.
+    with b.goto_entry_block():
+        coords_slot = b.alloca(ir.ArrayType(vb.vtype, 6), name="coords")
+    slots = [b.gep(coords_slot, [ir.Constant(ir.IntType(32), 0), ir.Constant(ir.IntType(32), j)], inbounds=True)
+             for j in range(6)]
+    for slot, value in zip(slots, [*lo_coords, *hi_coords]):
+        b.store(value, slot)
+    var_nodes = [i for i in plan.before if tape.nodes[i][0] == "var"]
+    with for_set_bits(b, _low_bits(live_mask, len(plan.terms), b)) as k:
+        after = b.append_basic_block("fold.next")
+        switch = b.switch(k, after)
+        for step in fold.steps:
+            case = b.append_basic_block(f"fold.term{step.term}")
+            switch.add_case(ir.Constant(i64, step.term), case)
+            b.position_at_end(case)
+            own = dict(vals)
+            fresh = [volatile_load(b, slot) for slot in slots]
+            for i in var_nodes:
+                axis = tape.nodes[i][2]
+                own[i] = (fresh[axis], fresh[3 + axis])
+            t = _emit_term(em, vb, tape, own, plan.terms[step.term], step.term, kills, lo_coords, hi_coords)
+            for w in step.wrappers:
+                _emit_node(em, vb, tape, own, w, lo_coords, hi_coords)
+            value = own[step.wrappers[-1]] if step.wrappers else t
+            if step.node is None:
+                new = value
+            else:
+                op, _, attr = tape.nodes[step.node]
+                current = (acc[0].get(), acc[1].get())
+                new = getattr(em, f"i_{op}")([value, current] if step.term_left else [current, value], attr)
+                if fold.base is None:
+                    is_empty = empty.get()
+                    new = (b.select(is_empty, value[0], new[0]), b.select(is_empty, value[1], new[1]))
+            acc[0].set(new[0])
+            acc[1].set(new[1])
+            empty.set(ir.Constant(ir.IntType(1), 0))
+            if minmax:
+                bound.set(pick(bound.get(), t[side]))
+                b.store(t[1 - side], b.gep(kept, [ir.Constant(ir.IntType(32), 0), k], inbounds=True))
+            b.branch(after)
+        b.position_at_end(after)
+    is_empty = empty.get()
+    vals[fold.top] = (b.select(is_empty, identity, acc[0].get()), b.select(is_empty, identity, acc[1].get()))
+    if minmax:  # a live leaf entirely above the bound (below, for max) can never be the extremum below
+        with for_set_bits(b, _low_bits(live_mask, len(plan.terms), b)) as k:
+            other = b.load(b.gep(kept, [ir.Constant(ir.IntType(32), 0), k], inbounds=True))
+            dead = vb.cmp(">", other, bound.get()) if fold.op == "min" else vb.cmp("<", other, bound.get())
+            kills.add(dead, b.shl(ir.Constant(i64, 1), k))
+    for i in fold.tail:
+        _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
 
 
 def whole_line_if_undefined(vb: VectorBuilder, lo, hi):

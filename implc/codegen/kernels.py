@@ -11,6 +11,15 @@ points and boxes as row-major (n, 3) float64 arrays:
   Either may be NULL: everything is live, and no mask is written.
 - ``implc_interval_mvf(lo, hi, out_lo, out_hi, n)``: the same, intersected with the mean-value form
   (tighter on small boxes, about five times the work), built by :func:`build_mean_value_module`.
+
+and, for the subdivider, the same enclosures over the eight children of one octant, generated in
+vector registers from the octant's cell index:
+
+- ``implc_octant(geom, cell, level, live_in, live_out) -> i32`` (and ``implc_octant_mvf``): ``cell`` points
+  to the octant's (i, j, k) (int32) one level above ``level``; child c (x bit | y bit << 1 | z bit << 2)
+  is the box [o + i·h − pad, o + (i + 1)·h + pad] per axis, i = 2·cell + bit, with the origin o, the pad and
+  the cell size h of ``level`` read from ``geom`` (:data:`implc.codegen.runtime.GEOMETRY_DOUBLES`). Returns
+  bit c set where child c's enclosure contains 0; writes the children's live masks to ``live_out[8]``.
 """
 
 from __future__ import annotations
@@ -36,6 +45,7 @@ KERNELS = {  # (pointer arguments before n, pointer arguments after n)
     "implc_interval_mvf": (4, 2),
 }
 MEAN_VALUE_KERNEL = "implc_interval_mvf"
+OCTANT_KERNEL, MEAN_VALUE_OCTANT_KERNEL = "implc_octant", "implc_octant_mvf"
 
 _PTR = ir.PointerType(DOUBLE)
 
@@ -108,6 +118,58 @@ def _parent_mask(builder, live_in, block, width):
     return builder.load(ptr)
 
 
+def _octant_kernel(module, name, width, enclose):
+    """Emit ``name`` (see the module docstring); ``enclose(vb, lo, hi, live_in) -> (lo, hi, masks)``."""
+    i32 = ir.IntType(32)
+    fn = ir.Function(module, ir.FunctionType(i32, [_PTR, ir.PointerType(i32), I64, I64, _PI64]), name=name)
+    geom, cell, level, live_in, live_out = fn.args
+    b = ir.IRBuilder(fn.append_basic_block("entry"))
+    vb = VectorBuilder(b, width)
+    ivec = ir.VectorType(i32, width)
+
+    def read(index):
+        return b.load(b.gep(geom, [index if isinstance(index, ir.Value) else ir.Constant(I64, index)]))
+
+    def splat(value, vtype):
+        one = b.insert_element(ir.Constant(vtype, ir.Undefined), value, ir.Constant(i32, 0))
+        return b.shuffle_vector(one, ir.Constant(vtype, ir.Undefined), ir.Constant(ivec, [0] * width))
+
+    origin = [splat(read(a), vb.vtype) for a in range(3)]
+    pad = [splat(read(3 + a), vb.vtype) for a in range(3)]
+    h = [splat(read(b.add(b.mul(level, ir.Constant(I64, 3)), ir.Constant(I64, 6 + a))), vb.vtype) for a in range(3)]
+    twice = [splat(b.shl(b.load(b.gep(cell, [ir.Constant(I64, a)])), ir.Constant(i32, 1)), ivec) for a in range(3)]
+    kept = ir.Constant(i32, 0)
+    for first in range(0, 8, width):
+        lanes = range(first, first + width)
+        lo, hi = [], []
+        for a in range(3):
+            index = b.add(twice[a], ir.Constant(ivec, [(c >> a) & 1 for c in lanes]))
+            i_lo = b.uitofp(index, vb.vtype)
+            i_hi = b.uitofp(b.add(index, ir.Constant(ivec, [1] * width)), vb.vtype)
+            lo.append(vb.sub(vb.add(origin[a], vb.mul(i_lo, h[a])), pad[a]))
+            hi.append(vb.add(vb.add(origin[a], vb.mul(i_hi, h[a])), pad[a]))
+        f_lo, f_hi, masks = enclose(vb, lo, hi, live_in)
+        zero = vb.splat(0.0)
+        contains = b.and_(vb.cmp("<=", f_lo, zero), vb.cmp(">=", f_hi, zero))
+        bits = b.zext(b.bitcast(contains, ir.IntType(width)), i32)
+        kept = b.or_(kept, b.shl(bits, ir.Constant(i32, first)))
+        with b.if_then(b.icmp_unsigned("!=", live_out, ir.Constant(_PI64, None))):
+            ptr = b.bitcast(b.gep(live_out, [ir.Constant(I64, first)]), ir.PointerType(masks.type))
+            b.store(masks, ptr, align=8)
+    b.ret(kept)
+
+
+def _natural(value_tape):
+    """The natural enclosure, pruned by the region plan where the tape has terms to prune."""
+    plan = plan_regions(value_tape)
+
+    def enclose(vb, lo, hi, live_in):
+        if plan.enabled:
+            return emit_interval_regions(vb, value_tape, plan, lo, hi, live_in)
+        return (*emit_interval(vb, value_tape, lo, hi), _splat_mask(vb.b, live_in, vb.width))
+    return enclose
+
+
 def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", width: int = WIDTH) -> str:
     """The LLVM IR text of the point, gradient and interval kernels for a surface."""
     module = ir.Module(name=name)
@@ -129,19 +191,15 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
 
     fn, b, blocks = _kernel(module, "implc_interval", width)
     lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
-    plan = plan_regions(value_tape)
+    enclose = _natural(value_tape)
     with for_range(b, blocks) as i:
-        vb = VectorBuilder(b, width)
-        if plan.enabled:
-            f_lo, f_hi, masks = emit_interval_regions(vb, value_tape, plan, _load_xyz(b, lo, i, width),
-                                                      _load_xyz(b, hi, i, width), _parent_mask(b, live_in, i, width))
-        else:
-            f_lo, f_hi = emit_interval(vb, value_tape, _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width))
-            masks = _splat_mask(b, _parent_mask(b, live_in, i, width), width)
+        f_lo, f_hi, masks = enclose(VectorBuilder(b, width), _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width),
+                                    _parent_mask(b, live_in, i, width))
         _store(b, out_lo, i, f_lo, width)
         _store(b, out_hi, i, f_hi, width)
         _live_masks(b, live_in, live_out, i, masks, width)
     b.ret_void()
+    _octant_kernel(module, OCTANT_KERNEL, width, enclose)
     return str(module)
 
 
@@ -159,12 +217,15 @@ def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "
     module = ir.Module(name=name)
     fn, b, blocks = _kernel(module, MEAN_VALUE_KERNEL, width)
     lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
+
+    def enclose(vb, lo, hi, live_in):  # prunes nothing: the children keep their parent's mask
+        return (*emit_mean_value(vb, value_tape, gradient_tape, lo, hi), _splat_mask(vb.b, live_in, vb.width))
     with for_range(b, blocks) as i:
-        f_lo, f_hi = emit_mean_value(VectorBuilder(b, width), value_tape, gradient_tape,
-                                     _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width))
+        f_lo, f_hi, masks = enclose(VectorBuilder(b, width), _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width),
+                                    _parent_mask(b, live_in, i, width))
         _store(b, out_lo, i, f_lo, width)
         _store(b, out_hi, i, f_hi, width)
-        masks = _splat_mask(b, _parent_mask(b, live_in, i, width), width)  # prunes nothing
         _live_masks(b, live_in, live_out, i, masks, width)
     b.ret_void()
+    _octant_kernel(module, MEAN_VALUE_OCTANT_KERNEL, width, enclose)
     return str(module)

@@ -1,11 +1,11 @@
 """The generic native routines, one LLVM module shared by every surface.
 
 - ``implc_subdivide``: Fig. 1 of the paper as a loop over an explicit stack. It calls a surface's
-  interval kernel through a function pointer on the eight children of each octant (one vector step;
-  a second, finer kernel, e.g. the mean-value form, from a given child level on; optionally a leaf is
-  kept only if one of its eight halves-per-axis may meet the surface),
-  prunes children whose enclosure excludes 0, pushes the rest in reverse so that leaves come out in
-  Morton order, and writes leaf coordinates. It is resumable: when the output buffer is full or the
+  octant kernel (``implc_octant``: the eight children of an octant, generated and enclosed in vector
+  registers) through a function pointer (a second, finer kernel, e.g. the mean-value form, from a
+  given child level on; optionally a leaf is kept only if one of its eight halves-per-axis may meet the
+  surface), prunes children whose enclosure excludes 0, pushes the rest in reverse so that leaves come
+  out in Morton order, and writes leaf coordinates with their live-term masks. It is resumable: when the output buffer is full or the
   cancel flag is raised it returns with its stack intact.
 - ``implc_normals``: unit normals at voxel centres from a surface's gradient kernel, with central
   differences and then a fixed direction as fallbacks (never NaN, never zero).
@@ -44,12 +44,12 @@ LEVEL_COUNTS = 8
 PATH = LEVEL_COUNTS + MAX_DEPTH + 2
 OCTREE_STATE_WORDS = PATH + MAX_DEPTH + 2
 
-BOX_FN = ir.FunctionType(VOID, [PD, PD, PD, PD, I64, PI64, PI64])
+OCTANT_FN = ir.FunctionType(I32, [PD, PI32, I64, I64, PI64])  # implc.codegen.kernels: implc_octant
 GRADIENT_FN = ir.FunctionType(VOID, [PD, PD, PD, I64])
 POINT_FN = ir.FunctionType(VOID, [PD, PD, I64])
 
 SIGNATURES = {
-    "implc_subdivide": (I64, [I8P, I8P, I64, I64, I64, PD, PI32, PI64, PI64, PI32, I64, PI64, PI32]),
+    "implc_subdivide": (I64, [I8P, I8P, I64, I64, I64, PD, PI32, PI64, PI64, PI32, PI64, I64, PI64, PI32]),
     "implc_normals": (VOID, [I8P, I8P, PD, PI32, I64, PF]),
     "implc_octree_insert": (I64, [PI32, I64, PI64, PI32, I64, I64]),
     "implc_octree_traverse": (I64, [PI32, I64, I64, PI32, PI64]),
@@ -82,24 +82,18 @@ def _bump(b, ptr, index, amount=1):
 
 def _subdivide(module):
     fn, b = _function(module, "implc_subdivide")
-    box_ptr, fine_ptr, fine_level, prune, refine, geom, stack, masks, state, out, cap, stats, cancel = fn.args
-    box = b.bitcast(box_ptr, ir.PointerType(BOX_FN))
-    fine = b.bitcast(fine_ptr, ir.PointerType(BOX_FN))
+    box_ptr, fine_ptr, fine_level, prune, refine, geom, stack, masks, state, out, out_masks, cap, stats, cancel = fn.args
+    box = b.bitcast(box_ptr, ir.PointerType(OCTANT_FN))
+    fine = b.bitcast(fine_ptr, ir.PointerType(OCTANT_FN))
     depth = b.trunc(_load(b, state, 1), I32)
     size = Local(b, I64, _load(b, state, 0), "size")
     count = Local(b, I64, 0, "count")
-    lo, hi = local_array(b, DOUBLE, 24, "lo"), local_array(b, DOUBLE, 24, "hi")
-    flo, fhi = local_array(b, DOUBLE, 8, "flo"), local_array(b, DOUBLE, 8, "fhi")
     child_masks = local_array(b, I64, 8, "child_masks")
-    parent_mask = local_array(b, I64, 1, "parent_mask")
+    sub_cell = local_array(b, I32, 3, "sub_cell")
     pruning = b.icmp_signed("!=", prune, const(I64, 0))
     refining = b.icmp_signed("!=", refine, const(I64, 0))
-    sub_lo, sub_hi = local_array(b, DOUBLE, 24, "sub_lo"), local_array(b, DOUBLE, 24, "sub_hi")
-    sub_flo, sub_fhi = local_array(b, DOUBLE, 8, "sub_flo"), local_array(b, DOUBLE, 8, "sub_fhi")
     null64 = ir.Constant(PI64, None)
-    origin = [_load(b, geom, a) for a in range(3)]
-    pad = [_load(b, geom, 3 + a) for a in range(3)]
-    zero = const(DOUBLE, 0.0)
+    all_live = const(I64, -1)
 
     with while_true(b) as loop:
         s = size.get()
@@ -113,60 +107,41 @@ def _subdivide(module):
         no_room = b.icmp_signed(">", b.add(count.get(), const(I64, 8)), cap)
         loop.break_if(b.and_(leaf, no_room))
         size.set(b.sub(s, const(I64, 1)))
-        _store(b, _load(b, masks, b.sub(s, const(I64, 1))), parent_mask, 0)
+        parent_mask = b.select(pruning, _load(b, masks, b.sub(s, const(I64, 1))), all_live)
 
         level64 = b.zext(child_level, I64)
-        h = [_load(b, geom, b.add(b.mul(level64, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
-        children = []
-        for c in range(8):
-            coords = [b.add(b.shl(cell[a], const(I32, 1)), const(I32, (c >> a) & 1)) for a in range(3)]
-            children.append(coords)
-            for a in range(3):
-                i_lo = b.uitofp(coords[a], DOUBLE)
-                i_hi = b.uitofp(b.add(coords[a], const(I32, 1)), DOUBLE)
-                _store(b, b.fsub(b.fadd(origin[a], b.fmul(i_lo, h[a])), pad[a]), lo, 3 * c + a)
-                _store(b, b.fadd(b.fadd(origin[a], b.fmul(i_hi, h[a])), pad[a]), hi, 3 * c + a)
-        use_fine = b.icmp_signed(">=", b.zext(child_level, I64), fine_level)
-        b.call(b.select(use_fine, fine, box), [lo, hi, flo, fhi, const(I64, 8), b.select(pruning, parent_mask, null64),
-                                               b.select(pruning, child_masks, null64)])
-        kernel = b.select(use_fine, fine, box)
+        children = [[b.add(b.shl(cell[a], const(I32, 1)), const(I32, (c >> a) & 1)) for a in range(3)]
+                    for c in range(8)]
+        kernel = b.select(b.icmp_signed(">=", level64, fine_level), fine, box)
+        kept = b.call(kernel, [geom, _at(b, stack, top), level64, parent_mask, child_masks])
         _bump(b, stats, 0, 8)
         stat_slot = b.add(level64, const(I64, 1))
 
         def keep(c):
-            return b.and_(b.fcmp_ordered("<=", _load(b, flo, c), zero), b.fcmp_ordered(">=", _load(b, fhi, c), zero))
+            return b.trunc(b.lshr(kept, const(I32, c)), ir.IntType(1))
 
+        def child_mask(c):
+            return b.select(pruning, _load(b, child_masks, c), all_live)
 
         def refined_keep(c):
             """Whether some eighth of leaf c may meet the surface (one more level, for tightness)."""
-            sub_level = b.add(level64, const(I64, 1))
-            hs = [_load(b, geom, b.add(b.mul(sub_level, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
-            for k in range(8):
-                for a in range(3):
-                    i_lo = b.uitofp(b.add(b.shl(children[c][a], const(I32, 1)), const(I32, (k >> a) & 1)), DOUBLE)
-                    _store(b, b.fsub(b.fadd(origin[a], b.fmul(i_lo, hs[a])), pad[a]), sub_lo, 3 * k + a)
-                    i_hi = b.fadd(i_lo, const(DOUBLE, 1.0))
-                    _store(b, b.fadd(b.fadd(origin[a], b.fmul(i_hi, hs[a])), pad[a]), sub_hi, 3 * k + a)
-            live = b.select(pruning, _at(b, child_masks, c), null64)
-            b.call(kernel, [sub_lo, sub_hi, sub_flo, sub_fhi, const(I64, 8), live, null64])
+            for a in range(3):
+                _store(b, children[c][a], sub_cell, a)
+            sub_kept = b.call(kernel, [geom, sub_cell, b.add(level64, const(I64, 1)), child_mask(c), null64])
             _bump(b, stats, 0, 8)
-            hit = None
-            for k in range(8):
-                here = b.and_(b.fcmp_ordered("<=", _load(b, sub_flo, k), zero),
-                              b.fcmp_ordered(">=", _load(b, sub_fhi, k), zero))
-                hit = here if hit is None else b.or_(hit, here)
-            return hit
+            return b.icmp_unsigned("!=", sub_kept, const(I32, 0))
 
         with b.if_else(leaf) as (then, otherwise):
-            with then:  # emit kept leaves in Morton order
+            with then:  # emit kept leaves in Morton order, each with its live mask (for the normals)
                 for c in range(8):
-                    kept = Local(b, ir.IntType(1), keep(c))
-                    with if_(b, b.and_(kept.get(), refining)):
-                        kept.set(refined_keep(c))
-                    with if_(b, kept.get()):
+                    kept_c = Local(b, ir.IntType(1), keep(c))
+                    with if_(b, b.and_(kept_c.get(), refining)):
+                        kept_c.set(refined_keep(c))
+                    with if_(b, kept_c.get()):
                         n = count.get()
                         for a in range(3):
                             _store(b, children[c][a], out, b.add(b.mul(n, const(I64, 3)), const(I64, a)))
+                        _store(b, child_mask(c), out_masks, n)
                         count.set(b.add(n, const(I64, 1)))
                         _bump(b, stats, stat_slot)
             with otherwise:  # push kept octants in reverse, so child 0 is popped first
@@ -177,7 +152,7 @@ def _subdivide(module):
                         for a in range(3):
                             _store(b, children[c][a], stack, b.add(base, const(I64, a)))
                         _store(b, child_level, stack, b.add(base, const(I64, 3)))
-                        _store(b, b.select(pruning, _load(b, child_masks, c), const(I64, -1)), masks, t)
+                        _store(b, child_mask(c), masks, t)
                         size.set(b.add(t, const(I64, 1)))
                         _bump(b, stats, stat_slot)
     _store(b, size.get(), state, 0)
