@@ -246,6 +246,12 @@ class Tape:
         out.outputs = [remap[o] for o in self.outputs]
         return out
 
+    def subtape(self, root: int) -> Tape:
+        """A tape computing node ``root`` alone (with the nodes it depends on) as its only output."""
+        view = Tape()
+        view.nodes, view.outputs = self.nodes, [root]
+        return view.compacted()
+
     # -- inspection -------------------------------------------------------------------------------
     def fingerprint(self) -> str:
         """A stable hash of the tape and its outputs (used to key the compiled-code cache)."""

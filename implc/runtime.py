@@ -20,7 +20,7 @@ class Runtime:
         self.native = NativeModule(build_runtime, source_key="implc-runtime")
         fn = self.native.function
         self.subdivide = fn("implc_subdivide", [_P, _P, _N, _N, _N, _P, _P, _P, _P, _P, _P, _N, _P, _P], _N)
-        self.normals = fn("implc_normals", [_P, _P, _P, _P, _N, _P])
+        self.normals = fn("implc_normals", [_P, _P, _P, _P, _P, _N, _P])
         self.octree_insert = fn("implc_octree_insert", [_P, _N, _P, _P, _N, _N], _N)
         self.octree_traverse = fn("implc_octree_traverse", [_P, _N, _N, _P, _P], _N)
         self.splat = fn("implc_splat", [_P, _P, _P, _P, _N, _N, _P, _P])

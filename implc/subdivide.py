@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .codegen.kernels import GRADIENT_LIVE_KERNEL
 from .codegen.runtime import GEOMETRY_DOUBLES, MAX_DEPTH, STACK_ENTRIES
 from .runtime import Runtime
 
@@ -139,7 +140,7 @@ class Subdivider:
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
         self.fine_box = surface.octant_address(mean_value=True) if mean_value_levels > 0 else self.box
-        self.gradient = surface.native.address("implc_gradient")
+        self.gradient = surface.native.address(GRADIENT_LIVE_KERNEL)
         self.point = surface.native.address("implc_point")
         self.cancel = np.zeros(1, dtype=np.int32)
         self.geom_ptr, self.leaf_geom_ptr = self.geom.ctypes.data, self.leaf_geom.ctypes.data
@@ -161,11 +162,12 @@ class Subdivider:
             if w.state[0] == 0 or self.cancel[0]:
                 break
 
-    def _normals(self, coords: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """Unit normals at the centres of ``coords``, written to ``out`` (same length)."""
+    def _normals(self, coords: np.ndarray, out: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
+        """Unit normals at the centres of ``coords``, written to ``out`` (same length); ``masks``: each
+        cell's live-term mask (None: every term live)."""
         if len(coords):
-            self.runtime.normals(self.gradient, self.point, self.leaf_geom_ptr, coords.ctypes.data, len(coords),
-                                 out.ctypes.data)
+            self.runtime.normals(self.gradient, self.point, self.leaf_geom_ptr, coords.ctypes.data,
+                                 None if masks is None else masks.ctypes.data, len(coords), out.ctypes.data)
         return out
 
     # -- orchestration ---------------------------------------------------------------------------
@@ -260,7 +262,8 @@ class Subdivider:
                     t0 = time.perf_counter()
                     self._run_task(w, cells[t], level, self.depth, result)
                     t1 = time.perf_counter()
-                    self._normals(result.coords[: result.count], result.normals[: result.count])
+                    self._normals(result.coords[: result.count], result.normals[: result.count],
+                                  result.masks[: result.count])
                     t2 = time.perf_counter()
                     w.busy += t2 - t0
                     w.normals += t2 - t1

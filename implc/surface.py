@@ -12,7 +12,15 @@ import math
 import numpy as np
 import sympy
 
-from .codegen.kernels import MEAN_VALUE_KERNEL, MEAN_VALUE_OCTANT_KERNEL, OCTANT_KERNEL, WIDTH, WIDTHS, build_mean_value_module, build_module
+from .codegen.kernels import (
+    MEAN_VALUE_KERNEL,
+    MEAN_VALUE_OCTANT_KERNEL,
+    OCTANT_KERNEL,
+    WIDTH,
+    WIDTHS,
+    build_mean_value_module,
+    build_module,
+)
 from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape

@@ -31,3 +31,29 @@ def test_min_chain_leaves_are_terms():
 def test_nothing_to_prune():
     assert not plan_regions(lower(x**2 + y**2 + z**2 - 1)).enabled
     assert not plan_regions(lower(sympy.sin(4 * sympy.Symbol("theta")) - sympy.Symbol("r"))).enabled
+
+
+def test_gradient_over_all_terms_is_the_full_gradient():
+    """implc_gradient_live with every term live computes the full gradient; with none live, the part of F
+    outside the terms (here a constant: zero gradient)."""
+    import ctypes
+
+    import numpy as np
+
+    import implc
+    from implc.codegen.kernels import GRADIENT_LIVE_KERNEL
+    P, N = ctypes.c_void_p, ctypes.c_int64
+    rng = np.random.default_rng(4)
+    pts = np.ascontiguousarray(rng.uniform(-1, 1, (64, 3)))
+    union = shapes.union(*[shapes.sphere(Rational(1, 5), (Rational(k, 5), 0, 0)) for k in range(-2, 3)])
+    for expr in (scene.load("paper_blobs").surface, union):
+        s = implc.compile(expr)
+        live = s.native.function(GRADIENT_LIVE_KERNEL, [P, P, P, N, N])
+        value, grad = np.empty(64), np.empty((64, 3))
+        live(pts.ctypes.data, value.ctypes.data, grad.ctypes.data, 64, -1)
+        np.testing.assert_allclose(value, s.eval(pts), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(grad, s.gradient(pts), rtol=1e-12, atol=1e-15)
+    s = implc.compile(scene.load("paper_blobs").surface)
+    s.native.function(GRADIENT_LIVE_KERNEL, [P, P, P, N, N])(pts.ctypes.data, value.ctypes.data, grad.ctypes.data, 64, 0)
+    np.testing.assert_array_equal(value, 0.25)
+    np.testing.assert_array_equal(grad, 0.0)

@@ -202,6 +202,24 @@ def test_normals_are_unit_and_follow_the_gradient(compiled):
     np.testing.assert_allclose(sphere.normals, radial, atol=1e-5)
 
 
+def test_normals_over_live_terms_follow_the_full_gradient(compiled):
+    """Each voxel's normal is computed over the terms live in its cell only; dead terms add nothing to
+    the gradient there, so it must match the full tape's gradient (blends, unions, CSG)."""
+    import random
+    random.seed(5)
+    R = Rational
+    union = implc.compile(shapes.union(*[shapes.sphere(R(random.randint(8, 15), 100),
+                                                       tuple(R(random.randint(-70, 70), 100) for _ in range(3)))
+                                         for _ in range(40)]))
+    for s in (compiled["paper_blobs"], compiled["csg"], compiled["min_of_blobs"], union):
+        v = implc.voxelize(s, 7)
+        g = s.gradient(v.centers())
+        expected = g / np.linalg.norm(g, axis=1, keepdims=True)
+        usable = np.all(np.isfinite(expected), axis=1)
+        assert usable.mean() > 0.99
+        np.testing.assert_allclose(v.normals[usable], expected[usable], atol=1e-5)
+
+
 def test_spherical_normals_never_nan_or_zero(compiled):
     v = implc.voxelize(compiled["paper_sin4_sin8"], 7)
     assert np.all(np.isfinite(v.normals))
@@ -259,11 +277,11 @@ def test_worker_errors_reach_the_caller_and_no_thread_is_left(monkeypatch):
     calls = {"n": 0}
     original = Subdivider._normals
 
-    def failing(self, coords, out):
+    def failing(self, coords, out, masks=None):
         calls["n"] += 1
         if calls["n"] > 3:
             raise RuntimeError("boom in a worker")
-        return original(self, coords, out)
+        return original(self, coords, out, masks)
 
     monkeypatch.setattr(Subdivider, "_normals", failing)
     before = threading.active_count()

@@ -11,7 +11,7 @@ import math
 from llvmlite import ir
 
 from .. import rounding as R
-from .control import Local, for_set_bits, volatile_load
+from .control import Local, for_set_bits
 from .point import powi
 from .vector import VectorBuilder
 
@@ -427,14 +427,7 @@ def _emit_fold(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills)
         bound = Local(b, vb.vtype, bound_value)
         with b.goto_entry_block():
             kept = b.alloca(ir.ArrayType(vb.vtype, len(plan.terms)), name="kept")  # the other side, per term
-    # The terms read the coordinates through volatile loads inside their case: without that, the
-    # optimiser hoists every term's (loop-invariant) code out of the loop and computes all of them.
-    with b.goto_entry_block():
-        coords_slot = b.alloca(ir.ArrayType(vb.vtype, 6), name="coords")
-    slots = [b.gep(coords_slot, [ir.Constant(ir.IntType(32), 0), ir.Constant(ir.IntType(32), j)], inbounds=True)
-             for j in range(6)]
-    for slot, value in zip(slots, [*lo_coords, *hi_coords]):
-        b.store(value, slot)
+    reload = vb.reloadable([*lo_coords, *hi_coords])  # keeps each term's code inside its case
     var_nodes = [i for i in plan.before if tape.nodes[i][0] == "var"]
     with for_set_bits(b, _low_bits(live_mask, len(plan.terms), b)) as k:
         after = b.append_basic_block("fold.next")
@@ -444,7 +437,7 @@ def _emit_fold(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills)
             switch.add_case(ir.Constant(i64, step.term), case)
             b.position_at_end(case)
             own = dict(vals)
-            fresh = [volatile_load(b, slot) for slot in slots]
+            fresh = reload()
             for i in var_nodes:
                 axis = tape.nodes[i][2]
                 own[i] = (fresh[axis], fresh[3 + axis])

@@ -5,6 +5,9 @@ points and boxes as row-major (n, 3) float64 arrays:
 
 - ``implc_point(pts, out, n)``: F at each point.
 - ``implc_gradient(pts, out_value, out_grad, n)``: F and its analytic gradient (n, 3).
+- ``implc_gradient_live(pts, out_value, out_grad, n, live)``: the same over the terms live in ``live`` (an
+  i64 live-term mask valid at every point, :mod:`implc.codegen.pruned_gradient`); the gradient equals
+  ``implc_gradient``'s up to rounding where the mask holds.
 - ``implc_interval(lo, hi, out_lo, out_hi, n, live_in, live_out)``: an enclosure of F over each box
   [lo, hi]. ``live_in`` holds one live-term mask (:mod:`implc.regions`) per group of WIDTH boxes, the
   children of one octant: terms dead there are skipped; ``live_out`` receives each box's own mask.
@@ -31,6 +34,7 @@ from ..regions import plan_regions
 from .control import for_range
 from .interval import emit_interval, emit_interval_regions, emit_mean_value
 from .point import emit_point
+from .pruned_gradient import emit_pruned_gradient
 from .vector import DOUBLE, I64, VectorBuilder
 
 WIDTH = 8
@@ -46,6 +50,7 @@ KERNELS = {  # (pointer arguments before n, pointer arguments after n)
 }
 MEAN_VALUE_KERNEL = "implc_interval_mvf"
 OCTANT_KERNEL, MEAN_VALUE_OCTANT_KERNEL = "implc_octant", "implc_octant_mvf"
+GRADIENT_LIVE_KERNEL = "implc_gradient_live"
 
 _PTR = ir.PointerType(DOUBLE)
 
@@ -159,9 +164,8 @@ def _octant_kernel(module, name, width, enclose):
     b.ret(kept)
 
 
-def _natural(value_tape):
+def _natural(value_tape, plan):
     """The natural enclosure, pruned by the region plan where the tape has terms to prune."""
-    plan = plan_regions(value_tape)
 
     def enclose(vb, lo, hi, live_in):
         if plan.enabled:
@@ -189,9 +193,23 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
         _store_xyz(b, out_grad, i, grad, width)
     b.ret_void()
 
+    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_PTR] * 3 + [I64, I64]), name=GRADIENT_LIVE_KERNEL)
+    b = ir.IRBuilder(fn.append_basic_block("entry"))
+    pts, out_value, out_grad, n, live = fn.args
+    plan = plan_regions(value_tape)
+    with for_range(b, b.sdiv(n, ir.Constant(I64, width))) as i:
+        vb = VectorBuilder(b, width)
+        if plan.fold is not None:
+            value, grad = emit_pruned_gradient(vb, value_tape, plan, _load_xyz(b, pts, i, width), live)
+        else:  # nothing to prune
+            value, *grad = emit_point(vb, gradient_tape, _load_xyz(b, pts, i, width))
+        _store(b, out_value, i, value, width)
+        _store_xyz(b, out_grad, i, grad, width)
+    b.ret_void()
+
     fn, b, blocks = _kernel(module, "implc_interval", width)
     lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
-    enclose = _natural(value_tape)
+    enclose = _natural(value_tape, plan)
     with for_range(b, blocks) as i:
         f_lo, f_hi, masks = enclose(VectorBuilder(b, width), _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width),
                                     _parent_mask(b, live_in, i, width))

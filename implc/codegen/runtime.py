@@ -7,8 +7,9 @@
   surface), prunes children whose enclosure excludes 0, pushes the rest in reverse so that leaves come
   out in Morton order, and writes leaf coordinates with their live-term masks. It is resumable: when the output buffer is full or the
   cancel flag is raised it returns with its stack intact.
-- ``implc_normals``: unit normals at voxel centres from a surface's gradient kernel, with central
-  differences and then a fixed direction as fallbacks (never NaN, never zero).
+- ``implc_normals``: unit normals at voxel centres from a surface's gradient kernel (over the terms live
+  in the voxels' cells where their masks are given), with central differences and then a fixed
+  direction as fallbacks (never NaN, never zero).
 - ``implc_octree_insert``: Fig. 2, insertion of Morton-ordered voxels into an index-based octree that
   starts from the previous voxel's path and ascends only to the common parent.
 - ``implc_octree_traverse``: Fig. 6, depth-first traversal yielding the nodes of one level in order.
@@ -45,12 +46,12 @@ PATH = LEVEL_COUNTS + MAX_DEPTH + 2
 OCTREE_STATE_WORDS = PATH + MAX_DEPTH + 2
 
 OCTANT_FN = ir.FunctionType(I32, [PD, PI32, I64, I64, PI64])  # implc.codegen.kernels: implc_octant
-GRADIENT_FN = ir.FunctionType(VOID, [PD, PD, PD, I64])
+GRADIENT_FN = ir.FunctionType(VOID, [PD, PD, PD, I64, I64])  # implc_gradient_live
 POINT_FN = ir.FunctionType(VOID, [PD, PD, I64])
 
 SIGNATURES = {
     "implc_subdivide": (I64, [I8P, I8P, I64, I64, I64, PD, PI32, PI64, PI64, PI32, PI64, I64, PI64, PI32]),
-    "implc_normals": (VOID, [I8P, I8P, PD, PI32, I64, PF]),
+    "implc_normals": (VOID, [I8P, I8P, PD, PI32, PI64, I64, PF]),
     "implc_octree_insert": (I64, [PI32, I64, PI64, PI32, I64, I64]),
     "implc_octree_traverse": (I64, [PI32, I64, I64, PI32, PI64]),
     "implc_splat": (VOID, [PI64, PI64, PI64, PD, I64, I64, PD, PI64]),
@@ -161,7 +162,7 @@ def _subdivide(module):
 
 def _normals(module):
     fn, b = _function(module, "implc_normals")
-    grad_ptr, point_ptr, geom, coords, n, out = fn.args
+    grad_ptr, point_ptr, geom, coords, masks, n, out = fn.args
     grad_fn = b.bitcast(grad_ptr, ir.PointerType(GRADIENT_FN))
     point_fn = b.bitcast(point_ptr, ir.PointerType(POINT_FN))
     origin = [_load(b, geom, a) for a in range(3)]
@@ -178,6 +179,8 @@ def _normals(module):
     zero, inf = const(DOUBLE, 0.0), const(DOUBLE, float("inf"))
     last = b.sub(n, const(I64, 1))
     blocks = b.sdiv(b.add(n, const(I64, 7)), const(I64, 8))
+    has_masks = b.icmp_unsigned("!=", masks, ir.Constant(PI64, None))
+    masks = b.select(has_masks, masks, local_array(b, I64, 1, "no_masks"))  # read at index 0 only
 
     def usable(n2):
         return b.and_(b.fcmp_ordered(">", n2, zero), b.fcmp_ordered("<", n2, inf))
@@ -193,44 +196,83 @@ def _normals(module):
                 c = b.uitofp(_load(b, coords, b.add(b.mul(idx, const(I64, 3)), const(I64, a))), DOUBLE)
                 centre = b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 0.5)), h[a]))
                 _store(b, centre, pts, 3 * j + a)
-        b.call(grad_fn, [pts, values, grad, const(I64, 8)])
-        need.set(const(ir.IntType(1), 0))
-        for j in range(8):
-            g = [_load(b, grad, 3 * j + a) for a in range(3)]
-            centre = [_load(b, pts, 3 * j + a) for a in range(3)]
-            bad = b.or_(b.not_(usable(norm2(g))), b.fcmp_ordered("<", norm2(centre), near_origin))
-            need.set(b.or_(need.get(), bad))
-        with if_(b, need.get()):  # central differences, half a voxel each way, for the whole block
-            for a in range(3):
-                for s, sign in enumerate((1.0, -1.0)):
-                    for j in range(8):
-                        for k in range(3):
-                            v = _load(b, pts, 3 * j + k)
-                            if k == a:
-                                v = b.fadd(v, b.fmul(h[a], const(DOUBLE, 0.5 * sign)))
-                            _store(b, v, probe, ((2 * a + s) * 8 + j) * 3 + k)
-            b.call(point_fn, [probe, probe_values, const(I64, 48)])
-        for j in range(8):
-            g = [Local(b, DOUBLE, _load(b, grad, 3 * j + a)) for a in range(3)]
-            centre = [_load(b, pts, 3 * j + a) for a in range(3)]
-            r2 = norm2(centre)
-            bad = b.or_(b.not_(usable(norm2([v.get() for v in g]))), b.fcmp_ordered("<", r2, near_origin))
-            with if_(b, bad):
-                for a in range(3):
-                    up = _load(b, probe_values, (2 * a) * 8 + j)
-                    down = _load(b, probe_values, (2 * a + 1) * 8 + j)
-                    g[a].set(b.fdiv(b.fsub(up, down), h[a]))
-            with if_(b, b.not_(usable(norm2([v.get() for v in g])))):  # flat or undefined: point outward
-                radial = usable(r2)
-                for a in range(3):
-                    g[a].set(b.select(radial, centre[a], const(DOUBLE, 1.0 if a == 2 else 0.0)))
-            length = b.call(sqrt, [norm2([v.get() for v in g])])
+        live = const(I64, 0)
+        for j in range(8):  # the terms live in any of the eight cells
             index = b.add(b.mul(block, const(I64, 8)), const(I64, j))
-            with if_(b, b.icmp_signed("<", index, n)):
-                for a in range(3):
-                    unit = b.fptrunc(b.fdiv(g[a].get(), length), FLOAT)
-                    _store(b, unit, out, b.add(b.mul(index, const(I64, 3)), const(I64, a)))
+            index = b.select(b.icmp_signed(">", index, last), last, index)
+            live = b.or_(live, _load(b, masks, b.select(has_masks, index, const(I64, 0))))
+        b.call(grad_fn, [pts, values, grad, const(I64, 8), b.select(has_masks, live, const(I64, -1))])
+        # the common case in vector registers: every gradient usable, a full block of 8
+        v8 = ir.VectorType(DOUBLE, 8)
+        rows = b.load(b.bitcast(grad, ir.PointerType(ir.VectorType(DOUBLE, 24))), align=8)
+        centres = b.load(b.bitcast(pts, ir.PointerType(ir.VectorType(DOUBLE, 24))), align=8)
+
+        def axis(vec, a):
+            return b.shuffle_vector(vec, ir.Constant(vec.type, ir.Undefined),
+                                    ir.Constant(ir.VectorType(I32, 8), [3 * j + a for j in range(8)]))
+        g8 = [axis(rows, a) for a in range(3)]
+        c8 = [axis(centres, a) for a in range(3)]
+        n2 = norm2(g8)
+        good = b.and_(b.and_(b.fcmp_ordered(">", n2, ir.Constant(v8, [0.0] * 8)),
+                             b.fcmp_ordered("<", n2, ir.Constant(v8, [float("inf")] * 8))),
+                      b.fcmp_ordered(">=", norm2(c8), _broadcast(b, near_origin, v8)))
+        all_good = b.icmp_unsigned("==", b.bitcast(good, ir.IntType(8)), ir.Constant(ir.IntType(8), 0xFF))
+        full = b.icmp_signed("<=", b.mul(b.add(block, const(I64, 1)), const(I64, 8)), n)
+        with b.if_else(b.and_(all_good, full)) as (fast, slow):
+            with fast:
+                length = b.call(_intrinsic(module, "llvm.sqrt.v8f64", 1, v8), [n2])
+                unit = [b.fptrunc(b.fdiv(g, length), ir.VectorType(FLOAT, 8)) for g in g8]
+                pair = b.shuffle_vector(unit[0], unit[1], ir.Constant(ir.VectorType(I32, 16), list(range(16))))
+                third = b.shuffle_vector(unit[2], ir.Constant(unit[2].type, ir.Undefined),
+                                         ir.Constant(ir.VectorType(I32, 16), list(range(8)) + [0] * 8))
+                order = [8 * a + j if a < 2 else 16 + j for j in range(8) for a in range(3)]
+                interleaved = b.shuffle_vector(pair, third, ir.Constant(ir.VectorType(I32, 24), order))
+                target = _at(b, out, b.mul(block, const(I64, 24)))
+                b.store(interleaved, b.bitcast(target, ir.PointerType(ir.VectorType(FLOAT, 24))), align=4)
+            with slow:  # fallbacks, lane by lane
+                need.set(const(ir.IntType(1), 0))
+                for j in range(8):
+                    g = [_load(b, grad, 3 * j + a) for a in range(3)]
+                    centre = [_load(b, pts, 3 * j + a) for a in range(3)]
+                    bad = b.or_(b.not_(usable(norm2(g))), b.fcmp_ordered("<", norm2(centre), near_origin))
+                    need.set(b.or_(need.get(), bad))
+                with if_(b, need.get()):  # central differences, half a voxel each way, for the whole block
+                    for a in range(3):
+                        for s, sign in enumerate((1.0, -1.0)):
+                            for j in range(8):
+                                for k in range(3):
+                                    v = _load(b, pts, 3 * j + k)
+                                    if k == a:
+                                        v = b.fadd(v, b.fmul(h[a], const(DOUBLE, 0.5 * sign)))
+                                    _store(b, v, probe, ((2 * a + s) * 8 + j) * 3 + k)
+                    b.call(point_fn, [probe, probe_values, const(I64, 48)])
+                for j in range(8):
+                    g = [Local(b, DOUBLE, _load(b, grad, 3 * j + a)) for a in range(3)]
+                    centre = [_load(b, pts, 3 * j + a) for a in range(3)]
+                    r2 = norm2(centre)
+                    bad = b.or_(b.not_(usable(norm2([v.get() for v in g]))), b.fcmp_ordered("<", r2, near_origin))
+                    with if_(b, bad):
+                        for a in range(3):
+                            up = _load(b, probe_values, (2 * a) * 8 + j)
+                            down = _load(b, probe_values, (2 * a + 1) * 8 + j)
+                            g[a].set(b.fdiv(b.fsub(up, down), h[a]))
+                    with if_(b, b.not_(usable(norm2([v.get() for v in g])))):  # flat or undefined: point outward
+                        radial = usable(r2)
+                        for a in range(3):
+                            g[a].set(b.select(radial, centre[a], const(DOUBLE, 1.0 if a == 2 else 0.0)))
+                    length = b.call(sqrt, [norm2([v.get() for v in g])])
+                    index = b.add(b.mul(block, const(I64, 8)), const(I64, j))
+                    with if_(b, b.icmp_signed("<", index, n)):
+                        for a in range(3):
+                            unit = b.fptrunc(b.fdiv(g[a].get(), length), FLOAT)
+                            _store(b, unit, out, b.add(b.mul(index, const(I64, 3)), const(I64, a)))
     b.ret_void()
+
+
+def _broadcast(b, value, vtype):
+    one = b.insert_element(ir.Constant(vtype, ir.Undefined), value, const(I32, 0))
+    return b.shuffle_vector(one, ir.Constant(vtype, ir.Undefined),
+                            ir.Constant(ir.VectorType(I32, vtype.count), [0] * vtype.count))
 
 
 def _intrinsic(module, name, arity, type_=DOUBLE):

@@ -8,6 +8,7 @@ import math
 from llvmlite import ir
 
 from ..rounding import TINY
+from .control import volatile_load
 
 DOUBLE = ir.DoubleType()
 I64 = ir.IntType(64)
@@ -84,6 +85,22 @@ class VectorBuilder:
 
     def isnan(self, a):
         return self.b.fcmp_unordered("uno", a, a)
+
+    def reloadable(self, vectors):
+        """Spill ``vectors`` to the stack; returns a function that reads them back through volatile loads.
+
+        Code computed from such a reload stays where it is: a loop that switches to one of many
+        loop-invariant computations per iteration (a fold over live terms) would otherwise have the
+        optimiser hoist all of them out of the loop and compute every one.
+        """
+        b = self.b
+        with b.goto_entry_block():
+            slots = b.alloca(ir.ArrayType(self.vtype, len(vectors)), name="spilled")
+        ptrs = [b.gep(slots, [ir.Constant(ir.IntType(32), 0), ir.Constant(ir.IntType(32), j)], inbounds=True)
+                for j in range(len(vectors))]
+        for ptr, value in zip(ptrs, vectors):
+            b.store(value, ptr)
+        return lambda: [volatile_load(b, ptr) for ptr in ptrs]
 
     # -- the C math library, one lane at a time ------------------------------------------------------
     def libm(self, name: str, *args):
