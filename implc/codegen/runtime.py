@@ -132,30 +132,44 @@ def _subdivide(module):
             _bump(b, stats, 0, 8)
             return b.icmp_unsigned("!=", sub_kept, const(I32, 0))
 
-        with b.if_else(leaf) as (then, otherwise):
-            with then:  # emit kept leaves in Morton order, each with its live mask (for the normals)
+        ctpop = module.globals.get("llvm.ctpop.i32") or ir.Function(
+            module, ir.FunctionType(I32, [I32]), name="llvm.ctpop.i32")
+
+        def append(array, masks_array, n, c, width):
+            """Write child c at slot n whether it is kept or not; the next slot is n + its keep bit
+            (branch-free: which children survive is unpredictable)."""
+            for a in range(3):
+                _store(b, children[c][a], array, b.add(b.mul(n, const(I64, width)), const(I64, a)))
+            if width == 4:
+                _store(b, child_level, array, b.add(b.mul(n, const(I64, 4)), const(I64, 3)))
+            _store(b, child_mask(c), masks_array, n)
+            return b.add(n, b.zext(keep(c), I64))
+
+        with b.if_else(b.and_(leaf, refining)) as (refined, plain):
+            with refined:  # emit the kept leaves that pass refinement, in Morton order
                 for c in range(8):
-                    kept_c = Local(b, ir.IntType(1), keep(c))
-                    with if_(b, b.and_(kept_c.get(), refining)):
-                        kept_c.set(refined_keep(c))
-                    with if_(b, kept_c.get()):
-                        n = count.get()
-                        for a in range(3):
-                            _store(b, children[c][a], out, b.add(b.mul(n, const(I64, 3)), const(I64, a)))
-                        _store(b, child_mask(c), out_masks, n)
-                        count.set(b.add(n, const(I64, 1)))
-                        _bump(b, stats, stat_slot)
-            with otherwise:  # push kept octants in reverse, so child 0 is popped first
-                for c in reversed(range(8)):
                     with if_(b, keep(c)):
+                        with if_(b, refined_keep(c)):
+                            n = count.get()
+                            for a in range(3):
+                                _store(b, children[c][a], out, b.add(b.mul(n, const(I64, 3)), const(I64, a)))
+                            _store(b, child_mask(c), out_masks, n)
+                            count.set(b.add(n, const(I64, 1)))
+                            _bump(b, stats, stat_slot)
+            with plain:
+                slot = _at(b, stats, stat_slot)
+                b.store(b.add(b.load(slot), b.zext(b.call(ctpop, [kept]), I64)), slot)
+                with b.if_else(leaf) as (then, otherwise):
+                    with then:  # kept leaves in Morton order, each with its live mask (for the normals)
+                        n = count.get()
+                        for c in range(8):
+                            n = append(out, out_masks, n, c, 3)
+                        count.set(n)
+                    with otherwise:  # kept octants pushed in reverse, so child 0 is popped first
                         t = size.get()
-                        base = b.mul(t, const(I64, 4))
-                        for a in range(3):
-                            _store(b, children[c][a], stack, b.add(base, const(I64, a)))
-                        _store(b, child_level, stack, b.add(base, const(I64, 3)))
-                        _store(b, child_mask(c), masks, t)
-                        size.set(b.add(t, const(I64, 1)))
-                        _bump(b, stats, stat_slot)
+                        for c in reversed(range(8)):
+                            t = append(stack, masks, t, c, 4)
+                        size.set(t)
     _store(b, size.get(), state, 0)
     b.ret(count.get())
 

@@ -1,0 +1,89 @@
+"""Voxelization time of this working tree against an older git revision, measured in one run.
+
+Each case runs in a fresh process per revision (its own JIT cache), the two revisions interleaved so
+that the machine's drift hits both alike; the table shows medians and their ratio. Example, the state
+before the issue "tighter and faster" against now::
+
+    python benchmarks/against_revision.py ee2b892 --depth 9 --repeats 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+PROBE = r"""
+import json, random, statistics, sys, time
+import sympy, implc
+from implc import scene, shapes
+case, depth, repeats = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+if case == "union of 50 spheres":
+    rng = random.Random(7)
+    centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
+    expr = shapes.union(*[shapes.sphere(sympy.Rational(rng.randint(6, 14), 100), centre()) for _ in range(50)])
+    s = implc.compile(expr, ((-1, 1),) * 3)
+else:
+    sc = scene.load(case)
+    s = implc.compile(sc.surface, sc.bounds)
+implc.voxelize(s, depth, workers=1)  # warm: runtime module, memory
+times = []
+for _ in range(repeats):
+    t0 = time.perf_counter(); v = implc.voxelize(s, depth, workers=1); times.append(time.perf_counter() - t0)
+print(json.dumps({"seconds": statistics.median(times), "voxels": len(v)}))
+"""
+
+CASES = ("paper_blobs", "union of 50 spheres", "paper_sin4_sin8", "paper_sin3_sin4")
+
+
+def run(tree: Path, case: str, depth: int, repeats: int, cache: Path) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(tree), IMPLC_CACHE_DIR=str(cache))
+    out = subprocess.run([sys.executable, "-c", PROBE, case, str(depth), str(repeats)], env=env, check=True,
+                         capture_output=True, text=True, cwd=tree)
+    return json.loads(out.stdout)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("revision", help="the older git revision (e.g. a commit hash)")
+    p.add_argument("--depth", type=int, default=9)
+    p.add_argument("--repeats", type=int, default=5, help="timed voxelizations per process")
+    p.add_argument("--rounds", type=int, default=3, help="processes per revision and case, interleaved")
+    p.add_argument("--cases", default=",".join(CASES))
+    args = p.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        old = Path(tmp) / "old"
+        subprocess.run(["git", "worktree", "add", "--detach", str(old), args.revision], cwd=ROOT, check=True,
+                       capture_output=True)
+        try:
+            rows = []
+            for case in args.cases.split(","):
+                times = {"old": [], "new": []}
+                voxels = {}
+                for _ in range(args.rounds):
+                    for label, tree in (("old", old), ("new", ROOT)):
+                        r = run(tree, case, args.depth, args.repeats, Path(tmp) / f"cache-{label}")
+                        times[label].append(r["seconds"])
+                        voxels[label] = r["voxels"]
+                t_old, t_new = statistics.median(times["old"]), statistics.median(times["new"])
+                rows.append((case, t_old, t_new, voxels["old"], voxels["new"]))
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, capture_output=True)
+    print(f"### Voxelize at {1 << args.depth}³, one worker: {args.revision} against this tree "
+          f"(medians of {args.rounds} processes x {args.repeats} runs)\n")
+    print(f"| case | {args.revision} s | now s | speedup | voxels then | voxels now |")
+    print("|---|---|---|---|---|---|")
+    for case, t_old, t_new, v_old, v_new in rows:
+        print(f"| {case} | {t_old:.4f} | {t_new:.4f} | {t_old / t_new:.1f}× | {v_old} | {v_new} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
