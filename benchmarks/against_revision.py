@@ -75,7 +75,8 @@ def main(argv=None) -> int:
                 t_old, t_new = statistics.median(times["old"]), statistics.median(times["new"])
                 rows.append((case, t_old, t_new, voxels["old"], voxels["new"]))
         finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, capture_output=True)
+            subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, capture_output=True,
+                           check=False)  # best effort: the temporary folder goes anyway
     print(f"### Voxelize at {1 << args.depth}³, one worker: {args.revision} against this tree "
           f"(medians of {args.rounds} processes x {args.repeats} runs)\n")
     print(f"| case | {args.revision} s | now s | speedup | voxels then | voxels now |")
