@@ -139,10 +139,7 @@ def plan_regions(tape) -> RegionPlan:
     out = tape.outputs[0]
     root_set = frozenset(roots)
     chain = _closure(tape, [out], stop=root_set) - root_set  # reached from F without entering a term
-    downstream = set()  # nodes that depend on a term root: the combining chain
-    for i, (_, args, _) in enumerate(tape.nodes):
-        if any(a in root_set or a in downstream for a in args):
-            downstream.add(i)
+    downstream = _closure_users(tape, root_set) - root_set  # the combining chain
     # Everything a term needs that the chain does not is computed inside the term's block, even when
     # another term needs it too (then it is computed in both): a dead term then costs nothing at all.
     # Inputs and constants stay outside, as free.

@@ -12,8 +12,9 @@ from llvmlite import ir
 
 from .. import rounding as R
 from .control import Local, for_set_bits
+from .fold import Accumulator, live_steps, live_terms
 from .point import powi
-from .vector import VectorBuilder
+from .vector import VectorBuilder, broadcast
 
 INF = math.inf
 NAN = math.nan
@@ -320,7 +321,7 @@ def emit_interval_regions(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, l
     else:
         _emit_term_by_term(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills)
     lo, hi = whole_line_if_undefined(vb, *vals[tape.outputs[0]])
-    return lo, hi, b.and_(_splat_i64(vb, live_mask), b.not_(kills.get()))
+    return lo, hi, b.and_(broadcast(b, live_mask, vb.width), b.not_(kills.get()))
 
 
 class _Kills:
@@ -334,19 +335,11 @@ class _Kills:
     def add(self, dead, bits):
         """Mark ``bits`` (an i64, constant or not) dead in the boxes where ``dead`` holds."""
         b = self.vb.b
-        bits = _splat_i64(self.vb, bits) if bits.type == ir.IntType(64) else bits
+        bits = broadcast(b, bits, self.vb.width)
         self.local.set(b.or_(self.local.get(), b.select(dead, bits, ir.Constant(self.type, [0] * self.vb.width))))
 
     def get(self):
         return self.local.get()
-
-
-def _splat_i64(vb, value):
-    b = vb.b
-    vec = ir.VectorType(ir.IntType(64), vb.width)
-    one = b.insert_element(ir.Constant(vec, ir.Undefined), value, ir.Constant(ir.IntType(32), 0))
-    return b.shuffle_vector(one, ir.Constant(vec, ir.Undefined),
-                            ir.Constant(ir.VectorType(ir.IntType(32), vb.width), [0] * vb.width))
 
 
 def _emit_term(em, vb, tape, vals, term, bit, kills, lo_coords, hi_coords):
@@ -361,7 +354,7 @@ def _emit_term(em, vb, tape, vals, term, bit, kills, lo_coords, hi_coords):
             dead = vb.cmp(">=" if strict else ">", g[0], zero)
         else:
             dead = vb.cmp("<" if strict else "<=", g[1], zero)
-        kills.add(dead, bit if isinstance(bit, ir.Value) else ir.Constant(ir.IntType(64), 1 << bit))
+        kills.add(dead, ir.Constant(ir.IntType(64), 1 << bit))
     return vals[term.root]
 
 
@@ -403,19 +396,17 @@ def _emit_term_by_term(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask
         _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
 
 
-def _low_bits(mask, count, b):
-    return b.and_(mask, ir.Constant(mask.type, (1 << count) - 1 if count < 64 else -1))
-
-
 def _emit_fold(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills):
     """The chain as a loop over the live terms only (see :class:`implc.regions.Fold`)."""
     b = vb.b
     fold = plan.fold
-    i64 = ir.IntType(64)
+    count = len(plan.terms)
     identity = vb.splat(_IDENTITY[fold.op])
-    start = vals[fold.base] if fold.base is not None else (identity, identity)
-    acc = [Local(b, vb.vtype, start[0]), Local(b, vb.vtype, start[1])]
-    empty = Local(b, ir.IntType(1), ir.Constant(ir.IntType(1), int(fold.base is None)))
+    acc = Accumulator(b, fold, vals.get(fold.base), [identity, identity])
+
+    def combine(node, operands):
+        op, _, attr = tape.nodes[node]
+        return list(getattr(em, f"i_{op}")(operands, attr))
     minmax = fold.op != "sum"
     if minmax:  # the kill bound: min of the leaves' upper bounds (max of lower bounds for max)
         side, pick = (1, vb.minimum) if fold.op == "min" else (0, vb.maximum)
@@ -426,49 +417,28 @@ def _emit_fold(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills)
                 bound_value = pick(bound_value, vals[leaf][side])
         bound = Local(b, vb.vtype, bound_value)
         with b.goto_entry_block():
-            kept = b.alloca(ir.ArrayType(vb.vtype, len(plan.terms)), name="kept")  # the other side, per term
+            kept = b.alloca(ir.ArrayType(vb.vtype, count), name="kept")  # the other side, per term
     reload = vb.reloadable([*lo_coords, *hi_coords])  # keeps each term's code inside its case
     var_nodes = [i for i in plan.before if tape.nodes[i][0] == "var"]
-    with for_set_bits(b, _low_bits(live_mask, len(plan.terms), b)) as k:
-        after = b.append_basic_block("fold.next")
-        switch = b.switch(k, after)
-        for step in fold.steps:
-            case = b.append_basic_block(f"fold.term{step.term}")
-            switch.add_case(ir.Constant(i64, step.term), case)
-            b.position_at_end(case)
-            own = dict(vals)
-            fresh = reload()
-            for i in var_nodes:
-                axis = tape.nodes[i][2]
-                own[i] = (fresh[axis], fresh[3 + axis])
-            t = _emit_term(em, vb, tape, own, plan.terms[step.term], step.term, kills, lo_coords, hi_coords)
-            for w in step.wrappers:
-                _emit_node(em, vb, tape, own, w, lo_coords, hi_coords)
-            value = own[step.wrappers[-1]] if step.wrappers else t
-            if step.node is None:
-                new = value
-            else:
-                op, _, attr = tape.nodes[step.node]
-                current = (acc[0].get(), acc[1].get())
-                new = getattr(em, f"i_{op}")([value, current] if step.term_left else [current, value], attr)
-                if fold.base is None:
-                    is_empty = empty.get()
-                    new = (b.select(is_empty, value[0], new[0]), b.select(is_empty, value[1], new[1]))
-            acc[0].set(new[0])
-            acc[1].set(new[1])
-            empty.set(ir.Constant(ir.IntType(1), 0))
-            if minmax:
-                bound.set(pick(bound.get(), t[side]))
-                b.store(t[1 - side], b.gep(kept, [ir.Constant(ir.IntType(32), 0), k], inbounds=True))
-            b.branch(after)
-        b.position_at_end(after)
-    is_empty = empty.get()
-    vals[fold.top] = (b.select(is_empty, identity, acc[0].get()), b.select(is_empty, identity, acc[1].get()))
+    for k, step in live_steps(b, fold, live_mask, count):
+        own = dict(vals)
+        fresh = reload()
+        for i in var_nodes:
+            axis = tape.nodes[i][2]
+            own[i] = (fresh[axis], fresh[3 + axis])
+        t = _emit_term(em, vb, tape, own, plan.terms[step.term], step.term, kills, lo_coords, hi_coords)
+        for w in step.wrappers:
+            _emit_node(em, vb, tape, own, w, lo_coords, hi_coords)
+        acc.take(step, list(own[step.wrappers[-1]] if step.wrappers else t), combine)
+        if minmax:
+            bound.set(pick(bound.get(), t[side]))
+            b.store(t[1 - side], b.gep(kept, [ir.Constant(ir.IntType(32), 0), k], inbounds=True))
+    vals[fold.top] = tuple(acc.result())
     if minmax:  # a live leaf entirely above the bound (below, for max) can never be the extremum below
-        with for_set_bits(b, _low_bits(live_mask, len(plan.terms), b)) as k:
+        with for_set_bits(b, live_terms(b, live_mask, count)) as k:
             other = b.load(b.gep(kept, [ir.Constant(ir.IntType(32), 0), k], inbounds=True))
             dead = vb.cmp(">", other, bound.get()) if fold.op == "min" else vb.cmp("<", other, bound.get())
-            kills.add(dead, b.shl(ir.Constant(i64, 1), k))
+            kills.add(dead, b.shl(ir.Constant(k.type, 1), k))
     for i in fold.tail:
         _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords)
 

@@ -35,7 +35,7 @@ from .control import for_range
 from .interval import emit_interval, emit_interval_regions, emit_mean_value
 from .point import emit_point
 from .pruned_gradient import emit_pruned_gradient
-from .vector import DOUBLE, I64, VectorBuilder
+from .vector import DOUBLE, I64, VectorBuilder, broadcast
 
 WIDTH = 8
 """Default lanes per vector: eight boxes (an octant's children) per kernel step. 1, 2 and 4 are allowed
@@ -123,6 +123,19 @@ def _parent_mask(builder, live_in, block, width):
     return builder.load(ptr)
 
 
+def _interval_kernel(module, name, width, enclose):
+    """Emit the batched kernel ``name(lo, hi, out_lo, out_hi, n, live_in, live_out)`` over ``enclose``."""
+    fn, b, blocks = _kernel(module, name, width)
+    lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
+    with for_range(b, blocks) as i:
+        f_lo, f_hi, masks = enclose(VectorBuilder(b, width), _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width),
+                                    _parent_mask(b, live_in, i, width))
+        _store(b, out_lo, i, f_lo, width)
+        _store(b, out_hi, i, f_hi, width)
+        _live_masks(b, live_in, live_out, i, masks, width)
+    b.ret_void()
+
+
 def _octant_kernel(module, name, width, enclose):
     """Emit ``name`` (see the module docstring); ``enclose(vb, lo, hi, live_in) -> (lo, hi, masks)``."""
     i32 = ir.IntType(32)
@@ -135,14 +148,11 @@ def _octant_kernel(module, name, width, enclose):
     def read(index):
         return b.load(b.gep(geom, [index if isinstance(index, ir.Value) else ir.Constant(I64, index)]))
 
-    def splat(value, vtype):
-        one = b.insert_element(ir.Constant(vtype, ir.Undefined), value, ir.Constant(i32, 0))
-        return b.shuffle_vector(one, ir.Constant(vtype, ir.Undefined), ir.Constant(ivec, [0] * width))
-
-    origin = [splat(read(a), vb.vtype) for a in range(3)]
-    pad = [splat(read(3 + a), vb.vtype) for a in range(3)]
-    h = [splat(read(b.add(b.mul(level, ir.Constant(I64, 3)), ir.Constant(I64, 6 + a))), vb.vtype) for a in range(3)]
-    twice = [splat(b.shl(b.load(b.gep(cell, [ir.Constant(I64, a)])), ir.Constant(i32, 1)), ivec) for a in range(3)]
+    origin = [broadcast(b, read(a), width) for a in range(3)]
+    pad = [broadcast(b, read(3 + a), width) for a in range(3)]
+    h = [broadcast(b, read(b.add(b.mul(level, ir.Constant(I64, 3)), ir.Constant(I64, 6 + a))), width) for a in range(3)]
+    twice = [broadcast(b, b.shl(b.load(b.gep(cell, [ir.Constant(I64, a)])), ir.Constant(i32, 1)), width)
+             for a in range(3)]
     kept = ir.Constant(i32, 0)
     for first in range(0, 8, width):
         lanes = range(first, first + width)
@@ -170,7 +180,7 @@ def _natural(value_tape, plan):
     def enclose(vb, lo, hi, live_in):
         if plan.enabled:
             return emit_interval_regions(vb, value_tape, plan, lo, hi, live_in)
-        return (*emit_interval(vb, value_tape, lo, hi), _splat_mask(vb.b, live_in, vb.width))
+        return (*emit_interval(vb, value_tape, lo, hi), broadcast(vb.b, live_in, vb.width))
     return enclose
 
 
@@ -207,25 +217,10 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
         _store_xyz(b, out_grad, i, grad, width)
     b.ret_void()
 
-    fn, b, blocks = _kernel(module, "implc_interval", width)
-    lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
     enclose = _natural(value_tape, plan)
-    with for_range(b, blocks) as i:
-        f_lo, f_hi, masks = enclose(VectorBuilder(b, width), _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width),
-                                    _parent_mask(b, live_in, i, width))
-        _store(b, out_lo, i, f_lo, width)
-        _store(b, out_hi, i, f_hi, width)
-        _live_masks(b, live_in, live_out, i, masks, width)
-    b.ret_void()
+    _interval_kernel(module, "implc_interval", width, enclose)
     _octant_kernel(module, OCTANT_KERNEL, width, enclose)
     return str(module)
-
-
-def _splat_mask(builder, mask, width):
-    vec = ir.VectorType(I64, width)
-    one = builder.insert_element(ir.Constant(vec, ir.Undefined), mask, ir.Constant(ir.IntType(32), 0))
-    return builder.shuffle_vector(one, ir.Constant(vec, ir.Undefined),
-                                  ir.Constant(ir.VectorType(ir.IntType(32), width), [0] * width))
 
 
 def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface_mvf",
@@ -233,17 +228,9 @@ def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "
     """The LLVM IR of the mean-value interval kernel, a module of its own: it is about three times the
     size of the others together, so it is compiled only when first used."""
     module = ir.Module(name=name)
-    fn, b, blocks = _kernel(module, MEAN_VALUE_KERNEL, width)
-    lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
 
     def enclose(vb, lo, hi, live_in):  # prunes nothing: the children keep their parent's mask
-        return (*emit_mean_value(vb, value_tape, gradient_tape, lo, hi), _splat_mask(vb.b, live_in, vb.width))
-    with for_range(b, blocks) as i:
-        f_lo, f_hi, masks = enclose(VectorBuilder(b, width), _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width),
-                                    _parent_mask(b, live_in, i, width))
-        _store(b, out_lo, i, f_lo, width)
-        _store(b, out_hi, i, f_hi, width)
-        _live_masks(b, live_in, live_out, i, masks, width)
-    b.ret_void()
+        return (*emit_mean_value(vb, value_tape, gradient_tape, lo, hi), broadcast(vb.b, live_in, vb.width))
+    _interval_kernel(module, MEAN_VALUE_KERNEL, width, enclose)
     _octant_kernel(module, MEAN_VALUE_OCTANT_KERNEL, width, enclose)
     return str(module)

@@ -16,10 +16,8 @@ from __future__ import annotations
 
 import math
 
-from llvmlite import ir
-
 from ..gradient import with_gradient
-from .control import Local, for_set_bits
+from .fold import Accumulator, live_steps
 from .point import emit_point
 from .vector import VectorBuilder
 
@@ -62,55 +60,28 @@ DUAL_RULES = {"neg": _neg, "scale": _scale, "add": _add, "sub": _sub, "min": _mi
 def emit_pruned_gradient(vb: VectorBuilder, tape, plan, coords, live_mask):
     """F and ∇F at points ``coords`` over the live terms of ``plan.fold`` (``live_mask``: an i64 for all
     W points). Returns (value, [∂x, ∂y, ∂z]) vectors."""
-    b = vb.b
     fold = plan.fold
 
-    def dual(root, xyz):
-        value, *grad = emit_point(vb, with_gradient(tape.subtape(root)), xyz)
-        return value, grad
+    def dual(root, xyz):  # flat: [value, ∂x, ∂y, ∂z]
+        return emit_point(vb, with_gradient(tape.subtape(root)), xyz)
 
     def combine(node, operands):
         op, _, attr = tape.nodes[node]
-        return DUAL_RULES[op](vb, *operands, attr)
+        value, grad = DUAL_RULES[op](vb, *[(o[0], o[1:]) for o in operands], attr)
+        return [value, *grad]
 
     none = {"sum": 0.0, "min": math.inf, "max": -math.inf}[fold.op]
-    identity = (vb.splat(none), [vb.splat(0.0)] * 3)
-    start = dual(fold.base, coords) if fold.base is not None else identity
-    acc = [Local(b, vb.vtype, v) for v in (start[0], *start[1])]
-    empty = Local(b, ir.IntType(1), ir.Constant(ir.IntType(1), int(fold.base is None)))
+    identity = [vb.splat(none)] + [vb.splat(0.0)] * 3
+    acc = Accumulator(vb.b, fold, dual(fold.base, coords) if fold.base is not None else None, identity)
     reload = vb.reloadable(coords)
-    count = len(plan.terms)
-    live = b.and_(live_mask, ir.Constant(live_mask.type, (1 << count) - 1 if count < 64 else -1))
-    with for_set_bits(b, live) as k:
-        after = b.append_basic_block("fold.next")
-        switch = b.switch(k, after)
-        for step in fold.steps:
-            case = b.append_basic_block(f"fold.term{step.term}")
-            switch.add_case(ir.Constant(k.type, step.term), case)
-            b.position_at_end(case)
-            value = dual(plan.terms[step.term].root, reload())
-            for w in step.wrappers:
-                value = combine(w, [value])
-            if step.node is None:
-                new = value
-            else:
-                current = (acc[0].get(), [a.get() for a in acc[1:]])
-                new = combine(step.node, [value, current] if step.term_left else [current, value])
-                if fold.base is None:
-                    is_empty = empty.get()
-                    new = (b.select(is_empty, value[0], new[0]),
-                           [b.select(is_empty, p, q) for p, q in zip(value[1], new[1])])
-            for slot, v in zip(acc, (new[0], *new[1])):
-                slot.set(v)
-            empty.set(ir.Constant(ir.IntType(1), 0))
-            b.branch(after)
-        b.position_at_end(after)
-    is_empty = empty.get()
-    result = [b.select(is_empty, i, a.get()) for i, a in zip((identity[0], *identity[1]), acc)]
-    result = (result[0], result[1:])
-    previous = fold.top
+    for _, step in live_steps(vb.b, fold, live_mask, len(plan.terms)):
+        value = dual(plan.terms[step.term].root, reload())
+        for w in step.wrappers:
+            value = combine(w, [value])
+        acc.take(step, value, combine)
+    result, previous = acc.result(), fold.top
     for node in fold.tail:  # above the fold: combine with the non-term operand
         _, args, _ = tape.nodes[node]
         result = combine(node, [result if a == previous else dual(a, coords) for a in args])
         previous = node
-    return result
+    return result[0], result[1:]

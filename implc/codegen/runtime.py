@@ -21,6 +21,7 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .control import I32, I64, Local, const, for_range, if_, local_array, while_true
+from .vector import broadcast
 
 DOUBLE = ir.DoubleType()
 FLOAT = ir.FloatType()
@@ -203,6 +204,7 @@ def _normals(module):
         return b.fadd(b.fadd(b.fmul(v[0], v[0]), b.fmul(v[1], v[1])), b.fmul(v[2], v[2]))
 
     with for_range(b, blocks) as block:
+        live = const(I64, 0)  # the terms live in any of the eight cells
         for j in range(8):  # voxel centres; lanes past the end repeat the last voxel
             idx = b.select(b.icmp_signed(">", b.add(b.mul(block, const(I64, 8)), const(I64, j)), last), last,
                            b.add(b.mul(block, const(I64, 8)), const(I64, j)))
@@ -210,11 +212,7 @@ def _normals(module):
                 c = b.uitofp(_load(b, coords, b.add(b.mul(idx, const(I64, 3)), const(I64, a))), DOUBLE)
                 centre = b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 0.5)), h[a]))
                 _store(b, centre, pts, 3 * j + a)
-        live = const(I64, 0)
-        for j in range(8):  # the terms live in any of the eight cells
-            index = b.add(b.mul(block, const(I64, 8)), const(I64, j))
-            index = b.select(b.icmp_signed(">", index, last), last, index)
-            live = b.or_(live, _load(b, masks, b.select(has_masks, index, const(I64, 0))))
+            live = b.or_(live, _load(b, masks, b.select(has_masks, idx, const(I64, 0))))
         b.call(grad_fn, [pts, values, grad, const(I64, 8), b.select(has_masks, live, const(I64, -1))])
         # the common case in vector registers: every gradient usable, a full block of 8
         v8 = ir.VectorType(DOUBLE, 8)
@@ -229,7 +227,7 @@ def _normals(module):
         n2 = norm2(g8)
         good = b.and_(b.and_(b.fcmp_ordered(">", n2, ir.Constant(v8, [0.0] * 8)),
                              b.fcmp_ordered("<", n2, ir.Constant(v8, [float("inf")] * 8))),
-                      b.fcmp_ordered(">=", norm2(c8), _broadcast(b, near_origin, v8)))
+                      b.fcmp_ordered(">=", norm2(c8), broadcast(b, near_origin, 8)))
         all_good = b.icmp_unsigned("==", b.bitcast(good, ir.IntType(8)), ir.Constant(ir.IntType(8), 0xFF))
         full = b.icmp_signed("<=", b.mul(b.add(block, const(I64, 1)), const(I64, 8)), n)
         with b.if_else(b.and_(all_good, full)) as (fast, slow):
@@ -281,12 +279,6 @@ def _normals(module):
                             unit = b.fptrunc(b.fdiv(g[a].get(), length), FLOAT)
                             _store(b, unit, out, b.add(b.mul(index, const(I64, 3)), const(I64, a)))
     b.ret_void()
-
-
-def _broadcast(b, value, vtype):
-    one = b.insert_element(ir.Constant(vtype, ir.Undefined), value, const(I32, 0))
-    return b.shuffle_vector(one, ir.Constant(vtype, ir.Undefined),
-                            ir.Constant(ir.VectorType(I32, vtype.count), [0] * vtype.count))
 
 
 def _intrinsic(module, name, arity, type_=DOUBLE):

@@ -14,6 +14,14 @@ DOUBLE = ir.DoubleType()
 I64 = ir.IntType(64)
 
 
+def broadcast(builder: ir.IRBuilder, value, width: int):
+    """A <width x T> vector with ``value`` (a scalar of type T, constant or not) in every lane."""
+    vtype = ir.VectorType(value.type, width)
+    one = builder.insert_element(ir.Constant(vtype, ir.Undefined), value, ir.Constant(ir.IntType(32), 0))
+    return builder.shuffle_vector(one, ir.Constant(vtype, ir.Undefined),
+                                  ir.Constant(ir.VectorType(ir.IntType(32), width), [0] * width))
+
+
 class VectorBuilder:
     """Wraps an IRBuilder with the vector operations the point and interval emitters need."""
 
