@@ -1,7 +1,8 @@
 """``implc.compile``: a SymPy expression becomes a :class:`Surface` with native kernels.
 
-A Surface owns its tapes, its :class:`~implc.jit.NativeModule` and batched entry points that validate
-their arrays, run the compiled code over whole vectors and handle the ragged tail.
+A Surface owns its tapes, its :class:`~implc.jit.NativeModule`, the runtime its voxelizations run on,
+and batched entry points that validate their arrays, run the compiled code over whole vectors and
+handle the ragged tail.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from .gradient import with_gradient
 from .ir import Tape
 from .jit import NativeModule
 from .lower import lower
+from .runtime import Runtime
 
 _P = ctypes.c_void_p
 _N = ctypes.c_int64
@@ -79,6 +81,15 @@ class Surface:
         self._interval = self.native.function("implc_interval", [_P, _P, _P, _P, _N, _P, _P])
         self.mean_value_native: NativeModule | None = None  # compiled on first use
         self._interval_mvf = None
+        self._runtime: Runtime | None = None
+
+    @property
+    def runtime(self) -> Runtime:
+        """The generic native routines (subdivider, normals, octree) this surface's voxelizations run on,
+        loaded on first use and then kept: loading them costs about a millisecond per call otherwise."""
+        if self._runtime is None:
+            self._runtime = Runtime()
+        return self._runtime
 
     def _mean_value_kernel(self):
         """The mean-value interval kernel, compiled (or loaded from the cache) on first use."""

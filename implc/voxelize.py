@@ -12,7 +12,6 @@ import time
 
 import numpy as np
 
-from .runtime import Runtime
 from .storage import bytes_per_voxel, make_backend
 from .storage.grid import dense_bytes
 from .storage.octree import Octree, OctreeBuilder
@@ -150,7 +149,7 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
         max_voxels = int(available * 0.8 / bytes_per_voxel(storage))
 
     t_start = time.perf_counter()
-    runtime = Runtime()
+    runtime = surface.runtime
     backend = OctreeBuilder(keep_normals=False, runtime=runtime) if storage == "octree" else make_backend(storage)
     subdivider = Subdivider(surface, depth, workers, runtime, max_voxels=max_voxels,
                             mean_value_levels=min(mean_value_levels, depth), prune=prune,
