@@ -31,6 +31,11 @@ def _host() -> tuple[str, str]:
     return llvm.get_host_cpu_name(), llvm.get_host_cpu_features().flatten()
 
 
+def host_has_avx512() -> bool:
+    """Whether this CPU has AVX-512F (and with it instructions that round toward ±inf by themselves)."""
+    return "+avx512f" in _host()[1].split(",")
+
+
 @cache
 def _codegen_fingerprint() -> str:
     """Hash of the sources that decide what a kernel computes: editing them invalidates the cache."""

@@ -5,6 +5,12 @@ Every bound is computed in round-to-nearest and then moved outward by ``|v| * c 
 covers that operation's error: ``|v| * 2**-52`` is at least one ulp of ``v``. Both evaluators use exactly
 these formulas, so their bounds agree bit for bit wherever they call the same functions. A bound that
 overflows to infinity on the wrong side becomes NaN, and NaN never prunes.
+
+On CPUs with AVX-512 the kernels instead round add, sub, mul and sqrt bounds directly toward -inf / +inf
+with the instructions' embedded rounding (``implc.compile(..., rounding="directed")``, the default there):
+each bound is then the nearest double outward of the exact result, never further out than the widening
+would put it; libm results are still widened by ``LIBM`` (and ``pow`` by ``POWF``).
+Both schemes assume the default floating-point environment (no flush-to-zero of subnormals).
 """
 
 import math

@@ -25,7 +25,7 @@ from .codegen.kernels import (
 from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape
-from .jit import NativeModule
+from .jit import NativeModule, host_has_avx512
 from .lower import lower
 from .runtime import Runtime
 
@@ -33,6 +33,7 @@ _P = ctypes.c_void_p
 _N = ctypes.c_int64
 
 DEFAULT_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
+ROUNDINGS = ("auto", "directed", "widen")
 
 
 def check_bounds(bounds) -> tuple[tuple[float, float], ...]:
@@ -67,15 +68,16 @@ def _rows(name: str, array) -> np.ndarray:
 class Surface:
     """A compiled implicit surface F(x, y, z) = 0 (F < 0 inside) over a bounding box."""
 
-    def __init__(self, expr: sympy.Expr, bounds, tape: Tape, vector_width: int = WIDTH):
+    def __init__(self, expr: sympy.Expr, bounds, tape: Tape, vector_width: int = WIDTH, directed: bool = False):
         self.expr = expr
         self.bounds = bounds
         self.tape = tape
         self.width = vector_width
+        self.directed = directed  # interval arithmetic rounded by AVX-512 instructions rather than widened
         self.gradient_tape = with_gradient(tape)
-        self._key = f"w{self.width}" + self.tape.fingerprint() + self.gradient_tape.fingerprint()
-        self.native = NativeModule(lambda: build_module(self.tape, self.gradient_tape, width=self.width),
-                                   source_key=self._key)
+        self._key = (f"w{self.width}{'d' if directed else ''}" + self.tape.fingerprint()
+                     + self.gradient_tape.fingerprint())
+        self.native = NativeModule(self._build, source_key=self._key)
         self._point = self.native.function("implc_point", [_P, _P, _N])
         self._gradient = self.native.function("implc_gradient", [_P, _P, _P, _N])
         self._interval = self.native.function("implc_interval", [_P, _P, _P, _P, _N, _P, _P])
@@ -95,7 +97,8 @@ class Surface:
         """The mean-value interval kernel, compiled (or loaded from the cache) on first use."""
         if self._interval_mvf is None:
             self.mean_value_native = NativeModule(
-                lambda: build_mean_value_module(self.tape, self.gradient_tape, width=self.width),
+                lambda: build_mean_value_module(self.tape, self.gradient_tape, width=self.width,
+                                                directed=self.directed),
                 source_key="mvf" + self._key)
             self._interval_mvf = self.mean_value_native.function(MEAN_VALUE_KERNEL, [_P, _P, _P, _P, _N, _P, _P])
         return self._interval_mvf
@@ -114,10 +117,13 @@ class Surface:
         """The value tape, printed."""
         return str(self.tape)
 
+    def _build(self) -> str:
+        return build_module(self.tape, self.gradient_tape, width=self.width, directed=self.directed)
+
     @property
     def llvm_ir(self) -> str:
         """The LLVM IR of the kernels as generated (before optimisation)."""
-        return build_module(self.tape, self.gradient_tape, width=self.width)
+        return self._build()
 
     def __repr__(self) -> str:
         return f"Surface({self.expr}, bounds={self.bounds}, {len(self.tape)} ops)"
@@ -173,11 +179,14 @@ class Surface:
         return f_lo, f_hi
 
 
-def compile(expr, bounds=DEFAULT_BOUNDS, *, vector_width: int = WIDTH) -> Surface:
+def compile(expr, bounds=DEFAULT_BOUNDS, *, vector_width: int = WIDTH, rounding: str = "auto") -> Surface:
     """Compile the surface ``expr = 0`` (a SymPy expression in x, y, z, r, theta, phi) over ``bounds``.
 
     ``vector_width``: lanes per kernel step (8 by default: an octant's children at once; 1 for scalar
-    code, to measure what vectors bring).
+    code, to measure what vectors bring). ``rounding``: how interval bounds are rounded outward:
+    "directed" (each add, sub, mul and sqrt rounded toward the bound by the instruction; needs AVX-512),
+    "widen" (round to nearest, then move outward by a relative ulp or more: any CPU) or "auto" (directed
+    where the host has AVX-512). Both are sound; directed is faster and a few ulps tighter.
     """
     if not isinstance(expr, sympy.Basic):
         raise TypeError(f"implc.compile expects a SymPy expression, got {type(expr).__name__}")
@@ -189,4 +198,9 @@ def compile(expr, bounds=DEFAULT_BOUNDS, *, vector_width: int = WIDTH) -> Surfac
     checked = check_bounds(bounds)
     if vector_width not in WIDTHS:
         raise CompileError(f"vector_width must be one of {WIDTHS}, got {vector_width!r}")
-    return Surface(expr, checked, lower(expr), vector_width)
+    if rounding not in ROUNDINGS:
+        raise CompileError(f"rounding must be one of {', '.join(ROUNDINGS)}, got {rounding!r}")
+    if rounding == "directed" and not host_has_avx512():
+        raise CompileError("rounding='directed' needs a CPU with AVX-512F; this one has none (use 'auto' or 'widen')")
+    directed = rounding == "directed" or (rounding == "auto" and host_has_avx512())
+    return Surface(expr, checked, lower(expr), vector_width, directed)

@@ -1,5 +1,9 @@
 """Every op through every evaluator: the numpy reference and the compiled kernels agree, intervals enclose
-high-precision true values over adversarial boxes, and gradients match differences and the reference."""
+high-precision true values over adversarial boxes, and gradients match differences and the reference.
+Kernels compile with the host's default rounding (directed where the CPU has AVX-512); the comparisons
+with the reference, which widens, use kernels compiled to widen as well."""
+
+import zlib
 
 import numpy as np
 import pytest
@@ -31,6 +35,7 @@ from implc import ir, reference
 from implc.codegen.interval import IntervalEmitter
 from implc.gradient import DERIVATIVE_RULES
 from implc.interval import RULES
+from implc.jit import host_has_avx512
 from implc.symbols import phi, r, theta, x, y, z
 
 from .truth import TrueValues, adversarial_boxes, assert_encloses
@@ -102,17 +107,52 @@ def surfaces():
     return {name: implc.compile(expr) for name, expr in OP_CASES.items()}
 
 
+@pytest.fixture(scope="module")
+def widened():
+    """The same surfaces with round-to-nearest-then-widen interval arithmetic, as the reference does."""
+    return {name: implc.compile(expr, rounding="widen") for name, expr in OP_CASES.items()}
+
+
+def seed(name: str) -> int:
+    return zlib.crc32(name.encode())  # stable across runs, unlike hash()
+
+
 @pytest.mark.parametrize("name", sorted(OP_CASES))
 def test_interval_encloses_true_values(name, surfaces):
-    rng = np.random.default_rng(abs(hash(name)) % 2**32)
+    rng = np.random.default_rng(seed(name))
     lo, hi = adversarial_boxes(rng, 60)
     assert_encloses(surfaces[name], OP_CASES[name], lo, hi, rng)
 
 
 @pytest.mark.parametrize("name", sorted(OP_CASES))
-def test_mean_value_form_encloses_and_never_loosens(name, surfaces):
+def test_widened_intervals_enclose_true_values(name, widened):
+    rng = np.random.default_rng(seed(name) + 2)
+    lo, hi = adversarial_boxes(rng, 40)
+    assert_encloses(widened[name], OP_CASES[name], lo, hi, rng)
+
+
+@pytest.mark.parametrize("name", sorted(OP_CASES))
+def test_directed_rounding_is_never_looser_than_widening(name, surfaces, widened):
+    """Each directed bound is the nearest double outward of its operation's exact result; widening moves
+    at least as far, and every rule is monotone in its operands' bounds, so the enclosures nest."""
+    if not host_has_avx512():
+        with pytest.raises(implc.CompileError, match="AVX-512"):
+            implc.compile(OP_CASES[name], rounding="directed")
+        return
+    directed = implc.compile(OP_CASES[name], rounding="directed")
+    rng = np.random.default_rng(seed(name) + 3)
+    lo, hi = adversarial_boxes(rng, 200)
+    for mean_value in (False, True):
+        d_lo, d_hi = directed.interval(lo, hi, mean_value)
+        w_lo, w_hi = widened[name].interval(lo, hi, mean_value)
+        assert np.all(d_lo >= w_lo) and np.all(d_hi <= w_hi), f"mean_value={mean_value}"
+    assert_encloses(directed, OP_CASES[name], lo[:40], hi[:40], rng)
+
+
+@pytest.mark.parametrize("name", sorted(OP_CASES))
+def test_mean_value_form_encloses_and_never_loosens(name, surfaces, widened):
     s = surfaces[name]
-    rng = np.random.default_rng(abs(hash(name)) % 2**32 + 1)
+    rng = np.random.default_rng(seed(name) + 1)
     lo, hi = adversarial_boxes(rng, 60)
     small = rng.random(60) < 0.5  # the form pays on small boxes: shrink half of them
     hi[small] = lo[small] + (hi[small] - lo[small]) * 1e-3
@@ -121,6 +161,7 @@ def test_mean_value_form_encloses_and_never_loosens(name, surfaces):
     m_lo, m_hi = s.interval(lo, hi, mean_value=True)
     assert np.all(m_lo >= n_lo) and np.all(m_hi <= n_hi)
     r_lo, r_hi = reference.eval_interval_mean_value(s.tape, lo, hi)
+    m_lo, m_hi = widened[name].interval(lo, hi, mean_value=True)
     np.testing.assert_allclose(m_lo, r_lo, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(m_hi, r_hi, rtol=1e-12, atol=1e-12)
 
@@ -147,8 +188,8 @@ def test_jumps_never_use_the_mean_value_form():
 
 
 @pytest.mark.parametrize("name", sorted(OP_CASES))
-def test_compiled_matches_reference(name, surfaces):
-    s = surfaces[name]
+def test_compiled_matches_reference(name, widened):
+    s = widened[name]
     rng = np.random.default_rng(7)
     pts = rng.uniform(-1.5, 1.5, (203, 3))
     np.testing.assert_allclose(s.eval(pts), reference.eval_point(s.tape, pts)[0], rtol=1e-12, atol=1e-12)

@@ -123,12 +123,13 @@ def _parent_mask(builder, live_in, block, width):
     return builder.load(ptr)
 
 
-def _interval_kernel(module, name, width, enclose):
+def _interval_kernel(module, name, width, directed, enclose):
     """Emit the batched kernel ``name(lo, hi, out_lo, out_hi, n, live_in, live_out)`` over ``enclose``."""
     fn, b, blocks = _kernel(module, name, width)
     lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
     with for_range(b, blocks) as i:
-        f_lo, f_hi, masks = enclose(VectorBuilder(b, width), _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width),
+        vb = VectorBuilder(b, width, directed)
+        f_lo, f_hi, masks = enclose(vb, _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width),
                                     _parent_mask(b, live_in, i, width))
         _store(b, out_lo, i, f_lo, width)
         _store(b, out_hi, i, f_hi, width)
@@ -136,13 +137,13 @@ def _interval_kernel(module, name, width, enclose):
     b.ret_void()
 
 
-def _octant_kernel(module, name, width, enclose):
+def _octant_kernel(module, name, width, directed, enclose):
     """Emit ``name`` (see the module docstring); ``enclose(vb, lo, hi, live_in) -> (lo, hi, masks)``."""
     i32 = ir.IntType(32)
     fn = ir.Function(module, ir.FunctionType(i32, [_PTR, ir.PointerType(i32), I64, I64, _PI64]), name=name)
     geom, cell, level, live_in, live_out = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
-    vb = VectorBuilder(b, width)
+    vb = VectorBuilder(b, width, directed)
     ivec = ir.VectorType(i32, width)
 
     def read(index):
@@ -184,8 +185,10 @@ def _natural(value_tape, plan):
     return enclose
 
 
-def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", width: int = WIDTH) -> str:
-    """The LLVM IR text of the point, gradient and interval kernels for a surface."""
+def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", width: int = WIDTH,
+                 directed: bool = False) -> str:
+    """The LLVM IR text of the point, gradient and interval kernels for a surface; ``directed``: round
+    interval arithmetic with AVX-512 embedded rounding (see :class:`~implc.codegen.vector.VectorBuilder`)."""
     module = ir.Module(name=name)
 
     fn, b, blocks = _kernel(module, "implc_point", width)
@@ -218,19 +221,19 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     b.ret_void()
 
     enclose = _natural(value_tape, plan)
-    _interval_kernel(module, "implc_interval", width, enclose)
-    _octant_kernel(module, OCTANT_KERNEL, width, enclose)
+    _interval_kernel(module, "implc_interval", width, directed, enclose)
+    _octant_kernel(module, OCTANT_KERNEL, width, directed, enclose)
     return str(module)
 
 
 def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface_mvf",
-                            width: int = WIDTH) -> str:
+                            width: int = WIDTH, directed: bool = False) -> str:
     """The LLVM IR of the mean-value interval kernel, a module of its own: it is about three times the
     size of the others together, so it is compiled only when first used."""
     module = ir.Module(name=name)
 
     def enclose(vb, lo, hi, live_in):  # prunes nothing: the children keep their parent's mask
         return (*emit_mean_value(vb, value_tape, gradient_tape, lo, hi), broadcast(vb.b, live_in, vb.width))
-    _interval_kernel(module, MEAN_VALUE_KERNEL, width, enclose)
-    _octant_kernel(module, MEAN_VALUE_OCTANT_KERNEL, width, enclose)
+    _interval_kernel(module, MEAN_VALUE_KERNEL, width, directed, enclose)
+    _octant_kernel(module, MEAN_VALUE_OCTANT_KERNEL, width, directed, enclose)
     return str(module)

@@ -1,5 +1,6 @@
 """Vector arithmetic on ``<W x double>`` for the emitters: splats, NaN-propagating min/max, selects,
-element-wise libm calls and the outward widening of :mod:`implc.rounding`."""
+element-wise libm calls and outward rounding: the widening of :mod:`implc.rounding`, or, where the host
+has AVX-512, arithmetic rounded directly downward or upward by the instruction itself."""
 
 from __future__ import annotations
 
@@ -7,11 +8,14 @@ import math
 
 from llvmlite import ir
 
-from ..rounding import TINY
+from ..rounding import ARITH, TINY
 from .control import volatile_load
 
 DOUBLE = ir.DoubleType()
 I64 = ir.IntType(64)
+
+ROUND_DOWN, ROUND_UP = 8 | 1, 8 | 2
+"""AVX-512 embedded rounding immediates: toward -inf / +inf, exceptions suppressed (``_MM_FROUND_*``)."""
 
 
 def broadcast(builder: ir.IRBuilder, value, width: int):
@@ -25,9 +29,12 @@ def broadcast(builder: ir.IRBuilder, value, width: int):
 class VectorBuilder:
     """Wraps an IRBuilder with the vector operations the point and interval emitters need."""
 
-    def __init__(self, builder: ir.IRBuilder, width: int):
+    def __init__(self, builder: ir.IRBuilder, width: int, directed: bool = False):
+        """``directed``: round add, sub, mul, div and sqrt bounds with AVX-512 embedded rounding (the host
+        must have AVX-512F); otherwise round to nearest and widen by :data:`implc.rounding.ARITH`."""
         self.b = builder
         self.width = width
+        self.directed = directed
         self.vtype = ir.VectorType(DOUBLE, width)
         self.module = builder.module
 
@@ -121,6 +128,57 @@ class VectorBuilder:
         return out
 
     # -- outward rounding (see implc.rounding) -------------------------------------------------------
+    def add_down(self, a, b):
+        return self._rounded("add", [a, b], up=False)
+
+    def add_up(self, a, b):
+        return self._rounded("add", [a, b], up=True)
+
+    def sub_down(self, a, b):
+        return self._rounded("sub", [a, b], up=False)
+
+    def sub_up(self, a, b):
+        return self._rounded("sub", [a, b], up=True)
+
+    def mul_down(self, a, b):
+        return self._rounded("mul", [a, b], up=False)
+
+    def mul_up(self, a, b):
+        return self._rounded("mul", [a, b], up=True)
+
+    def sqrt_down(self, a):
+        return self._rounded("sqrt", [a], up=False)
+
+    def sqrt_up(self, a):
+        return self._rounded("sqrt", [a], up=True)
+
+    def _rounded(self, op: str, args, up: bool):
+        """``op`` on ``args`` with a result at or below (``up``: at or above) the exact one."""
+        if not self.directed:
+            nearest = getattr(self, op)(*args)
+            return self.widen_up(nearest, ARITH) if up else self.widen_down(nearest, ARITH)
+        mode = ir.Constant(ir.IntType(32), ROUND_UP if up else ROUND_DOWN)
+        i32 = ir.IntType(32)
+        if self.width == 1:  # the scalar (sd) forms, on lane 0 of an xmm register
+            v2 = ir.VectorType(DOUBLE, 2)
+            wide = [self.b.shuffle_vector(a, ir.Constant(a.type, ir.Undefined), ir.Constant(ir.VectorType(i32, 2), [0, 1]))
+                    for a in args]
+            name = "llvm.x86.avx512.mask.sqrt.sd" if op == "sqrt" else f"llvm.x86.avx512.mask.{op}.sd.round"
+            fn = self._function(name, v2, [v2, v2, v2, ir.IntType(8), i32])
+            operands = [wide[0], wide[0]] if op == "sqrt" else wide
+            out = self.b.call(fn, [*operands, ir.Constant(v2, ir.Undefined), ir.Constant(ir.IntType(8), -1), mode])
+            return self.b.shuffle_vector(out, ir.Constant(v2, ir.Undefined), ir.Constant(ir.VectorType(i32, 1), [0]))
+        v8 = ir.VectorType(DOUBLE, 8)
+        if self.width < 8:  # the 512-bit forms on the low lanes (the others are don't-care)
+            pad = ir.Constant(ir.VectorType(i32, 8), list(range(self.width)) + [self.width] * (8 - self.width))
+            args = [self.b.shuffle_vector(a, ir.Constant(a.type, ir.Undefined), pad) for a in args]
+        fn = self._function(f"llvm.x86.avx512.{op}.pd.512", v8, [v8] * len(args) + [i32])
+        out = self.b.call(fn, [*args, mode])
+        if self.width < 8:
+            out = self.b.shuffle_vector(out, ir.Constant(v8, ir.Undefined),
+                                        ir.Constant(ir.VectorType(i32, self.width), list(range(self.width))))
+        return out
+
     def widen_down(self, v, c: float):
         return self.sub(self.sub(v, self.mul(self.fabs(v), self.splat(c))), self.splat(TINY))
 
