@@ -111,7 +111,7 @@ def _check_depth(depth):
 
 
 def _estimate_voxels(planned_cells, plan_level, depth):
-    """Surface cells grow about 4x per level; coarse levels over-include, so this errs high."""
+    """Surface cells grow about 4x per level (within about ±50% on the scenes from the plan's level)."""
     return planned_cells * 4 ** (depth - plan_level)
 
 
@@ -160,10 +160,11 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
 
     t0 = time.perf_counter()
     backend.begin(depth, surface.bounds)
-    expected = min(estimate, max_voxels) // 2
+    # reserve generously: the pages of a reserved array that stay untouched cost nothing, a growth costs a copy
+    capacity = min(2 * estimate, max_voxels)
     if hasattr(backend, "reserve"):
-        backend.reserve(expected)
-    collect = _Collect(backend, expected)
+        backend.reserve(capacity)
+    collect = _Collect(backend, capacity)
     bar = None
     if progress:
         from tqdm import tqdm

@@ -11,7 +11,8 @@
   in the voxels' cells where their masks are given), with central differences and then a fixed
   direction as fallbacks (never NaN, never zero).
 - ``implc_octree_insert``: Fig. 2, insertion of Morton-ordered voxels into an index-based octree that
-  starts from the previous voxel's path and ascends only to the common parent.
+  starts from the previous voxel's path and ascends only to the common parent; it clears each node it
+  creates, so the node array may be reserved uninitialised.
 - ``implc_octree_traverse``: Fig. 6, depth-first traversal yielding the nodes of one level in order.
 - ``implc_splat``: z-buffered square splats for the point renderer (nearest point wins each pixel).
 """
@@ -296,52 +297,71 @@ def _child_index(b, xyz, bit):
     return b.zext(slot, I64)
 
 
+def _copy(b, src, src_at, dst, dst_at, count):
+    with for_range(b, const(I64, count)) as i:
+        _store(b, _load(b, src, b.add(i, const(I64, src_at))), dst, b.add(i, const(I64, dst_at)))
+
+
 def _octree_insert(module):
     fn, b = _function(module, "implc_octree_insert")
     nodes, node_cap, state, coords, n, first_index = fn.args
+    for arg in (nodes, state, coords):
+        arg.add_attribute("noalias")
     ctlz = module.globals.get("llvm.ctlz.i32") or ir.Function(
         module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.ctlz.i32")
     depth = _load(b, state, DEPTH)
     depth32 = b.trunc(depth, I32)
+    # the state lives in locals (registers, a stack-resident path) during the call, written back at the end
     node_count = Local(b, I64, _load(b, state, NODE_COUNT), "node_count")
+    started = Local(b, ir.IntType(1), b.icmp_signed("!=", _load(b, state, STARTED), const(I64, 0)), "started")
+    prev = [Local(b, I32, b.trunc(_load(b, state, PREV + a), I32), f"prev{a}") for a in range(3)]
+    levels = MAX_DEPTH + 2
+    path = local_array(b, I64, levels, "path")
+    counts = local_array(b, I64, levels, "counts")
+    _copy(b, state, PATH, path, 0, levels)
+    _copy(b, state, LEVEL_COUNTS, counts, 0, levels)
     inserted = Local(b, I64, 0, "inserted")
     with while_true(b) as loop:
         v = inserted.get()
         loop.break_if(b.icmp_signed(">=", v, n))
         xyz = [_load(b, coords, b.add(b.mul(v, const(I64, 3)), const(I64, a))) for a in range(3)]
-        prev = [b.trunc(_load(b, state, PREV + a), I32) for a in range(3)]
-        diff = b.or_(b.or_(b.xor(xyz[0], prev[0]), b.xor(xyz[1], prev[1])), b.xor(xyz[2], prev[2]))
-        started = b.icmp_signed("!=", _load(b, state, STARTED), const(I64, 0))
+        diff = b.or_(b.or_(b.xor(xyz[0], prev[0].get()), b.xor(xyz[1], prev[1].get())), b.xor(xyz[2], prev[2].get()))
         # the deepest level whose node is shared with the previous voxel (Fig. 2's ascent)
         top_bit = b.sub(const(I32, 31), b.call(ctlz, [diff, const(ir.IntType(1), 0)]))
         shared = b.select(b.icmp_signed("==", diff, const(I32, 0)), b.sub(depth32, const(I32, 1)),
                           b.sub(b.sub(depth32, const(I32, 1)), top_bit))
-        start = b.zext(b.select(started, shared, const(I32, 0)), I64)
+        start = b.zext(b.select(started.get(), shared, const(I32, 0)), I64)
         # room for the nodes this voxel may create (levels start+1 .. depth-1)
         needed = b.sub(b.sub(depth, const(I64, 1)), start)
         loop.break_if(b.icmp_signed(">", b.add(node_count.get(), needed), node_cap))
         with for_range(b, b.sub(depth, const(I64, 1)), start=start) as level:  # descend, creating nodes
             bit = b.trunc(b.sub(b.sub(depth, const(I64, 1)), level), I32)
-            slot = b.add(b.mul(b.sext(_load(b, state, b.add(level, const(I64, PATH))), I64), const(I64, 8)),
-                         _child_index(b, xyz, bit))
+            slot = b.add(b.mul(_load(b, path, level), const(I64, 8)), _child_index(b, xyz, bit))
             entry = Local(b, I32, _load(b, nodes, slot))
             with if_(b, b.icmp_signed("==", entry.get(), const(I32, 0))):
                 fresh = node_count.get()
+                row = b.bitcast(_at(b, nodes, b.mul(fresh, const(I64, 8))), ir.PointerType(ir.VectorType(I32, 8)))
+                b.store(ir.Constant(ir.VectorType(I32, 8), [0] * 8), row, align=4)  # rows arrive uninitialised
                 entry.set(b.trunc(fresh, I32))
                 _store(b, entry.get(), nodes, slot)
                 node_count.set(b.add(fresh, const(I64, 1)))
-                _bump(b, state, b.add(level, const(I64, LEVEL_COUNTS + 1)))
-            _store(b, b.sext(entry.get(), I64), state, b.add(level, const(I64, PATH + 1)))
-        leaf_parent = b.sext(_load(b, state, b.add(b.sub(depth, const(I64, 1)), const(I64, PATH))), I64)
+                _bump(b, counts, b.add(level, const(I64, 1)))
+            _store(b, b.sext(entry.get(), I64), path, b.add(level, const(I64, 1)))
+        leaf_parent = _load(b, path, b.sub(depth, const(I64, 1)))
         slot = b.add(b.mul(leaf_parent, const(I64, 8)), _child_index(b, xyz, const(I32, 0)))
         with if_(b, b.icmp_signed("==", _load(b, nodes, slot), const(I32, 0))):
-            _bump(b, state, b.add(depth, const(I64, LEVEL_COUNTS)))
+            _bump(b, counts, depth)
         _store(b, b.trunc(b.add(b.add(first_index, v), const(I64, 1)), I32), nodes, slot)
         for a in range(3):
-            _store(b, b.zext(xyz[a], I64), state, PREV + a)
-        _store(b, const(I64, 1), state, STARTED)
+            prev[a].set(xyz[a])
+        started.set(const(ir.IntType(1), 1))
         inserted.set(b.add(v, const(I64, 1)))
     _store(b, node_count.get(), state, NODE_COUNT)
+    _store(b, b.zext(started.get(), I64), state, STARTED)
+    for a in range(3):
+        _store(b, b.zext(prev[a].get(), I64), state, PREV + a)
+    _copy(b, path, 0, state, PATH, levels)
+    _copy(b, counts, 0, state, LEVEL_COUNTS, levels)
     b.ret(inserted.get())
 
 

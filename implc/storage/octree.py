@@ -113,9 +113,12 @@ class OctreeBuilder:
         self._grow_to(int(voxels * 0.4))
 
     def _grow_to(self, rows: int):
+        """Room for ``rows`` nodes; rows past the node count are left uninitialised (the native insertion
+        clears each node it creates), so that rows reserved but never used cost nothing."""
         if rows > len(self.nodes):
-            grown = np.zeros((rows, 8), dtype=np.int32)
-            grown[: len(self.nodes)] = self.nodes
+            grown = np.empty((rows, 8), dtype=np.int32)
+            used = int(self.state[NODE_COUNT])
+            grown[:used] = self.nodes[:used]
             self.nodes = grown
 
     def add(self, coords, normals):
