@@ -26,7 +26,8 @@ from .codegen.runtime import GEOMETRY_DOUBLES, MAX_DEPTH, STACK_ENTRIES
 from .runtime import Runtime
 
 OUTPUT_CHUNK = 1 << 16
-"""Voxels one native call writes before returning to drain its buffer."""
+"""Free rows a task's result has before each native call (it returns when they are full, and the
+result grows)."""
 
 
 @dataclass
@@ -79,25 +80,29 @@ def geometry(bounds, depth: int) -> np.ndarray:
 
 
 class _TaskResult:
-    """Reusable arrays for one finished task's voxels: pooled, so that steady state allocates nothing
-    (fresh pages are costly, and page faults from several threads contend in the kernel)."""
+    """Reusable arrays for one finished task's voxels, written by the native subdivider in place: pooled,
+    so that steady state allocates nothing (fresh pages are costly, and page faults from several threads
+    contend in the kernel)."""
 
     def __init__(self):
-        self.coords = np.empty((OUTPUT_CHUNK, 3), dtype=np.uint32)
-        self.masks = np.empty(OUTPUT_CHUNK, dtype=np.int64)  # each voxel's live-term mask
-        self.normals = np.empty((OUTPUT_CHUNK, 3), dtype=np.float32)
         self.count = 0
+        self._allocate(OUTPUT_CHUNK)
 
-    def append(self, coords, masks):
-        end = self.count + len(coords)
-        if end > len(self.coords):
-            size = max(end, 2 * len(self.coords))
-            self.coords = np.resize(self.coords, (size, 3))
-            self.masks = np.resize(self.masks, size)
-            self.normals = np.empty((size, 3), dtype=np.float32)
-        self.coords[self.count:end] = coords
-        self.masks[self.count:end] = masks
-        self.count = end
+    def _allocate(self, size):
+        self.coords = np.empty((size, 3), dtype=np.uint32)
+        self.masks = np.empty(size, dtype=np.int64)  # each voxel's live-term mask
+        self.normals = np.empty((size, 3), dtype=np.float32)
+        # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
+        self.coords_ptr, self.masks_ptr = self.coords.ctypes.data, self.masks.ctypes.data
+
+    def make_room(self, free):
+        """At least ``free`` unused rows past ``count`` (doubling, keeping the rows written so far)."""
+        if self.count + free > len(self.coords):
+            coords, masks = self.coords[: self.count], self.masks[: self.count]
+            self._allocate(max(self.count + free, 2 * len(self.coords)))
+            self.coords[: self.count] = coords
+            self.masks[: self.count] = masks
+        return len(self.coords) - self.count
 
 
 class _Worker:
@@ -107,15 +112,11 @@ class _Worker:
         self.stack = np.zeros(4 * STACK_ENTRIES, dtype=np.int32)
         self.masks = np.full(STACK_ENTRIES, -1, dtype=np.int64)  # live-term mask of each stack entry
         self.state = np.zeros(2, dtype=np.int64)
-        self.out = np.empty((OUTPUT_CHUNK, 3), dtype=np.uint32)
-        self.out_masks = np.empty(OUTPUT_CHUNK, dtype=np.int64)
         self.stats = np.zeros(MAX_DEPTH + 2, dtype=np.int64)
         self.depth = depth
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
         self.stack_ptr, self.state_ptr = self.stack.ctypes.data, self.state.ctypes.data
-        self.masks_ptr = self.masks.ctypes.data
-        self.out_ptr, self.stats_ptr = self.out.ctypes.data, self.stats.ctypes.data
-        self.out_masks_ptr = self.out_masks.ctypes.data
+        self.masks_ptr, self.stats_ptr = self.masks.ctypes.data, self.stats.ctypes.data
         self.busy = 0.0
         self.normals = 0.0
         self.tasks = 0
@@ -154,11 +155,12 @@ class Subdivider:
         w.masks[0] = -1  # every term live at a task's root
         w.state[:] = (1, depth)
         while True:
+            room = result.make_room(OUTPUT_CHUNK)
             n = self.runtime.subdivide(self.box, self.fine_box, self.fine_level, self.prune, self.refine,
-                                       self.geom_ptr, w.stack_ptr, w.masks_ptr, w.state_ptr, w.out_ptr,
-                                       w.out_masks_ptr, OUTPUT_CHUNK, w.stats_ptr, self.cancel_ptr)
-            if n:
-                result.append(w.out[:n], w.out_masks[:n])
+                                       self.geom_ptr, w.stack_ptr, w.masks_ptr, w.state_ptr,
+                                       result.coords_ptr + 12 * result.count, result.masks_ptr + 8 * result.count,
+                                       room, w.stats_ptr, self.cancel_ptr)
+            result.count += n
             if w.state[0] == 0 or self.cancel[0]:
                 break
 

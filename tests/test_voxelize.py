@@ -144,6 +144,20 @@ def test_worker_counts_agree_and_order_is_morton(name, compiled):
     assert one.stats.kept_per_level == two.stats.kept_per_level
 
 
+@pytest.mark.parametrize("options", [{}, {"refine_leaves": True}])
+def test_tasks_larger_than_a_native_call_resume_and_grow(monkeypatch, compiled, options):
+    """With room for only a few voxels per native call, tasks resume from their stack many times and their
+    result arrays grow: the voxels must be the same."""
+    from implc import subdivide
+    s = compiled["paper_sin4_sin8"]
+    expected = implc.voxelize(s, 7, workers=2, **options)
+    monkeypatch.setattr(subdivide, "OUTPUT_CHUNK", 16)
+    chunked = implc.voxelize(s, 7, workers=2, **options)
+    np.testing.assert_array_equal(chunked.coords, expected.coords)
+    np.testing.assert_array_equal(chunked.normals, expected.normals)
+    assert chunked.stats.kept_per_level == expected.stats.kept_per_level
+
+
 def test_backends_hold_the_same_voxels(compiled):
     s = compiled["paper_sin3_sin4"]
     depth = 6

@@ -196,7 +196,7 @@ def _normals(module):
     last = b.sub(n, const(I64, 1))
     blocks = b.sdiv(b.add(n, const(I64, 7)), const(I64, 8))
     has_masks = b.icmp_unsigned("!=", masks, ir.Constant(PI64, None))
-    masks = b.select(has_masks, masks, local_array(b, I64, 1, "no_masks"))  # read at index 0 only
+    masks = b.select(has_masks, masks, local_array(b, I64, 8, "no_masks"))  # read, unused, at 0..7
 
     def usable(n2):
         return b.and_(b.fcmp_ordered(">", n2, zero), b.fcmp_ordered("<", n2, inf))
@@ -204,17 +204,38 @@ def _normals(module):
     def norm2(v):
         return b.fadd(b.fadd(b.fmul(v[0], v[0]), b.fmul(v[1], v[1])), b.fmul(v[2], v[2]))
 
+    v24 = ir.VectorType(DOUBLE, 24)
+    origin24 = ir.Constant(v24, ir.Undefined)
+    h24 = ir.Constant(v24, ir.Undefined)
+    for k in range(24):
+        origin24 = b.insert_element(origin24, origin[k % 3], const(I32, k))
+        h24 = b.insert_element(h24, h[k % 3], const(I32, k))
+    or_reduce = module.globals.get("llvm.vector.reduce.or.v8i64") or ir.Function(
+        module, ir.FunctionType(I64, [ir.VectorType(I64, 8)]), name="llvm.vector.reduce.or.v8i64")
+    live = Local(b, I64, 0, "live")  # the terms live in any of a block's eight cells
     with for_range(b, blocks) as block:
-        live = const(I64, 0)  # the terms live in any of the eight cells
-        for j in range(8):  # voxel centres; lanes past the end repeat the last voxel
-            idx = b.select(b.icmp_signed(">", b.add(b.mul(block, const(I64, 8)), const(I64, j)), last), last,
-                           b.add(b.mul(block, const(I64, 8)), const(I64, j)))
-            for a in range(3):
-                c = b.uitofp(_load(b, coords, b.add(b.mul(idx, const(I64, 3)), const(I64, a))), DOUBLE)
-                centre = b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 0.5)), h[a]))
-                _store(b, centre, pts, 3 * j + a)
-            live = b.or_(live, _load(b, masks, b.select(has_masks, idx, const(I64, 0))))
-        b.call(grad_fn, [pts, values, grad, const(I64, 8), b.select(has_masks, live, const(I64, -1))])
+        full = b.icmp_signed("<=", b.mul(b.add(block, const(I64, 1)), const(I64, 8)), n)
+        with b.if_else(full) as (whole, tail):
+            with whole:  # eight voxels: their 24 coordinates and 8 masks as vectors
+                cells = b.load(b.bitcast(_at(b, coords, b.mul(block, const(I64, 24))),
+                                         ir.PointerType(ir.VectorType(I32, 24))), align=4)
+                centres = b.fadd(origin24, b.fmul(b.fadd(b.uitofp(cells, v24), ir.Constant(v24, [0.5] * 24)), h24))
+                b.store(centres, b.bitcast(pts, ir.PointerType(v24)), align=8)
+                row = b.bitcast(_at(b, masks, b.select(has_masks, b.mul(block, const(I64, 8)), const(I64, 0))),
+                                ir.PointerType(ir.VectorType(I64, 8)))
+                live.set(b.select(has_masks, b.call(or_reduce, [b.load(row, align=8)]), const(I64, -1)))
+            with tail:  # lanes past the end repeat the last voxel
+                union = const(I64, 0)
+                for j in range(8):
+                    idx = b.select(b.icmp_signed(">", b.add(b.mul(block, const(I64, 8)), const(I64, j)), last), last,
+                                   b.add(b.mul(block, const(I64, 8)), const(I64, j)))
+                    for a in range(3):
+                        c = b.uitofp(_load(b, coords, b.add(b.mul(idx, const(I64, 3)), const(I64, a))), DOUBLE)
+                        centre = b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 0.5)), h[a]))
+                        _store(b, centre, pts, 3 * j + a)
+                    union = b.or_(union, _load(b, masks, b.select(has_masks, idx, const(I64, 0))))
+                live.set(b.select(has_masks, union, const(I64, -1)))
+        b.call(grad_fn, [pts, values, grad, const(I64, 8), live.get()])
         # the common case in vector registers: every gradient usable, a full block of 8
         v8 = ir.VectorType(DOUBLE, 8)
         rows = b.load(b.bitcast(grad, ir.PointerType(ir.VectorType(DOUBLE, 24))), align=8)
