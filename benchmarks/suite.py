@@ -121,7 +121,7 @@ def table1(args, out):
         t0 = time.perf_counter()
         s = compiled(name)
         compile_s = time.perf_counter() - t0
-        implc.voxelize(s, min(args.depth, 6))  # warm the runtime
+        implc.voxelize(s, args.depth)  # warm: the runtime, and memory (fresh pages are slow on VMs)
         t1 = None
         for w in workers:
             seconds, v = median_time(lambda: implc.voxelize(s, args.depth, workers=w), args.repeats)
