@@ -30,7 +30,7 @@ class VectorBuilder:
     """Wraps an IRBuilder with the vector operations the point and interval emitters need."""
 
     def __init__(self, builder: ir.IRBuilder, width: int, directed: bool = False):
-        """``directed``: round add, sub, mul, div and sqrt bounds with AVX-512 embedded rounding (the host
+        """``directed``: round add, sub, mul and sqrt bounds with AVX-512 embedded rounding (the host
         must have AVX-512F); otherwise round to nearest and widen by :data:`implc.rounding.ARITH`."""
         self.b = builder
         self.width = width
