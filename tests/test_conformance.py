@@ -176,6 +176,22 @@ def test_mean_value_form_is_tighter_on_small_boxes():
     assert np.mean(m_hi - m_lo) < 0.9 * np.mean(n_hi - n_lo)
 
 
+@pytest.mark.parametrize("name", ["atan2", "atan2_wrapped", "spherical"])
+def test_atan2_corners_match_the_reference_on_every_kind_of_box(name, widened):
+    """The kernels call atan2 at the two corners where it is extreme; the reference evaluates all four.
+    Boxes with every placement of their edges: on, across and beside both axes, tiny, huge, infinite."""
+    edges = [-np.inf, -3.0, -1.0, -1e-300, -0.0, 0.0, 1e-300, 0.5, 2.0, np.inf]
+    pairs = [(a, b) for a in edges for b in edges if a <= b]
+    xs, ys = np.array(pairs * len(pairs)), np.repeat(np.array(pairs), len(pairs), axis=0)
+    lo = np.column_stack([xs[:, 0], ys[:, 0], np.full(len(xs), -0.5)])
+    hi = np.column_stack([xs[:, 1], ys[:, 1], np.full(len(xs), 0.25)])
+    s = widened[name]
+    f_lo, f_hi = s.interval(lo, hi)
+    r_lo, r_hi = reference.eval_interval(s.tape, lo, hi)
+    np.testing.assert_allclose(f_lo, r_lo, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(f_hi, r_hi, rtol=1e-12, atol=1e-12)
+
+
 def test_jumps_never_use_the_mean_value_form():
     step = implc.compile(Piecewise((1, x < 0), (-1, True)) + y / 100)
     lo, hi = np.array([[-1e-3, 0, 0]]), np.array([[1e-3, 1e-3, 1e-3]])
