@@ -86,6 +86,7 @@ class Tape:
         self.outputs: list[int] = []
         self._index: dict[tuple, int] = {}
         self._nonnegative: dict[int, bool] = {}
+        self._axes: list[int] = []
 
     # -- insertion --------------------------------------------------------------------------------
     def node(self, op: str, args: tuple[int, ...] = (), attr=None) -> int:
@@ -114,6 +115,16 @@ class Tape:
 
     def var(self, axis: int) -> int:
         return self.node("var", (), axis)
+
+    def axes(self) -> list[int]:
+        """For each node, the coordinate axes it depends on, as a bit mask (bit a: axis a)."""
+        masks = self._axes
+        for op, args, attr in self.nodes[len(masks):]:  # nodes are only ever appended
+            mask = 1 << attr if op == "var" else 0
+            for a in args:
+                mask |= masks[a]
+            masks.append(mask)
+        return masks
 
     def exact_value(self, i: int) -> Fraction | None:
         """The exact value of node ``i`` if it is a constant known exactly, else None."""

@@ -144,6 +144,41 @@ def test_worker_counts_agree_and_order_is_morton(name, compiled):
     assert one.stats.kept_per_level == two.stats.kept_per_level
 
 
+@pytest.mark.parametrize("name", ["paper_blobs", "paper_sin4_sin8", "spherical_cos_phi", "csg", "exp_gyroid_ball"])
+def test_octant_kernel_decides_as_the_interval_kernel_on_the_children(name, compiled):
+    """implc_octant builds an octant's eight children in registers (and calls the C library once for
+    children that differ only in axes a value does not depend on): its keep bits and child masks must be
+    those of implc_interval on the same eight boxes."""
+    import ctypes
+
+    from implc.subdivide import geometry
+    s = compiled[name]
+    depth = 7
+    geom = geometry(s.bounds, depth)
+    octant = ctypes.CFUNCTYPE(ctypes.c_int32, *[ctypes.c_void_p] * 2, ctypes.c_int64, ctypes.c_int64,
+                              ctypes.c_void_p)(s.octant_address())
+    parents = np.unique(implc.voxelize(s, depth, storage="coords").coords >> 1, axis=0)
+    rng = np.random.default_rng(1)
+    cells = parents[rng.choice(len(parents), min(len(parents), 300), replace=False)].astype(np.int32)
+    bits = np.array([[(c >> a) & 1 for a in range(3)] for c in range(8)])
+    origin, pad, h = geom[:3], geom[3:6], geom[6 + 3 * depth: 9 + 3 * depth]
+    masks, expected_masks = np.empty(8, dtype=np.int64), np.empty(8, dtype=np.int64)
+    all_live = np.array([-1], dtype=np.int64)
+    f_lo, f_hi = np.empty(8), np.empty(8)
+    mixed = 0
+    for cell in cells:
+        index = 2 * cell + bits
+        lo, hi = origin + index * h - pad, origin + (index + 1) * h + pad
+        s._interval(lo.ctypes.data, hi.ctypes.data, f_lo.ctypes.data, f_hi.ctypes.data, 8, all_live.ctypes.data,
+                    expected_masks.ctypes.data)
+        expected = sum(1 << c for c in range(8) if f_lo[c] <= 0 <= f_hi[c])
+        kept = octant(geom.ctypes.data, np.ascontiguousarray(cell).ctypes.data, depth, -1, masks.ctypes.data)
+        assert kept == expected, f"cell {cell}"
+        np.testing.assert_array_equal(masks, expected_masks)
+        mixed += 0 < kept < 255
+    assert mixed > 10  # the comparison saw children kept and children pruned
+
+
 @pytest.mark.parametrize("options", [{}, {"refine_leaves": True}])
 def test_tasks_larger_than_a_native_call_resume_and_grow(monkeypatch, compiled, options):
     """With room for only a few voxels per native call, tasks resume from their stack many times and their

@@ -353,6 +353,7 @@ def _emit_node(em, vb, tape, vals, i, lo_coords, hi_coords):
     elif op == "var":
         vals[i] = (lo_coords[attr], hi_coords[attr])
     else:
+        vb.depends_on(tape.axes()[i])
         vals[i] = getattr(em, f"i_{op}")([vals[a] for a in args], attr)
 
 

@@ -144,6 +144,7 @@ def _octant_kernel(module, name, width, directed, enclose):
     geom, cell, level, live_in, live_out = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
     vb = VectorBuilder(b, width, directed)
+    vb.octant_lanes = True  # lane c: child first + c (first a multiple of the width)
     ivec = ir.VectorType(i32, width)
 
     def read(index):

@@ -35,6 +35,8 @@ class VectorBuilder:
         self.b = builder
         self.width = width
         self.directed = directed
+        self.octant_lanes = False  # lane c holds child c of one octant (see depends_on)
+        self.lane_sources = list(range(width))
         self.vtype = ir.VectorType(DOUBLE, width)
         self.module = builder.module
 
@@ -118,13 +120,23 @@ class VectorBuilder:
         return lambda: [volatile_load(b, ptr) for ptr in ptrs]
 
     # -- the C math library, one lane at a time ------------------------------------------------------
+    def depends_on(self, axes: int):
+        """Declare the axes (bit a: axis a) the values emitted next depend on. Where lane c holds child c
+        of one octant (``octant_lanes``), children that differ only in other axes hold equal values, and
+        the C library is then called once for each group of such lanes."""
+        if self.octant_lanes:
+            same = ~axes & (self.width - 1)  # child-index bits that vary across the lanes but not the values
+            self.lane_sources = [lane & ~same for lane in range(self.width)]
+
     def libm(self, name: str, *args):
         fn = self._function(name, DOUBLE, [DOUBLE] * len(args))
         out = ir.Constant(self.vtype, ir.Undefined)
-        for lane in range(self.width):
-            idx = ir.Constant(ir.IntType(32), lane)
-            scalars = [self.b.extract_element(a, idx) for a in args]
-            out = self.b.insert_element(out, self.b.call(fn, scalars), idx)
+        results = {}
+        for lane, source in enumerate(self.lane_sources):
+            if source not in results:
+                idx = ir.Constant(ir.IntType(32), source)
+                results[source] = self.b.call(fn, [self.b.extract_element(a, idx) for a in args])
+            out = self.b.insert_element(out, results[source], ir.Constant(ir.IntType(32), lane))
         return out
 
     # -- outward rounding (see implc.rounding) -------------------------------------------------------
