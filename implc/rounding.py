@@ -24,6 +24,9 @@ LIBM = 2.0**-50
 POWF = 2.0**-40
 """pow(a, e) with e rounded to a double: |e - e_true| <= 2**-53 |e| costs up to ~745 * 2**-53 relative."""
 
+ATAN2_ERROR = 2.0**-45
+"""Absolute widening of the vector atan2 (:mod:`implc.codegen.elementary`), proven within 1.1e-15."""
+
 TINY = 2.0**-1074
 """The smallest subnormal: the absolute part of every move, so that results near zero widen too."""
 

@@ -13,6 +13,7 @@ import math
 from llvmlite import ir
 
 from .. import rounding as R
+from . import elementary
 from .control import Local, for_set_bits
 from .fold import Accumulator, live_steps, live_terms
 from .point import powi
@@ -312,15 +313,15 @@ class IntervalEmitter:
         (y0, y1), (x0, x1) = a
         y0, y1 = v.add(y0, zero), v.add(y1, zero)
         (lx, ly), (gx, gy) = self.extreme_corners(x0, x1, y0, y1)
-        least, greatest = v.libm("atan2", ly, lx), v.libm("atan2", gy, gx)
+        error = v.splat(R.ATAN2_ERROR)  # covers the vector atan2 and the C library's alike
+        least, greatest = v.sub_down(elementary.atan2(v, ly, lx), error), v.add_up(elementary.atan2(v, gy, gx), error)
         pi_hi = v.splat(R.PI_HI)
-        lo = v.maximum(v.widen_down(least, R.LIBM), v.neg(pi_hi))
-        hi = v.minimum(v.widen_up(greatest, R.LIBM), pi_hi)
+        lo = v.maximum(least, v.neg(pi_hi))
+        hi = v.minimum(greatest, pi_hi)
         origin = v.and_(self.contains_zero((x0, x1)), self.contains_zero((y0, y1)))
         cut = self.straddles_cut((y0, y1), (x0, x1))
         if wrapped:  # least = atan2(y1, x1) just above the cut, greatest = atan2(y0, x1) just below
-            cut_lo = v.widen_down(least, R.LIBM)
-            cut_hi = v.add_up(v.splat(R.TWO_PI_HI), v.widen_up(greatest, R.LIBM))
+            cut_lo, cut_hi = least, v.add_up(v.splat(R.TWO_PI_HI), greatest)
         else:
             cut_lo, cut_hi = v.neg(pi_hi), pi_hi
         lo = v.select(cut, cut_lo, lo)

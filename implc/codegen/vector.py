@@ -80,6 +80,12 @@ class VectorBuilder:
     def ceil(self, a):
         return self.b.call(self._intrinsic("ceil", 1), [a])
 
+    def floor(self, a):
+        return self.b.call(self._intrinsic("floor", 1), [a])
+
+    def copysign(self, magnitude, sign):
+        return self.b.call(self._intrinsic("copysign", 2), [magnitude, sign])
+
     def minimum(self, a, b):
         """min that propagates NaN (the sign of zero may go either way: bounds do not care)."""
         return self.b.call(self._intrinsic("minimum", 2), [a, b], fastmath=("nsz",))
