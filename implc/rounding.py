@@ -27,6 +27,9 @@ POWF = 2.0**-40
 ATAN2_ERROR = 2.0**-45
 """Absolute widening of the vector atan2 (:mod:`implc.codegen.elementary`), proven within 1.1e-15."""
 
+SIN_ERROR = 2.0**-45
+"""Absolute widening of the vector sin and cos (:mod:`implc.codegen.elementary`), proven within 5e-16."""
+
 TINY = 2.0**-1074
 """The smallest subnormal: the absolute part of every move, so that results near zero widen too."""
 

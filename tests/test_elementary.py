@@ -14,34 +14,34 @@ from implc.codegen.control import for_range
 from implc.codegen.vector import VectorBuilder
 from implc.jit import NativeModule
 
-PROVEN_ATAN2 = 1.1e-15  # the bound derived in implc/codegen/elementary.py
+PROVEN_ATAN2 = 1.1e-15  # the bounds derived in implc/codegen/elementary.py
+PROVEN_SIN = 5e-16
 
 
-def _atan2_kernel(width):
-    """f(ys, xs, out, n): elementary.atan2 over n (a multiple of width) lanes."""
+def _run(name, width, *args):
+    """elementary.<name> over the lanes of ``args`` (equal-length arrays, a multiple of width long)."""
+    arity = len(args)
+
     def build():
         module = ir.Module(name="elementary_test")
         double = ir.DoubleType()
         i64 = ir.IntType(64)
-        fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [ir.PointerType(double)] * 3 + [i64]), name="f")
+        fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [ir.PointerType(double)] * (arity + 1) + [i64]),
+                         name="f")
         b = ir.IRBuilder(fn.append_basic_block("entry"))
-        ys, xs, out, n = fn.args
+        *inputs, out, n = fn.args
         vector = ir.PointerType(ir.VectorType(double, width))
         with for_range(b, b.sdiv(n, ir.Constant(i64, width))) as i:
-            at = [b.bitcast(b.gep(p, [b.mul(i, ir.Constant(i64, width))]), vector) for p in (ys, xs, out)]
-            value = elementary.atan2(VectorBuilder(b, width), b.load(at[0], align=8), b.load(at[1], align=8))
-            b.store(value, at[2], align=8)
+            at = [b.bitcast(b.gep(p, [b.mul(i, ir.Constant(i64, width))]), vector) for p in (*inputs, out)]
+            value = getattr(elementary, name)(VectorBuilder(b, width), *[b.load(p, align=8) for p in at[:-1]])
+            b.store(value, at[-1], align=8)
         b.ret_void()
         return str(module)
-    native = NativeModule(build, source_key=f"elementary-atan2-test-w{width}")
-    return native, native.function("f", [ctypes.c_void_p] * 3 + [ctypes.c_int64])
-
-
-def _run(width, y, x):
-    native, f = _atan2_kernel(width)
-    y, x = np.ascontiguousarray(y, dtype=np.float64), np.ascontiguousarray(x, dtype=np.float64)
-    out = np.empty_like(y)
-    f(y.ctypes.data, x.ctypes.data, out.ctypes.data, len(y))
+    native = NativeModule(build, source_key=f"elementary-{name}-test-w{width}")
+    f = native.function("f", [ctypes.c_void_p] * (arity + 1) + [ctypes.c_int64])
+    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in args]
+    out = np.empty_like(arrays[0])
+    f(*[a.ctypes.data for a in arrays], out.ctypes.data, len(out))
     return out
 
 
@@ -63,7 +63,7 @@ def test_atan2_error_is_within_the_proven_bound(width):
     t = np.repeat(np.arange(0, 17) / 16, 16) * (1 + rng.uniform(-1e-12, 1e-12, 17 * 16))
     y = np.concatenate([y, t, -np.ones_like(t), t])
     x = np.concatenate([x, np.ones_like(t), -t, -np.ones_like(t)])
-    got = _run(width, y, x)
+    got = _run("atan2", width, y, x)
     mpmath.mp.prec = 200
     worst = max(abs(mpmath.atan2(mpmath.mpf(a), mpmath.mpf(b)) - mpmath.mpf(g)) for a, b, g in zip(y, x, got))
     assert worst <= PROVEN_ATAN2
@@ -74,6 +74,34 @@ def test_atan2_special_inputs_take_the_c_library_value_lane_by_lane():
     inf, nan = np.inf, np.nan
     y = np.array([0, -0.0, 0, -0.0, inf, -inf, nan, 1, inf, 0, 1e-310, 2, 3, -5, 1e300, 7])
     x = np.array([0, 0, -0.0, -0.0, 1, -inf, 1, nan, inf, inf, 1e-310, 3, -4, 5, 1e-300, -1e-320])
-    got = _run(8, y, x)
+    got = _run("atan2", 8, y, x)
     np.testing.assert_array_equal(got[:10], np.arctan2(y[:10], x[:10]))  # 0/0, infinities, NaN
     assert np.max(np.abs(got[10:] - np.arctan2(y[10:], x[10:]))) <= PROVEN_ATAN2  # regular, same vectors
+
+
+@pytest.mark.parametrize("name", ["sin", "cos"])
+@pytest.mark.parametrize("width", [8, 1])
+def test_sin_cos_error_is_within_the_proven_bound(name, width):
+    rng = np.random.default_rng(len(name) + width)
+    n = 3000
+    x = rng.uniform(-1, 1, n) * 10.0 ** rng.integers(-12, 6, n)
+    # around multiples of pi/4, where the quadrant and the reduction switch, up to the range's end
+    quarters = np.arange(-400, 401) * (np.pi / 4)
+    x = np.concatenate([x, quarters, np.nextafter(quarters, np.inf), [elementary.TRIG_MAX, -elementary.TRIG_MAX]])
+    x = x[: len(x) - len(x) % 8]
+    got = _run(name, width, x)
+    mpmath.mp.prec = 200
+    exact = getattr(mpmath, name)
+    worst = max(abs(exact(mpmath.mpf(a)) - mpmath.mpf(g)) for a, g in zip(x, got))
+    assert worst <= PROVEN_SIN
+    assert PROVEN_SIN < rounding.SIN_ERROR / 16
+
+
+@pytest.mark.parametrize("name", ["sin", "cos"])
+def test_sin_cos_beyond_their_range_take_the_c_library_value(name):
+    x = np.array([np.inf, -np.inf, np.nan, 2e5, -1e300, 1e17, np.nextafter(elementary.TRIG_MAX, np.inf), 3.0])
+    got = _run(name, 8, x)
+    with np.errstate(invalid="ignore"):
+        expected = getattr(np, name)(x)
+    np.testing.assert_array_equal(got[:7], expected[:7])
+    assert abs(got[7] - expected[7]) <= PROVEN_SIN

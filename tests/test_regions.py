@@ -57,3 +57,26 @@ def test_gradient_over_all_terms_is_the_full_gradient():
     s.native.function(GRADIENT_LIVE_KERNEL, [P, P, P, N, N])(pts.ctypes.data, value.ctypes.data, grad.ctypes.data, 64, 0)
     np.testing.assert_array_equal(value, 0.25)
     np.testing.assert_array_equal(grad, 0.0)
+
+
+def test_normals_kernel_without_terms_matches_the_gradient():
+    """With nothing to prune, implc_gradient_live evaluates the gradient tape with the vector sin, cos and
+    atan2: within rounding of Surface.gradient (C library) away from the z axis, where theta's
+    derivatives blow up."""
+    import ctypes
+
+    import numpy as np
+
+    import implc
+    from implc.codegen.kernels import GRADIENT_LIVE_KERNEL
+    from implc.symbols import phi, r, theta
+    P, N = ctypes.c_void_p, ctypes.c_int64
+    rng = np.random.default_rng(5)
+    pts = np.ascontiguousarray(rng.uniform(-1, 1, (256, 3)))
+    pts = pts[np.hypot(pts[:, 0], pts[:, 1]) > 0.05][:200]
+    s = implc.compile(sympy.sin(4 * theta) * sympy.sin(8 * phi) - r + sympy.cos(3 * phi) / 4)
+    value, grad = np.empty(len(pts)), np.empty((len(pts), 3))
+    s.native.function(GRADIENT_LIVE_KERNEL, [P, P, P, N, N])(pts.ctypes.data, value.ctypes.data, grad.ctypes.data,
+                                                             len(pts), -1)
+    np.testing.assert_allclose(value, s.eval(pts), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(grad, s.gradient(pts), rtol=1e-10, atol=1e-11)

@@ -184,9 +184,11 @@ class IntervalEmitter:
     def sin_like(self, name, a, max_offset, min_offset):
         v = self.v
         lo0, hi0 = a[0]
-        fa, fb = v.libm(name, lo0), v.libm(name, hi0)
-        lo = v.widen_down(v.minimum(fa, fb), R.LIBM)
-        hi = v.widen_up(v.maximum(fa, fb), R.LIBM)
+        function = getattr(elementary, name)  # in vector registers; the C library beyond its range
+        fa, fb = function(v, lo0), function(v, hi0)
+        error = v.splat(R.SIN_ERROR)  # covers both
+        lo = v.sub_down(v.minimum(fa, fb), error)
+        hi = v.add_up(v.maximum(fa, fb), error)
         one, minus_one = v.splat(1.0), v.splat(-1.0)
         hi = v.select(self.contains_peak(lo0, hi0, max_offset), one, v.minimum(hi, one))
         lo = v.select(self.contains_peak(lo0, hi0, min_offset), minus_one, v.maximum(lo, minus_one))

@@ -7,7 +7,8 @@ points and boxes as row-major (n, 3) float64 arrays:
 - ``implc_gradient(pts, out_value, out_grad, n)``: F and its analytic gradient (n, 3).
 - ``implc_gradient_live(pts, out_value, out_grad, n, live)``: the same over the terms live in ``live`` (an
   i64 live-term mask valid at every point, :mod:`implc.codegen.pruned_gradient`); the gradient equals
-  ``implc_gradient``'s up to rounding where the mask holds.
+  ``implc_gradient``'s up to rounding where the mask holds (sin, cos and atan2 come from
+  :mod:`implc.codegen.elementary`: this kernel computes normals).
 - ``implc_interval(lo, hi, out_lo, out_hi, n, live_in, live_out)``: an enclosure of F over each box
   [lo, hi]. ``live_in`` holds one live-term mask (:mod:`implc.regions`) per group of WIDTH boxes, the
   children of one octant: terms dead there are skipped; ``live_out`` receives each box's own mask.
@@ -215,8 +216,8 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
         vb = VectorBuilder(b, width)
         if plan.fold is not None:
             value, grad = emit_pruned_gradient(vb, value_tape, plan, _load_xyz(b, pts, i, width), live)
-        else:  # nothing to prune
-            value, *grad = emit_point(vb, gradient_tape, _load_xyz(b, pts, i, width))
+        else:  # nothing to prune; normals need no more than the vector functions' 1e-15
+            value, *grad = emit_point(vb, gradient_tape, _load_xyz(b, pts, i, width), vector_elementary=True)
         _store(b, out_value, i, value, width)
         _store_xyz(b, out_grad, i, grad, width)
     b.ret_void()

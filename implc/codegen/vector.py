@@ -80,6 +80,10 @@ class VectorBuilder:
     def ceil(self, a):
         return self.b.call(self._intrinsic("ceil", 1), [a])
 
+    def rint(self, a):
+        """Round to the nearest integer, ties to even."""
+        return self.b.call(self._intrinsic("rint", 1), [a])
+
     def floor(self, a):
         return self.b.call(self._intrinsic("floor", 1), [a])
 
