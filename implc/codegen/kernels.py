@@ -36,6 +36,7 @@ from .control import for_range
 from .interval import emit_interval, emit_interval_regions, emit_mean_value
 from .point import emit_point
 from .pruned_gradient import emit_pruned_gradient
+from .pruned_mean_value import emit_pruned_mean_value
 from .vector import DOUBLE, I64, VectorBuilder, broadcast
 
 WIDTH = 8
@@ -233,8 +234,11 @@ def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "
     """The LLVM IR of the mean-value interval kernel, a module of its own: it is about three times the
     size of the others together, so it is compiled only when first used."""
     module = ir.Module(name=name)
+    plan = plan_regions(value_tape)
 
-    def enclose(vb, lo, hi, live_in):  # prunes nothing: the children keep their parent's mask
+    def enclose(vb, lo, hi, live_in):
+        if plan.fold is not None:  # over the live terms only, and each child gets its own mask
+            return emit_pruned_mean_value(vb, value_tape, plan, lo, hi, live_in)
         return (*emit_mean_value(vb, value_tape, gradient_tape, lo, hi), broadcast(vb.b, live_in, vb.width))
     _interval_kernel(module, MEAN_VALUE_KERNEL, width, directed, enclose)
     _octant_kernel(module, MEAN_VALUE_OCTANT_KERNEL, width, directed, enclose)

@@ -1,0 +1,102 @@
+"""The mean-value form over the live terms: the tightest enclosure, for the price of the terms near a box.
+
+Where a tape's chain is a fold over terms (:class:`implc.regions.Fold`), F equals the fold over the terms
+live in a box's parent at every point of the box (a dead term is 0 there, or never the extremum), so the
+mean-value form F(c) + ∇F(B)·(B − c) may be taken of that smaller function: its value at the centre and
+its natural enclosure come from the pruned interval fold (:func:`implc.codegen.interval.emit_interval_regions`,
+which also gives each box its own live mask), and ∇F(B) from a fold over the live terms of interval dual
+numbers (value and three partials, each an interval): each term's on its own gradient tape
+(:func:`implc.gradient.with_gradient` of :meth:`implc.ir.Tape.subtape`), combined by :data:`DUAL_RULES`,
+which mirror :mod:`implc.gradient`'s rules for neg, scale, add, sub, min and max in interval arithmetic.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..gradient import with_gradient
+from .fold import Accumulator, live_steps
+from .interval import (
+    IntervalEmitter,
+    box_centre,
+    emit_interval_outputs,
+    emit_interval_regions,
+    intersect_mean_value,
+)
+from .vector import VectorBuilder
+
+
+def _pairs(flat):
+    return [(flat[k], flat[k + 1]) for k in range(0, len(flat), 2)]
+
+
+def _flat(pairs):
+    return [v for pair in pairs for v in pair]
+
+
+def _neg(em, a, attr):
+    return [em.i_neg([p], None) for p in a]
+
+
+def _scale(em, a, attr):
+    return [em.i_scale([p], attr) for p in a]
+
+
+def _add(em, a, b, attr):
+    return [em.i_add([a[0], b[0]], attr)] + [em.i_add([p, q], False) for p, q in zip(a[1:], b[1:])]
+
+
+def _sub(em, a, b, attr):
+    return [em.i_sub([p, q], None) for p, q in zip(a, b)]
+
+
+def _min(em, a, b, attr):  # d min(a, b) = select_le(a − b, da, db), as implc.gradient writes it
+    difference = em.i_sub([a[0], b[0]], None)
+    return [em.i_min([a[0], b[0]], None)] + [em.i_select_le([difference, p, q], None) for p, q in zip(a[1:], b[1:])]
+
+
+def _max(em, a, b, attr):  # d max(a, b) = select_le(a − b, db, da)
+    difference = em.i_sub([a[0], b[0]], None)
+    return [em.i_max([a[0], b[0]], None)] + [em.i_select_le([difference, q, p], None) for p, q in zip(a[1:], b[1:])]
+
+
+DUAL_RULES = {"neg": _neg, "scale": _scale, "add": _add, "sub": _sub, "min": _min, "max": _max}
+"""Interval dual-number rules for a fold's chain ops: (emitter, *operands, attr) -> [value, ∂x, ∂y, ∂z],
+each an interval (lo, hi)."""
+
+
+def emit_pruned_mean_value(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask):
+    """(lo, hi, masks): the natural enclosure over the live terms intersected with their mean-value form,
+    and each box's live mask (as :func:`implc.codegen.interval.emit_interval_regions`)."""
+    em = IntervalEmitter(vb)
+    fold = plan.fold
+    nat_lo, nat_hi, masks = emit_interval_regions(vb, tape, plan, lo_coords, hi_coords, live_mask)
+    centre = box_centre(vb, lo_coords, hi_coords)
+    c_lo, c_hi, _ = emit_interval_regions(vb, tape, plan, centre, centre, live_mask)
+
+    def dual(root, lo, hi):  # flat: [value lo, value hi, ∂x lo, ∂x hi, ...]
+        return _flat(emit_interval_outputs(vb, with_gradient(tape.subtape(root)), lo, hi))
+
+    def combine(node, operands):
+        op, _, attr = tape.nodes[node]
+        return _flat(DUAL_RULES[op](em, *[_pairs(o) for o in operands], attr))
+
+    none = {"sum": 0.0, "min": math.inf, "max": -math.inf}[fold.op]
+    identity = [vb.splat(none)] * 2 + [vb.splat(0.0)] * 6
+    start = dual(fold.base, lo_coords, hi_coords) if fold.base is not None else None
+    acc = Accumulator(vb.b, fold, start, identity)
+    reload = vb.reloadable([*lo_coords, *hi_coords])  # keeps each term's code inside its case
+    for _, step in live_steps(vb.b, fold, live_mask, len(plan.terms)):
+        fresh = reload()
+        value = dual(plan.terms[step.term].root, fresh[:3], fresh[3:])
+        for w in step.wrappers:
+            value = combine(w, [value])
+        acc.take(step, value, combine)
+    result, previous = acc.result(), fold.top
+    for node in fold.tail:  # above the fold: combine with the non-term operand
+        _, args, _ = tape.nodes[node]
+        result = combine(node, [result if a == previous else dual(a, lo_coords, hi_coords) for a in args])
+        previous = node
+    grad = _pairs(result)[1:]
+    lo, hi = intersect_mean_value(vb, (nat_lo, nat_hi), (c_lo, c_hi), grad, lo_coords, hi_coords, centre)
+    return lo, hi, masks
