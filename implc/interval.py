@@ -243,14 +243,20 @@ def _select(true_for_sure, false_for_sure, a, b, attr):
     return lo, hi
 
 
+def _undecidable(g, pair):
+    """A condition that may be undefined (NaN) somewhere in the box makes the select's value undefined."""
+    undefined = np.isnan(g[0]) | np.isnan(g[1])
+    return np.where(undefined, NAN, pair[0]), np.where(undefined, NAN, pair[1])
+
+
 def i_select_lt(args, attr):
     g, a, b = args
-    return _select(g[1] < 0, g[0] >= 0, a, b, attr)
+    return _undecidable(g, _select(g[1] < 0, g[0] >= 0, a, b, attr))
 
 
 def i_select_le(args, attr):
     g, a, b = args
-    return _select(g[1] <= 0, g[0] > 0, a, b, attr)
+    return _undecidable(g, _select(g[1] <= 0, g[0] > 0, a, b, attr))
 
 
 def straddles_cut(yy, xx):

@@ -14,8 +14,9 @@ from .gradient import with_gradient
 from .ir import Tape
 
 
-def _select(cond, a, b):
-    return np.where(cond, a, b)
+def _select(g, cond, a, b):
+    """The branch ``cond`` picks; undefined where the condition's value g is."""
+    return np.where(np.isnan(g), np.nan, np.where(cond, a, b))
 
 
 POINT_RULES = {
@@ -25,7 +26,7 @@ POINT_RULES = {
     "atan2": lambda yy, xx: np.arctan2(yy + 0.0, xx + 0.0),
     "atan2_wrapped": lambda yy, xx: np.arctan2(yy + 0.0, xx + 0.0),
     "sinh": np.sinh, "cosh": np.cosh, "tanh": np.tanh, "abs": np.abs, "min": np.minimum, "max": np.maximum,
-    "select_lt": lambda g, a, b: _select(g < 0, a, b), "select_le": lambda g, a, b: _select(g <= 0, a, b),
+    "select_lt": lambda g, a, b: _select(g, g < 0, a, b), "select_le": lambda g, a, b: _select(g, g <= 0, a, b),
     "cut_guard": lambda yy, xx, c: c,
 }
 """Point rules of the ops without an attribute (``powi``, ``powf``, ``scale`` take theirs); float64 arrays."""

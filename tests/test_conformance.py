@@ -263,3 +263,17 @@ def test_point_values_match_true_values(surfaces):
                 assert not np.isfinite(v) or t == "pole", f"{name} at {p}: {v} where undefined"
                 continue
             assert abs(v - float(t)) <= 1e-12 * (1 + abs(float(t))), f"{name} at {p}: {v} vs {t}"
+
+
+def test_an_undefined_condition_makes_the_piecewise_undefined():
+    """Found by the property test: cbrt(x) < 0 is undefined for x < 0 (principal root), so the Piecewise
+    is, and a box reaching x < 0 must not be pruned, whichever branch the comparison would pick."""
+    s = implc.compile(Piecewise((x**3, cbrt(x) < 0), (x, True)))
+    lo, hi = np.array([[-2.0, 0, 0], [0.5, 0, 0]]), np.array([[3.0, 1, 1], [1.0, 1, 1]])
+    f_lo, f_hi = s.interval(lo, hi)
+    assert f_lo[0] == -np.inf and f_hi[0] == np.inf
+    assert f_lo[1] <= 0.5 and f_hi[1] >= 1.0 and np.isfinite(f_hi[1])
+    r_lo, r_hi = reference.eval_interval(s.tape, lo, hi)
+    assert r_lo[0] == -np.inf and r_hi[0] == np.inf
+    assert np.isnan(s.eval(np.array([[-1.0, 0, 0]]))[0])
+    assert np.isnan(reference.eval_point(s.tape, np.array([[-1.0, 0, 0]]))[0][0])

@@ -264,17 +264,24 @@ class IntervalEmitter:
         hi = v.select(true_for_sure, a[1], v.select(false_for_sure, b[1], union_hi))
         return lo, hi
 
+    def undecidable(self, g):
+        """A condition that may be undefined (NaN) somewhere in the box: so is the select's value."""
+        v = self.v
+        return v.or_(v.isnan(g[0]), v.isnan(g[1]))
+
     def i_select_lt(self, a, attr):
         v = self.v
         g, t, f = a
         zero = v.splat(0.0)
-        return self.select(v.cmp("<", g[1], zero), v.cmp(">=", g[0], zero), t, f, attr)
+        return self.nan_where(self.undecidable(g),
+                              self.select(v.cmp("<", g[1], zero), v.cmp(">=", g[0], zero), t, f, attr))
 
     def i_select_le(self, a, attr):
         v = self.v
         g, t, f = a
         zero = v.splat(0.0)
-        return self.select(v.cmp("<=", g[1], zero), v.cmp(">", g[0], zero), t, f, attr)
+        return self.nan_where(self.undecidable(g),
+                              self.select(v.cmp("<=", g[1], zero), v.cmp(">", g[0], zero), t, f, attr))
 
     def straddles_cut(self, yy, xx):
         v = self.v

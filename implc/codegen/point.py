@@ -54,10 +54,9 @@ def _point(vb: VectorBuilder, op: str, a: list, attr, vector_elementary: bool):
         return vb.minimum(a[0], a[1])
     if op == "max":
         return vb.maximum(a[0], a[1])
-    if op == "select_lt":
-        return vb.select(vb.cmp("<", a[0], vb.splat(0.0)), a[1], a[2])
-    if op == "select_le":
-        return vb.select(vb.cmp("<=", a[0], vb.splat(0.0)), a[1], a[2])
+    if op in ("select_lt", "select_le"):  # undefined where the condition's value is
+        chosen = vb.select(vb.cmp("<" if op == "select_lt" else "<=", a[0], vb.splat(0.0)), a[1], a[2])
+        return vb.select(vb.isnan(a[0]), vb.splat(float("nan")), chosen)
     if op == "cut_guard":
         return a[2]
     raise NotImplementedError(f"no point emitter for op {op}")
