@@ -66,7 +66,6 @@ PIO2_1, PIO2_2, PIO2_3 = 1.5707963267341256, 6.077100506303966e-11, 2.0222662487
 
 def atan2(vb: VectorBuilder, y, x):
     """atan2(y, x) lane by lane, within :data:`implc.rounding.ATAN2_ERROR` of the true value."""
-    b = vb.b
     ax, ay = vb.fabs(x), vb.fabs(y)
     big, small = vb.maximum(ax, ay), vb.minimum(ax, ay)
     regular = vb.and_(vb.cmp(">", big, vb.splat(0.0)), vb.cmp("<", big, vb.splat(float("inf"))))

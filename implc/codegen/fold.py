@@ -1,17 +1,23 @@
-"""The loop over the live terms of a :class:`implc.regions.Fold`, shared by the interval kernel and the
-pruned gradient: one iteration per set bit of the live mask, a switch to that term's code, and an
-accumulator that starts empty (a fold with no base) and combines each term through its spine node.
+"""The loop over the live terms of a :class:`implc.regions.Fold`, shared by the interval kernel, the
+pruned gradient and the pruned mean-value form: one iteration per set bit of the live mask, a switch to
+that term's code, and an accumulator that starts empty (a fold with no base) and combines each term
+through its spine node.
 
 Values are flat lists of vectors (an interval: [lo, hi]; a dual number: [value, ∂x, ∂y, ∂z]).
 """
 
 from __future__ import annotations
 
+import math
+
 from llvmlite import ir
 
 from .control import Local, for_set_bits
 
 I1 = ir.IntType(1)
+
+IDENTITY = {"sum": 0.0, "min": math.inf, "max": -math.inf}
+"""The value of a chain (a term's kind) with nothing in it."""
 
 
 def live_terms(builder: ir.IRBuilder, mask, count: int):
@@ -63,3 +69,25 @@ class Accumulator:
         """The folded value; the identity when no term was live and there is no base."""
         is_empty = self.empty.get()
         return [self.b.select(is_empty, i, slot.get()) for i, slot in zip(self.identity, self.slots)]
+
+
+def fold_live_terms(vb, tape, plan, live_mask, inputs, evaluate, combine, identity):
+    """The value of the whole chain (``plan.fold`` and its tail) over the live terms, where every operand
+    is computed by ``evaluate(root, inputs)`` (a flat value of the subtape rooted there, from the
+    coordinate vectors ``inputs``) and every chain node applied by ``combine(node, operands)``;
+    ``identity``: the fold's value when no term is live and there is no base."""
+    fold = plan.fold
+    start = evaluate(fold.base, inputs) if fold.base is not None else None
+    acc = Accumulator(vb.b, fold, start, identity)
+    reload = vb.reloadable(inputs)  # keeps each term's code inside its case
+    for _, step in live_steps(vb.b, fold, live_mask, len(plan.terms)):
+        value = evaluate(plan.terms[step.term].root, reload())
+        for w in step.wrappers:
+            value = combine(w, [value])
+        acc.take(step, value, combine)
+    result, previous = acc.result(), fold.top
+    for node in fold.tail:  # above the fold: combine with the non-term operand
+        _, args, _ = tape.nodes[node]
+        result = combine(node, [result if a == previous else evaluate(a, inputs) for a in args])
+        previous = node
+    return result

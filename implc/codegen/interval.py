@@ -15,7 +15,7 @@ from llvmlite import ir
 from .. import rounding as R
 from . import elementary
 from .control import Local, for_set_bits
-from .fold import Accumulator, live_steps, live_terms
+from .fold import IDENTITY, Accumulator, live_steps, live_terms
 from .point import powi
 from .vector import VectorBuilder, broadcast
 
@@ -424,9 +424,6 @@ def _emit_term(em, vb, tape, vals, term, bit, kills, lo_coords, hi_coords):
     return vals[term.root]
 
 
-_IDENTITY = {"sum": 0.0, "min": INF, "max": -INF}
-
-
 def _emit_term_by_term(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills):
     """Each term in an if/else on its bit (dead: the identity of its chain); then the chain as written."""
     b = vb.b
@@ -440,8 +437,8 @@ def _emit_term_by_term(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask
                 lo_local.set(lo)
                 hi_local.set(hi)
             with skip:
-                lo_local.set(vb.splat(_IDENTITY[term.kind]))
-                hi_local.set(vb.splat(_IDENTITY[term.kind]))
+                lo_local.set(vb.splat(IDENTITY[term.kind]))
+                hi_local.set(vb.splat(IDENTITY[term.kind]))
         vals[term.root] = (lo_local.get(), hi_local.get())
     if plan.chain_leaves:  # a leaf above another leaf's upper bound (min) can never be the minimum below
         op = tape.nodes[tape.outputs[0]][0]
@@ -467,7 +464,7 @@ def _emit_fold(em, vb, tape, plan, vals, lo_coords, hi_coords, live_mask, kills)
     b = vb.b
     fold = plan.fold
     count = len(plan.terms)
-    identity = vb.splat(_IDENTITY[fold.op])
+    identity = vb.splat(IDENTITY[fold.op])
     acc = Accumulator(b, fold, vals.get(fold.base), [identity, identity])
 
     def combine(node, operands):

@@ -14,10 +14,8 @@ mirror the derivative rules of :mod:`implc.gradient` for neg, scale, add, sub, m
 
 from __future__ import annotations
 
-import math
-
 from ..gradient import with_gradient
-from .fold import Accumulator, live_steps
+from .fold import IDENTITY, fold_live_terms
 from .point import emit_point
 from .vector import VectorBuilder
 
@@ -60,7 +58,6 @@ DUAL_RULES = {"neg": _neg, "scale": _scale, "add": _add, "sub": _sub, "min": _mi
 def emit_pruned_gradient(vb: VectorBuilder, tape, plan, coords, live_mask):
     """F and ∇F at points ``coords`` over the live terms of ``plan.fold`` (``live_mask``: an i64 for all
     W points). Returns (value, [∂x, ∂y, ∂z]) vectors."""
-    fold = plan.fold
 
     def dual(root, xyz):  # flat: [value, ∂x, ∂y, ∂z]
         return emit_point(vb, with_gradient(tape.subtape(root)), xyz)
@@ -70,18 +67,7 @@ def emit_pruned_gradient(vb: VectorBuilder, tape, plan, coords, live_mask):
         value, grad = DUAL_RULES[op](vb, *[(o[0], o[1:]) for o in operands], attr)
         return [value, *grad]
 
-    none = {"sum": 0.0, "min": math.inf, "max": -math.inf}[fold.op]
+    none = IDENTITY[plan.fold.op]
     identity = [vb.splat(none)] + [vb.splat(0.0)] * 3
-    acc = Accumulator(vb.b, fold, dual(fold.base, coords) if fold.base is not None else None, identity)
-    reload = vb.reloadable(coords)
-    for _, step in live_steps(vb.b, fold, live_mask, len(plan.terms)):
-        value = dual(plan.terms[step.term].root, reload())
-        for w in step.wrappers:
-            value = combine(w, [value])
-        acc.take(step, value, combine)
-    result, previous = acc.result(), fold.top
-    for node in fold.tail:  # above the fold: combine with the non-term operand
-        _, args, _ = tape.nodes[node]
-        result = combine(node, [result if a == previous else dual(a, coords) for a in args])
-        previous = node
+    result = fold_live_terms(vb, tape, plan, live_mask, coords, dual, combine, identity)
     return result[0], result[1:]

@@ -12,10 +12,8 @@ which mirror :mod:`implc.gradient`'s rules for neg, scale, add, sub, min and max
 
 from __future__ import annotations
 
-import math
-
 from ..gradient import with_gradient
-from .fold import Accumulator, live_steps
+from .fold import IDENTITY, fold_live_terms
 from .interval import (
     IntervalEmitter,
     box_centre,
@@ -69,34 +67,20 @@ def emit_pruned_mean_value(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, 
     """(lo, hi, masks): the natural enclosure over the live terms intersected with their mean-value form,
     and each box's live mask (as :func:`implc.codegen.interval.emit_interval_regions`)."""
     em = IntervalEmitter(vb)
-    fold = plan.fold
     nat_lo, nat_hi, masks = emit_interval_regions(vb, tape, plan, lo_coords, hi_coords, live_mask)
     centre = box_centre(vb, lo_coords, hi_coords)
     c_lo, c_hi, _ = emit_interval_regions(vb, tape, plan, centre, centre, live_mask)
 
-    def dual(root, lo, hi):  # flat: [value lo, value hi, ∂x lo, ∂x hi, ...]
-        return _flat(emit_interval_outputs(vb, with_gradient(tape.subtape(root)), lo, hi))
+    def dual(root, corners):  # corners: [*lo, *hi]; flat: [value lo, value hi, ∂x lo, ∂x hi, ...]
+        return _flat(emit_interval_outputs(vb, with_gradient(tape.subtape(root)), corners[:3], corners[3:]))
 
     def combine(node, operands):
         op, _, attr = tape.nodes[node]
         return _flat(DUAL_RULES[op](em, *[_pairs(o) for o in operands], attr))
 
-    none = {"sum": 0.0, "min": math.inf, "max": -math.inf}[fold.op]
+    none = IDENTITY[plan.fold.op]
     identity = [vb.splat(none)] * 2 + [vb.splat(0.0)] * 6
-    start = dual(fold.base, lo_coords, hi_coords) if fold.base is not None else None
-    acc = Accumulator(vb.b, fold, start, identity)
-    reload = vb.reloadable([*lo_coords, *hi_coords])  # keeps each term's code inside its case
-    for _, step in live_steps(vb.b, fold, live_mask, len(plan.terms)):
-        fresh = reload()
-        value = dual(plan.terms[step.term].root, fresh[:3], fresh[3:])
-        for w in step.wrappers:
-            value = combine(w, [value])
-        acc.take(step, value, combine)
-    result, previous = acc.result(), fold.top
-    for node in fold.tail:  # above the fold: combine with the non-term operand
-        _, args, _ = tape.nodes[node]
-        result = combine(node, [result if a == previous else dual(a, lo_coords, hi_coords) for a in args])
-        previous = node
+    result = fold_live_terms(vb, tape, plan, live_mask, [*lo_coords, *hi_coords], dual, combine, identity)
     grad = _pairs(result)[1:]
     lo, hi = intersect_mean_value(vb, (nat_lo, nat_hi), (c_lo, c_hi), grad, lo_coords, hi_coords, centre)
     return lo, hi, masks
