@@ -2,7 +2,7 @@
 
 Every figure is measured in this run on this machine and printed, never asserted. Times are medians over
 ``--repeats`` runs; speedups are ratios of figures from the same run. Results go to stdout as Markdown
-and to ``--out`` (default ``benchmarks/results``) as ``latest.md`` and ``latest.json`` with the machine
+and to ``--out`` (default ``./implc-bench``) as ``latest.md`` and ``latest.json`` with the machine
 described.
 """
 
@@ -364,7 +364,7 @@ def parser():
     p.add_argument("--growth-depths", default="7,8,9,10,11")
     p.add_argument("--tightness-scenes", default=None, help="default: every scene")
     p.add_argument("--tightness-depth", type=int, default=8)
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"), help="folder for latest.md/.json")
+    p.add_argument("--out", default="implc-bench", help="folder for latest.md/.json (default ./implc-bench)")
     return p
 
 

@@ -3,10 +3,10 @@
 import os
 
 import implc
-from implc import io, shapes
+from implc import shapes, voxel_files
 
 depth = int(os.environ.get("IMPLC_EXAMPLE_DEPTH", 8))
 voxels = implc.voxelize(implc.compile(shapes.torus(0.6, 0.25)), depth)
-io.save(voxels, "torus.ply")  # x y z nx ny nz per voxel centre: opens in MeshLab, CloudCompare, Open3D
-io.save(voxels, "torus.npz")  # exact: coords, normals, depth, bounds
+voxel_files.save(voxels, "torus.ply")  # x y z nx ny nz per voxel centre: opens in MeshLab, CloudCompare, Open3D
+voxel_files.save(voxels, "torus.npz")  # exact: coords, normals, depth, bounds
 print(f"wrote {len(voxels)} points to torus.ply and torus.npz")

@@ -1,26 +1,19 @@
-"""JIT compilation of kernel modules for the host CPU, with an on-disk object cache.
+"""JIT compilation of kernel modules for the host CPU, through the on-disk object cache.
 
 :class:`NativeModule` owns one MCJIT execution engine for its whole life: it optimises LLVM IR with the
-new pass manager, emits a host object file (or loads one from the cache), and hands out ctypes function
-pointers that stay valid as long as the NativeModule lives. Calls through those pointers release the GIL.
-
-The cache lives in ``$IMPLC_CACHE_DIR`` (default ``~/.cache/implc``), one object file per key, stored
-behind its SHA-256 so that a damaged entry is recompiled rather than loaded; the key
-covers the kernel source, the code generator's own source, llvmlite's version and the host CPU, so a
-stale entry cannot be loaded. Set ``IMPLC_CACHE_DIR=off`` to disable it.
+new pass manager, emits a host object file (or loads one from :mod:`implc.kernel_cache`), and binds the
+module's entry points (:mod:`implc.abi`) as ctypes functions that stay valid as long as the NativeModule
+lives. Calls through them release the GIL.
 """
 
 from __future__ import annotations
 
-import ctypes
-import hashlib
-import os
-import tempfile
 from functools import cache
-from pathlib import Path
 
-import llvmlite
 import llvmlite.binding as llvm
+
+from . import kernel_cache
+from .abi import Entry
 
 
 @cache
@@ -36,29 +29,6 @@ def host_has_avx512() -> bool:
     return "+avx512f" in _host()[1].split(",")
 
 
-@cache
-def _codegen_fingerprint() -> str:
-    """Hash of the sources that decide what a kernel computes: editing them invalidates the cache."""
-    here = Path(__file__).parent
-    h = hashlib.sha256()
-    for path in sorted([*here.glob("codegen/*.py"), here / "rounding.py", here / "jit.py"]):
-        h.update(path.read_bytes())
-    return h.hexdigest()
-
-
-def cache_dir() -> Path | None:
-    setting = os.environ.get("IMPLC_CACHE_DIR", "")
-    if setting.lower() == "off":
-        return None
-    return Path(setting) if setting else Path.home() / ".cache" / "implc"
-
-
-def cache_key(source_key: str) -> str:
-    cpu, features = _host()
-    text = "|".join((source_key, _codegen_fingerprint(), llvmlite.__version__, cpu, features))
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
 class NativeModule:
     """One JIT-compiled LLVM module and the execution engine that keeps its code alive.
 
@@ -71,14 +41,12 @@ class NativeModule:
         self._target_machine = target.create_target_machine(cpu=cpu, features=features, opt=opt_level,
                                                             reloc="pic", codemodel="jitdefault")
         self.opt_level = opt_level
-        self.key = cache_key(source_key)
-        self.from_cache = False
-        obj = self._load_cached()
+        self.key = kernel_cache.key(source_key, cpu, features, opt_level)
+        obj = kernel_cache.load(self.key)
+        self.from_cache = obj is not None  # True: the object came from the disk cache, no LLVM run
         if obj is None:
             obj = self._compile(llvm_ir())
-            self._store_cached(obj)
-        else:
-            self.from_cache = True
+            kernel_cache.store(self.key, obj)
         empty = llvm.parse_assembly("")
         empty.triple = llvm.get_process_triple()
         self._engine = llvm.create_mcjit_compiler(empty, self._target_machine)
@@ -96,36 +64,6 @@ class NativeModule:
         self.optimized_ir = str(module)
         return self._target_machine.emit_object(module)
 
-    def _path(self) -> Path | None:
-        directory = cache_dir()
-        return None if directory is None else directory / f"{self.key}.o"
-
-    def _load_cached(self) -> bytes | None:
-        """The cached object, or None when absent or damaged (LLVM would crash on a bad object file)."""
-        path = self._path()
-        if path is None:
-            return None
-        try:
-            data = path.read_bytes()
-        except OSError:
-            return None
-        digest, obj = data[:32], data[32:]
-        if len(data) <= 32 or hashlib.sha256(obj).digest() != digest:
-            return None
-        return obj
-
-    def _store_cached(self, obj: bytes) -> None:
-        path = self._path()
-        if path is None:
-            return
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.NamedTemporaryFile(dir=path.parent, delete=False) as tmp:
-                tmp.write(hashlib.sha256(obj).digest() + obj)
-            os.replace(tmp.name, path)  # atomic: a concurrent reader sees the old file or the whole new one
-        except OSError:
-            pass  # a read-only or full disk only costs the next process a compile
-
     def address(self, name: str) -> int:
         """The address of the exported function ``name`` (valid while this object lives)."""
         address = self._engine.get_function_address(name)
@@ -133,6 +71,6 @@ class NativeModule:
             raise LookupError(f"no function {name} in the compiled module")
         return address
 
-    def function(self, name: str, argtypes: list, restype=None):
-        """A ctypes function for the exported symbol ``name``."""
-        return ctypes.CFUNCTYPE(restype, *argtypes)(self.address(name))
+    def bind(self, entry: Entry):
+        """The exported function ``entry`` as a ctypes function with the ABI's prototype."""
+        return entry.ctypes_type()(self.address(entry.name))

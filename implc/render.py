@@ -59,8 +59,7 @@ def _shade(normals, forward, right, up, style: Style):
     return np.clip(rgb, 0.0, 1.0)
 
 
-def render_points(centers, normals, cell_size, bounds, *, size=1024, view: View = View(), style: Style = Style(),
-                  runtime: Runtime | None = None):
+def render_points(centers, normals, cell_size, bounds, *, size=1024, view: View = View(), style: Style = Style()):
     """An (size, size, 3) uint8 image of points with normals, each drawn as a square of its cell's size.
 
     Only the points that win a pixel are shaded; the z-buffer runs natively (``implc_splat``).
@@ -95,8 +94,7 @@ def render_points(centers, normals, cell_size, bounds, *, size=1024, view: View 
     winner = np.full(size * size, -1, dtype=np.int64)
     z = np.ascontiguousarray(z, dtype=np.float64)
     splat = np.ascontiguousarray(splat, dtype=np.int64)
-    runtime = runtime or Runtime()  # held in a local: its engine must outlive the call
-    runtime.splat(cx.ctypes.data, cy.ctypes.data, splat.ctypes.data, z.ctypes.data, len(z), size,
+    Runtime.shared().splat(cx.ctypes.data, cy.ctypes.data, splat.ctypes.data, z.ctypes.data, len(z), size,
                   zbuf.ctypes.data, winner.ctypes.data)
     image = np.empty((size * size, 3), dtype=np.uint8)
     image[:] = (np.asarray(style.background) * 255 + 0.5).astype(np.uint8)

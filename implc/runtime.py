@@ -1,26 +1,39 @@
-"""The generic native routines (subdivision, normals, octree, splatting) as callable ctypes functions.
+"""The generic native routines (subdivision, normals, octree, splatting) as callable functions.
 
-A :class:`Runtime` owns the JIT-compiled runtime module (see :mod:`implc.codegen.runtime`); like surface
-kernels it is cached on disk, so creating one costs a few milliseconds after the first time.
+A :class:`Runtime` owns the JIT-compiled runtime module (:mod:`implc.codegen.runtime_module`) and its
+entry points, bound from :mod:`implc.abi`. The module is the same for every surface, so a process needs
+one: :meth:`Runtime.shared` builds it on first use (from the disk cache after the first time) and hands
+the same one to every caller, which keeps its code alive for the life of the process.
 """
 
 from __future__ import annotations
 
-import ctypes
+import threading
 
-from .codegen.runtime import build_runtime
+from . import abi
+from .codegen.runtime_module import build_runtime
 from .jit import NativeModule
-
-_P = ctypes.c_void_p
-_N = ctypes.c_int64
 
 
 class Runtime:
+    """The runtime module's entry points: ``subdivide``, ``normals``, ``octree_insert``,
+    ``octree_traverse`` and ``splat`` (signatures in :mod:`implc.abi`)."""
+
+    _shared: Runtime | None = None
+    _lock = threading.Lock()
+
     def __init__(self):
         self.native = NativeModule(build_runtime, source_key="implc-runtime")
-        fn = self.native.function
-        self.subdivide = fn("implc_subdivide", [_P, _P, _N, _N, _N, _P, _P, _P, _P, _P, _P, _N, _P, _P], _N)
-        self.normals = fn("implc_normals", [_P, _P, _P, _P, _P, _N, _P])
-        self.octree_insert = fn("implc_octree_insert", [_P, _N, _P, _P, _N, _N], _N)
-        self.octree_traverse = fn("implc_octree_traverse", [_P, _N, _N, _P, _P], _N)
-        self.splat = fn("implc_splat", [_P, _P, _P, _P, _N, _N, _P, _P])
+        self.subdivide = self.native.bind(abi.SUBDIVIDE)
+        self.normals = self.native.bind(abi.NORMALS)
+        self.octree_insert = self.native.bind(abi.OCTREE_INSERT)
+        self.octree_traverse = self.native.bind(abi.OCTREE_TRAVERSE)
+        self.splat = self.native.bind(abi.SPLAT)
+
+    @classmethod
+    def shared(cls) -> Runtime:
+        """The process's runtime, built on first use (thread-safe)."""
+        with cls._lock:
+            if cls._shared is None:
+                cls._shared = cls()
+            return cls._shared

@@ -1,7 +1,10 @@
 """Scene files: plain Python modules defining ``surface`` (a SymPy expression) and ``bounds``.
 
-A scene is named by its file stem (looked up in the project's ``scenes/`` folder) or given as a path.
-Optional module-level names: ``depth`` (default voxelization depth) and ``view`` ((azimuth, elevation)).
+A scene is named by its file stem (looked up in the built-in scenes, :data:`SCENES_DIR`) or given as a
+path. Optional module-level names: ``depth`` (default voxelization depth) and ``view`` ((azimuth,
+elevation)). The built-in scenes are the project's top-level ``scenes/`` folder: a source checkout (or an
+editable install) reads its own, next to the package it imported; a wheel carries a copy inside the
+package (``implc/scene_files/``, put there by ``setup.py`` at build time).
 """
 
 from __future__ import annotations
@@ -12,12 +15,13 @@ from pathlib import Path
 
 
 def _scenes_dir() -> Path:
-    """The project's scenes/ folder (installed as the implc.scenes package)."""
-    try:
-        from . import scenes as package
-        return Path(next(iter(package.__path__)))
-    except ImportError:  # running from a source tree that was never installed
-        return Path(__file__).resolve().parent.parent / "scenes"
+    """The checkout's scenes/ beside this package when it is imported from a checkout, else the copy
+    inside the installed package."""
+    package = Path(__file__).resolve().parent
+    checkout = package.parent
+    if (checkout / "pyproject.toml").is_file() and (checkout / "scenes").is_dir():
+        return checkout / "scenes"
+    return package / "scene_files"
 
 
 SCENES_DIR = _scenes_dir()

@@ -2,7 +2,7 @@
 
 After the paper's Fig. 3, with today's means: a plan pass subdivides the root down to a coarse level
 and keeps the octants that may meet the surface; those become tasks, handed to workers as they go idle
-(a shared counter). Each worker runs the native depth-first subdivider (:mod:`implc.codegen.runtime`)
+(a shared counter). Each worker runs the native depth-first subdivider (:mod:`implc.codegen.subdivision`)
 on its task with the GIL released, then the native normal kernel. Finished tasks reach the storage
 backend strictly in task order (the paper's master's role, taken by whichever worker finds the next task
 ready, so that no extra thread competes for the cores): the voxels arrive in Morton order and the result
@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .codegen.kernels import GRADIENT_LIVE_KERNEL
-from .codegen.runtime import GEOMETRY_DOUBLES, MAX_DEPTH, STACK_ENTRIES
+from . import abi
+from .abi import GEOMETRY_DOUBLES, MAX_DEPTH, STACK_ENTRIES
 from .runtime import Runtime
 
 OUTPUT_CHUNK = 1 << 16
@@ -111,7 +111,7 @@ class _Worker:
     def __init__(self, depth):
         self.stack = np.zeros(4 * STACK_ENTRIES, dtype=np.int32)
         self.masks = np.full(STACK_ENTRIES, -1, dtype=np.int64)  # live-term mask of each stack entry
-        self.state = np.zeros(2, dtype=np.int64)
+        self.state = np.zeros(abi.SUBDIVIDE_STATE_WORDS, dtype=np.int64)
         self.stats = np.zeros(MAX_DEPTH + 2, dtype=np.int64)
         self.depth = depth
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
@@ -135,14 +135,14 @@ class Subdivider:
         self.geom = geometry(surface.bounds, depth)
         leaf = self.geom[6 + 3 * depth: 9 + 3 * depth]
         self.leaf_geom = np.concatenate([self.geom[:3], leaf])
-        self.box = surface.octant_address()
+        self.box = surface.kernel_address(abi.OCTANT)
         self.prune = int(bool(prune))
         self.refine = int(bool(refine_leaves))
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
-        self.fine_box = surface.octant_address(mean_value=True) if mean_value_levels > 0 else self.box
-        self.gradient = surface.native.address(GRADIENT_LIVE_KERNEL)
-        self.point = surface.native.address("implc_point")
+        self.fine_box = surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else self.box
+        self.gradient = surface.kernel_address(abi.GRADIENT_LIVE)
+        self.point = surface.kernel_address(abi.POINT)
         self.cancel = np.zeros(1, dtype=np.int32)
         self.geom_ptr, self.leaf_geom_ptr = self.geom.ctypes.data, self.leaf_geom.ctypes.data
         self.cancel_ptr = self.cancel.ctypes.data

@@ -1,36 +1,25 @@
 """``implc.compile``: a SymPy expression becomes a :class:`Surface` with native kernels.
 
-A Surface owns its tapes, its :class:`~implc.jit.NativeModule`, the runtime its voxelizations run on,
-and batched entry points that validate their arrays, run the compiled code over whole vectors and
+A Surface owns its tapes, its :class:`~implc.jit.NativeModule` (and the mean-value one, compiled on
+first use), its kernels bound from :mod:`implc.abi`, and batched entry points that validate their arrays, run the compiled code over whole vectors and
 handle the ragged tail.
 """
 
 from __future__ import annotations
 
-import ctypes
 import math
 
 import numpy as np
 import sympy
 
-from .codegen.kernels import (
-    MEAN_VALUE_KERNEL,
-    MEAN_VALUE_OCTANT_KERNEL,
-    OCTANT_KERNEL,
-    WIDTH,
-    WIDTHS,
-    build_mean_value_module,
-    build_module,
-)
+from . import abi
+from .codegen.kernels import WIDTH, WIDTHS, build_mean_value_module, build_module
 from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape
 from .jit import NativeModule, host_has_avx512
 from .lower import lower
 from .runtime import Runtime
-
-_P = ctypes.c_void_p
-_N = ctypes.c_int64
 
 DEFAULT_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
 ROUNDINGS = ("auto", "directed", "widen")
@@ -77,39 +66,48 @@ class Surface:
         self.gradient_tape = with_gradient(tape)
         self._key = (f"w{self.width}{'d' if directed else ''}" + self.tape.fingerprint()
                      + self.gradient_tape.fingerprint())
-        self.native = NativeModule(self._build, source_key=self._key)
-        self._point = self.native.function("implc_point", [_P, _P, _N])
-        self._gradient = self.native.function("implc_gradient", [_P, _P, _P, _N])
-        self._interval = self.native.function("implc_interval", [_P, _P, _P, _P, _N, _P, _P])
-        self.mean_value_native: NativeModule | None = None  # compiled on first use
-        self._interval_mvf = None
-        self._runtime: Runtime | None = None
+        self._native = NativeModule(self._build, source_key=self._key)
+        self._mean_value_native: NativeModule | None = None  # compiled on first use
+        self._bound: dict[str, object] = {}
+        self._point = self.kernel(abi.POINT)
+        self._gradient = self.kernel(abi.GRADIENT)
+        self._interval = self.kernel(abi.INTERVAL)
+
+    @property
+    def from_cache(self) -> bool:
+        """Whether this surface's kernels were loaded from the disk cache (no code generation, no LLVM)."""
+        return self._native.from_cache
 
     @property
     def runtime(self) -> Runtime:
-        """The generic native routines (subdivider, normals, octree) this surface's voxelizations run on,
-        loaded on first use and then kept: loading them costs about a millisecond per call otherwise."""
-        if self._runtime is None:
-            self._runtime = Runtime()
-        return self._runtime
+        """The generic native routines (subdivider, normals, octree) this surface's voxelizations run on:
+        the process's one :class:`~implc.runtime.Runtime`."""
+        return Runtime.shared()
 
-    def _mean_value_kernel(self):
-        """The mean-value interval kernel, compiled (or loaded from the cache) on first use."""
-        if self._interval_mvf is None:
-            self.mean_value_native = NativeModule(
+    def _module_of(self, entry: abi.Entry) -> NativeModule:
+        if entry in abi.SURFACE_ENTRIES:
+            return self._native
+        if entry not in abi.MEAN_VALUE_ENTRIES:
+            raise LookupError(f"{entry.name} is not a surface kernel")
+        if self._mean_value_native is None:  # about three times the others' size: compiled on first use
+            self._mean_value_native = NativeModule(
                 lambda: build_mean_value_module(self.tape, self.gradient_tape, width=self.width,
                                                 directed=self.directed),
                 source_key="mvf" + self._key)
-            self._interval_mvf = self.mean_value_native.function(MEAN_VALUE_KERNEL, [_P, _P, _P, _P, _N, _P, _P])
-        return self._interval_mvf
+        return self._mean_value_native
 
-    def octant_address(self, mean_value: bool = False) -> int:
-        """Address of the octant kernel (natural or mean-value enclosures of an octant's eight children),
-        for the native subdivider; valid while this Surface lives."""
-        if not mean_value:
-            return self.native.address(OCTANT_KERNEL)
-        self._mean_value_kernel()
-        return self.mean_value_native.address(MEAN_VALUE_OCTANT_KERNEL)
+    def kernel(self, entry: abi.Entry):
+        """The compiled kernel ``entry`` (one of :data:`implc.abi.SURFACE_ENTRIES` or
+        ``MEAN_VALUE_ENTRIES``) as a ctypes function with the ABI's prototype, valid while this Surface
+        lives. The low-level seam under :meth:`eval`, :meth:`interval` and the voxelizer: arrays go in as
+        addresses, ``n`` a multiple of :attr:`width`."""
+        if entry.name not in self._bound:
+            self._bound[entry.name] = self._module_of(entry).bind(entry)
+        return self._bound[entry.name]
+
+    def kernel_address(self, entry: abi.Entry) -> int:
+        """The address of the compiled kernel ``entry``, for native callers (the subdivider)."""
+        return self._module_of(entry).address(entry.name)
 
     # -- inspection ----------------------------------------------------------------------------
     @property
@@ -174,7 +172,7 @@ class Surface:
         if not np.all(lo <= hi):
             bad = int(np.argmin(np.all(lo <= hi, axis=1)))
             raise ValueError(f"box {bad} has lo > hi (or NaN): {lo[bad]} .. {hi[bad]}")
-        kernel = self._mean_value_kernel() if mean_value else self._interval
+        kernel = self.kernel(abi.INTERVAL_MVF) if mean_value else self._interval
         f_lo, f_hi = self._run(kernel, [lo, hi], [(), ()], extra=(None, None))
         return f_lo, f_hi
 

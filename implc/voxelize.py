@@ -149,9 +149,8 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
         max_voxels = int(available * 0.8 / bytes_per_voxel(storage))
 
     t_start = time.perf_counter()
-    runtime = surface.runtime
-    backend = OctreeBuilder(keep_normals=False, runtime=runtime) if storage == "octree" else make_backend(storage)
-    subdivider = Subdivider(surface, depth, workers, runtime, max_voxels=max_voxels,
+    backend = OctreeBuilder(keep_normals=False) if storage == "octree" else make_backend(storage)
+    subdivider = Subdivider(surface, depth, workers, surface.runtime, max_voxels=max_voxels,
                             mean_value_levels=min(mean_value_levels, depth), prune=prune,
                             refine_leaves=refine_leaves)
     cells, level = subdivider.plan()

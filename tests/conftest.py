@@ -1,8 +1,39 @@
-"""Shared fixtures: the over-inclusion report of the sampling tests."""
+"""Shared set-up: the suite's own kernel cache, no files outside temporary folders, and the over-inclusion
+report of the sampling tests.
+
+The suite never touches the user's kernel cache: every compile (in this process, its xdist workers and
+the subprocesses they start) goes to one temporary cache folder for the whole run, removed at the end.
+``IMPLC_TEST_CACHE_DIR`` names a folder to use instead (kept: a warm cache across runs).
+"""
+
+import os
+import shutil
+import sys
+import tempfile
 
 import pytest
+from hypothesis import settings
+
+sys.dont_write_bytecode = True  # nothing written into the checkout
+settings.register_profile("implc", database=None)  # no .hypothesis/ folder in the checkout
+settings.load_profile("implc")
 
 _RATIOS = {}
+
+
+def pytest_configure(config):
+    if hasattr(config, "workerinput"):  # an xdist worker: the controller has set the cache up
+        return
+    chosen = os.environ.get("IMPLC_TEST_CACHE_DIR")
+    folder = chosen or tempfile.mkdtemp(prefix="implc-test-cache-")
+    config._implc_cache = None if chosen else folder
+    os.environ["IMPLC_CACHE_DIR"] = folder  # inherited by xdist workers and subprocesses
+
+
+def pytest_unconfigure(config):
+    folder = getattr(config, "_implc_cache", None)
+    if folder:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from implc import io as voxel_io
+from implc import voxel_files
 from implc.cli import main
 
 
@@ -33,7 +33,7 @@ def test_voxelize_info_render_round_trip(tmp_path, capsys):
     assert main(["voxelize", "paper_blobs", "--depth", "6", "--workers", "2", "-o", str(out)]) == 0
     summary = capsys.readouterr().out
     assert "voxels at 64³" in summary and "yield" in summary
-    voxels = voxel_io.load_npz(out)
+    voxels = voxel_files.load_npz(out)
     assert voxels.depth == 6 and len(voxels) > 0
     assert main(["info", str(out)]) == 0
     info = capsys.readouterr().out
@@ -52,7 +52,7 @@ def test_voxelize_expr_and_formats(tmp_path):
         assert out.stat().st_size > 0
     dense = np.load(tmp_path / "s.npy")
     assert dense.shape == (32, 32, 32) and dense.dtype == bool
-    assert dense.sum() == len(voxel_io.load_npz(tmp_path / "s.npz"))
+    assert dense.sum() == len(voxel_files.load_npz(tmp_path / "s.npz"))
 
 
 def test_render_scene_directly_with_perspective(tmp_path):

@@ -8,6 +8,8 @@ import zlib
 import numpy as np
 import pytest
 import sympy
+from implc.codegen.interval_rules import IntervalEmitter
+from implc.reference import INTERVAL_RULES as RULES
 from sympy import (
     Abs,
     Max,
@@ -32,9 +34,7 @@ from sympy import (
 
 import implc
 from implc import ir, reference
-from implc.codegen.interval import IntervalEmitter
 from implc.gradient import DERIVATIVE_RULES
-from implc.interval import RULES
 from implc.jit import host_has_avx512
 from implc.symbols import phi, r, theta, x, y, z
 

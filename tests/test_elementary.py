@@ -1,16 +1,14 @@
 """The vector elementary functions against 60-digit values: their error stays within the proven bound,
 far inside the widening the interval rules apply, and special inputs get the C library's answer."""
 
-import ctypes
-
 import mpmath
 import numpy as np
 import pytest
 from llvmlite import ir
 
-from implc import rounding
+from implc import abi, rounding
 from implc.codegen import elementary
-from implc.codegen.control import for_range
+from implc.codegen.control import define, for_range
 from implc.codegen.vector import VectorBuilder
 from implc.jit import NativeModule
 
@@ -21,14 +19,13 @@ PROVEN_SIN = 5e-16
 def _run(name, width, *args):
     """elementary.<name> over the lanes of ``args`` (equal-length arrays, a multiple of width long)."""
     arity = len(args)
+    entry = abi.Entry("f", tuple((f"in{k}", "f64*") for k in range(arity)) + (("out", "f64*"), ("n", "i64")))
 
     def build():
         module = ir.Module(name="elementary_test")
         double = ir.DoubleType()
         i64 = ir.IntType(64)
-        fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [ir.PointerType(double)] * (arity + 1) + [i64]),
-                         name="f")
-        b = ir.IRBuilder(fn.append_basic_block("entry"))
+        fn, b = define(module, entry)
         *inputs, out, n = fn.args
         vector = ir.PointerType(ir.VectorType(double, width))
         with for_range(b, b.sdiv(n, ir.Constant(i64, width))) as i:
@@ -38,7 +35,7 @@ def _run(name, width, *args):
         b.ret_void()
         return str(module)
     native = NativeModule(build, source_key=f"elementary-{name}-test-w{width}")
-    f = native.function("f", [ctypes.c_void_p] * (arity + 1) + [ctypes.c_int64])
+    f = native.bind(entry)
     arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in args]
     out = np.empty_like(arrays[0])
     f(*[a.ctypes.data for a in arrays], out.ctypes.data, len(out))

@@ -17,21 +17,21 @@ def test_second_compile_loads_from_the_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("IMPLC_CACHE_DIR", str(tmp_path))
     expr = sympy.sin(x * 3) + y * z
     first = implc.compile(expr)
-    assert not first.native.from_cache
+    assert not first.from_cache
     assert len(list(tmp_path.glob("*.o"))) == 1
     second = implc.compile(expr)
-    assert second.native.from_cache
+    assert second.from_cache
     pts = np.random.default_rng(0).uniform(-1, 1, (100, 3))
     np.testing.assert_array_equal(first.eval(pts), second.eval(pts))
     other = implc.compile(expr + 1)
-    assert not other.native.from_cache  # a different surface is a different key
+    assert not other.from_cache  # a different surface is a different key
 
 
 def test_another_process_reuses_the_cache(tmp_path):
     code = textwrap.dedent("""
         import sympy, implc
         s = implc.compile(sympy.cos(implc.x) * implc.y - implc.z)
-        print(s.native.from_cache)
+        print(s.from_cache)
     """)
     env = {"IMPLC_CACHE_DIR": str(tmp_path), "PATH": "/usr/bin:/bin"}
     runs = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
@@ -41,8 +41,8 @@ def test_another_process_reuses_the_cache(tmp_path):
 
 def test_cache_can_be_disabled(tmp_path, monkeypatch):
     monkeypatch.setenv("IMPLC_CACHE_DIR", "off")
-    assert not implc.compile(x + 2 * y).native.from_cache
-    assert not implc.compile(x + 2 * y).native.from_cache
+    assert not implc.compile(x + 2 * y).from_cache
+    assert not implc.compile(x + 2 * y).from_cache
 
 
 def test_a_corrupt_cache_entry_is_not_trusted_blindly(tmp_path, monkeypatch):
@@ -51,7 +51,7 @@ def test_a_corrupt_cache_entry_is_not_trusted_blindly(tmp_path, monkeypatch):
     (entry,) = tmp_path.glob("*.o")
     entry.write_bytes(b"not an object file")
     s = implc.compile(x - y * 5)
-    assert not s.native.from_cache
+    assert not s.from_cache
     np.testing.assert_array_equal(s.eval(np.array([[1.0, 1.0, 0.0]])), [-4.0])
 
 

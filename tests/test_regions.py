@@ -37,25 +37,22 @@ def test_nothing_to_prune():
 def test_gradient_over_all_terms_is_the_full_gradient():
     """implc_gradient_live with every term live computes the full gradient; with none live, the part of F
     outside the terms (here a constant: zero gradient)."""
-    import ctypes
-
     import numpy as np
 
     import implc
-    from implc.codegen.kernels import GRADIENT_LIVE_KERNEL
-    P, N = ctypes.c_void_p, ctypes.c_int64
+    from implc import abi
     rng = np.random.default_rng(4)
     pts = np.ascontiguousarray(rng.uniform(-1, 1, (64, 3)))
     union = shapes.union(*[shapes.sphere(Rational(1, 5), (Rational(k, 5), 0, 0)) for k in range(-2, 3)])
     for expr in (scene.load("paper_blobs").surface, union):
         s = implc.compile(expr)
-        live = s.native.function(GRADIENT_LIVE_KERNEL, [P, P, P, N, N])
+        live = s.kernel(abi.GRADIENT_LIVE)
         value, grad = np.empty(64), np.empty((64, 3))
         live(pts.ctypes.data, value.ctypes.data, grad.ctypes.data, 64, -1)
         np.testing.assert_allclose(value, s.eval(pts), rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(grad, s.gradient(pts), rtol=1e-12, atol=1e-15)
     s = implc.compile(scene.load("paper_blobs").surface)
-    s.native.function(GRADIENT_LIVE_KERNEL, [P, P, P, N, N])(pts.ctypes.data, value.ctypes.data, grad.ctypes.data, 64, 0)
+    s.kernel(abi.GRADIENT_LIVE)(pts.ctypes.data, value.ctypes.data, grad.ctypes.data, 64, 0)
     np.testing.assert_array_equal(value, 0.25)
     np.testing.assert_array_equal(grad, 0.0)
 
@@ -64,20 +61,17 @@ def test_normals_kernel_without_terms_matches_the_gradient():
     """With nothing to prune, implc_gradient_live evaluates the gradient tape with the vector sin, cos and
     atan2: within rounding of Surface.gradient (C library) away from the z axis, where theta's
     derivatives blow up."""
-    import ctypes
-
     import numpy as np
 
     import implc
-    from implc.codegen.kernels import GRADIENT_LIVE_KERNEL
+    from implc import abi
     from implc.symbols import phi, r, theta
-    P, N = ctypes.c_void_p, ctypes.c_int64
     rng = np.random.default_rng(5)
     pts = np.ascontiguousarray(rng.uniform(-1, 1, (256, 3)))
     pts = pts[np.hypot(pts[:, 0], pts[:, 1]) > 0.05][:200]
     s = implc.compile(sympy.sin(4 * theta) * sympy.sin(8 * phi) - r + sympy.cos(3 * phi) / 4)
     value, grad = np.empty(len(pts)), np.empty((len(pts), 3))
-    s.native.function(GRADIENT_LIVE_KERNEL, [P, P, P, N, N])(pts.ctypes.data, value.ctypes.data, grad.ctypes.data,
+    s.kernel(abi.GRADIENT_LIVE)(pts.ctypes.data, value.ctypes.data, grad.ctypes.data,
                                                              len(pts), -1)
     np.testing.assert_allclose(value, s.eval(pts), rtol=1e-12, atol=1e-13)
     np.testing.assert_allclose(grad, s.gradient(pts), rtol=1e-10, atol=1e-11)
@@ -90,13 +84,14 @@ def test_mean_value_form_over_the_live_terms_encloses_and_never_loosens(case):
     import numpy as np
 
     import implc
+    from implc import abi
     if case == "paper_blobs":
         expr = scene.load("paper_blobs").surface
     else:
         expr = shapes.union(*[shapes.sphere(Rational(1, 5), (Rational(k, 5), Rational(k % 2, 7), 0))
                               for k in range(-3, 4)])
     s = implc.compile(expr)
-    natural, mvf = s._interval, s._mean_value_kernel()
+    natural, mvf = s.kernel(abi.INTERVAL), s.kernel(abi.INTERVAL_MVF)
     every_term = (1 << len(plan_regions(s.tape).terms)) - 1
     rng = np.random.default_rng(6)
     size = 1 / 16

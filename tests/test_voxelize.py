@@ -149,14 +149,12 @@ def test_octant_kernel_decides_as_the_interval_kernel_on_the_children(name, comp
     """implc_octant builds an octant's eight children in registers (and calls the C library once for
     children that differ only in axes a value does not depend on): its keep bits and child masks must be
     those of implc_interval on the same eight boxes."""
-    import ctypes
-
+    from implc import abi
     from implc.subdivide import geometry
     s = compiled[name]
     depth = 7
     geom = geometry(s.bounds, depth)
-    octant = ctypes.CFUNCTYPE(ctypes.c_int32, *[ctypes.c_void_p] * 2, ctypes.c_int64, ctypes.c_int64,
-                              ctypes.c_void_p)(s.octant_address())
+    octant = s.kernel(abi.OCTANT)
     parents = np.unique(implc.voxelize(s, depth, storage="coords").coords >> 1, axis=0)
     rng = np.random.default_rng(1)
     cells = parents[rng.choice(len(parents), min(len(parents), 300), replace=False)].astype(np.int32)
@@ -169,7 +167,7 @@ def test_octant_kernel_decides_as_the_interval_kernel_on_the_children(name, comp
     for cell in cells:
         index = 2 * cell + bits
         lo, hi = origin + index * h - pad, origin + (index + 1) * h + pad
-        s._interval(lo.ctypes.data, hi.ctypes.data, f_lo.ctypes.data, f_hi.ctypes.data, 8, all_live.ctypes.data,
+        s.kernel(abi.INTERVAL)(lo.ctypes.data, hi.ctypes.data, f_lo.ctypes.data, f_hi.ctypes.data, 8, all_live.ctypes.data,
                     expected_masks.ctypes.data)
         expected = sum(1 << c for c in range(8) if f_lo[c] <= 0 <= f_hi[c])
         kept = octant(geom.ctypes.data, np.ascontiguousarray(cell).ctypes.data, depth, -1, masks.ctypes.data)

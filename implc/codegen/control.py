@@ -13,6 +13,7 @@ from llvmlite import ir
 I1 = ir.IntType(1)
 I32 = ir.IntType(32)
 I64 = ir.IntType(64)
+DOUBLE = ir.DoubleType()
 
 
 def const(type_, value):
@@ -129,3 +130,43 @@ def while_true(builder: ir.IRBuilder):
 def if_(builder: ir.IRBuilder, condition):
     with builder.if_then(condition):
         yield
+
+
+# -- exported functions and memory access by index -----------------------------------------------------
+def define(module: ir.Module, entry):
+    """The function of an :class:`implc.abi.Entry` in ``module``, and a builder at its entry block."""
+    fn = ir.Function(module, entry.llvm_type(), name=entry.name)
+    return fn, ir.IRBuilder(fn.append_basic_block("entry"))
+
+
+def intrinsic(module: ir.Module, name: str, arity: int, type_=DOUBLE):
+    """The LLVM intrinsic ``name`` taking ``arity`` values of ``type_`` and returning one (declared once)."""
+    fn = module.globals.get(name)
+    if fn is None:
+        fn = ir.Function(module, ir.FunctionType(type_, [type_] * arity), name=name)
+    return fn
+
+
+def at(b: ir.IRBuilder, ptr, index):
+    """&ptr[index] (index an i64 value or a Python int)."""
+    return b.gep(ptr, [index if isinstance(index, ir.Value) else const(I64, index)], inbounds=True)
+
+
+def load_at(b: ir.IRBuilder, ptr, index):
+    return b.load(at(b, ptr, index))
+
+
+def store_at(b: ir.IRBuilder, value, ptr, index):
+    b.store(value, at(b, ptr, index))
+
+
+def bump(b: ir.IRBuilder, ptr, index, amount=1):
+    """ptr[index] += amount (an i64 counter)."""
+    slot = at(b, ptr, index)
+    b.store(b.add(b.load(slot), const(I64, amount)), slot)
+
+
+def copy_words(b: ir.IRBuilder, src, src_at: int, dst, dst_at: int, count: int):
+    """dst[dst_at + i] = src[src_at + i] for i < count."""
+    with for_range(b, const(I64, count)) as i:
+        store_at(b, load_at(b, src, b.add(i, const(I64, src_at))), dst, b.add(i, const(I64, dst_at)))

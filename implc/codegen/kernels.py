@@ -1,6 +1,6 @@
 """Kernel assembly: the exported, batched C-ABI functions of one surface's LLVM module.
 
-Every kernel walks ``n`` items (``n`` a multiple of :data:`WIDTH`) in vectors of WIDTH lanes, reading
+Signatures are declared in :mod:`implc.abi`. Every batched kernel walks ``n`` items (``n`` a multiple of :data:`WIDTH`) in vectors of WIDTH lanes, reading
 points and boxes as row-major (n, 3) float64 arrays:
 
 - ``implc_point(pts, out, n)``: F at each point.
@@ -22,7 +22,7 @@ vector registers from the octant's cell index:
 - ``implc_octant(geom, cell, level, live_in, live_out) -> i32`` (and ``implc_octant_mvf``): ``cell`` points
   to the octant's (i, j, k) (int32) one level above ``level``; child c (x bit | y bit << 1 | z bit << 2)
   is the box [o + i·h − pad, o + (i + 1)·h + pad] per axis, i = 2·cell + bit, with the origin o, the pad and
-  the cell size h of ``level`` read from ``geom`` (:data:`implc.codegen.runtime.GEOMETRY_DOUBLES`). Returns
+  the cell size h of ``level`` read from ``geom`` (:data:`implc.abi.GEOMETRY_DOUBLES`). Returns
   bit c set where child c's enclosure contains 0; writes the children's live masks to ``live_out[8]``.
 """
 
@@ -30,12 +30,15 @@ from __future__ import annotations
 
 from llvmlite import ir
 
+from .. import abi
 from ..ir import Tape
 from ..regions import plan_regions
-from .control import for_range
-from .interval import emit_interval, emit_interval_regions, emit_mean_value
+from .control import define, for_range
+from .interval_rules import emit_interval
+from .mean_value import emit_mean_value
 from .point import emit_point
 from .pruned_gradient import emit_pruned_gradient
+from .pruned_interval import emit_interval_regions
 from .pruned_mean_value import emit_pruned_mean_value
 from .vector import DOUBLE, I64, VectorBuilder, broadcast
 
@@ -43,16 +46,6 @@ WIDTH = 8
 """Default lanes per vector: eight boxes (an octant's children) per kernel step. 1, 2 and 4 are allowed
 (``implc.compile(..., vector_width=1)``), to measure what the vectors bring."""
 WIDTHS = (1, 2, 4, 8)
-
-KERNELS = {  # (pointer arguments before n, pointer arguments after n)
-    "implc_point": (2, 0),
-    "implc_gradient": (3, 0),
-    "implc_interval": (4, 2),
-    "implc_interval_mvf": (4, 2),
-}
-MEAN_VALUE_KERNEL = "implc_interval_mvf"
-OCTANT_KERNEL, MEAN_VALUE_OCTANT_KERNEL = "implc_octant", "implc_octant_mvf"
-GRADIENT_LIVE_KERNEL = "implc_gradient_live"
 
 _PTR = ir.PointerType(DOUBLE)
 
@@ -95,12 +88,13 @@ def _store(builder, base, block, vector, width):
 _PI64 = ir.PointerType(I64)
 
 
-def _kernel(module, name, width):
-    before, after = KERNELS[name]
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_PTR] * before + [I64] + [_PI64] * after), name=name)
+def _kernel(module, entry, width):
+    """A batched kernel: its function (the arrays before ``n`` marked noalias), a builder and the number
+    of vector blocks, n / width."""
+    fn, builder = define(module, entry)
+    before = entry.param_names.index("n")
     for arg in fn.args[:before]:
         arg.add_attribute("noalias")
-    builder = ir.IRBuilder(fn.append_basic_block("entry"))
     blocks = builder.sdiv(fn.args[before], ir.Constant(I64, width))
     return fn, builder, blocks
 
@@ -125,9 +119,9 @@ def _parent_mask(builder, live_in, block, width):
     return builder.load(ptr)
 
 
-def _interval_kernel(module, name, width, directed, enclose):
-    """Emit the batched kernel ``name(lo, hi, out_lo, out_hi, n, live_in, live_out)`` over ``enclose``."""
-    fn, b, blocks = _kernel(module, name, width)
+def _interval_kernel(module, entry, width, directed, enclose):
+    """Emit the batched kernel ``entry(lo, hi, out_lo, out_hi, n, live_in, live_out)`` over ``enclose``."""
+    fn, b, blocks = _kernel(module, entry, width)
     lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
     with for_range(b, blocks) as i:
         vb = VectorBuilder(b, width, directed)
@@ -139,12 +133,11 @@ def _interval_kernel(module, name, width, directed, enclose):
     b.ret_void()
 
 
-def _octant_kernel(module, name, width, directed, enclose):
-    """Emit ``name`` (see the module docstring); ``enclose(vb, lo, hi, live_in) -> (lo, hi, masks)``."""
+def _octant_kernel(module, entry, width, directed, enclose):
+    """Emit ``entry`` (see the module docstring); ``enclose(vb, lo, hi, live_in) -> (lo, hi, masks)``."""
     i32 = ir.IntType(32)
-    fn = ir.Function(module, ir.FunctionType(i32, [_PTR, ir.PointerType(i32), I64, I64, _PI64]), name=name)
+    fn, b = define(module, entry)
     geom, cell, level, live_in, live_out = fn.args
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
     vb = VectorBuilder(b, width, directed)
     vb.octant_lanes = True  # lane c: child first + c (first a multiple of the width)
     ivec = ir.VectorType(i32, width)
@@ -194,14 +187,14 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     interval arithmetic with AVX-512 embedded rounding (see :class:`~implc.codegen.vector.VectorBuilder`)."""
     module = ir.Module(name=name)
 
-    fn, b, blocks = _kernel(module, "implc_point", width)
+    fn, b, blocks = _kernel(module, abi.POINT, width)
     pts, out, _ = fn.args
     with for_range(b, blocks) as i:
         (value,) = emit_point(VectorBuilder(b, width), value_tape, _load_xyz(b, pts, i, width))
         _store(b, out, i, value, width)
     b.ret_void()
 
-    fn, b, blocks = _kernel(module, "implc_gradient", width)
+    fn, b, blocks = _kernel(module, abi.GRADIENT, width)
     pts, out_value, out_grad, _ = fn.args
     with for_range(b, blocks) as i:
         value, *grad = emit_point(VectorBuilder(b, width), gradient_tape, _load_xyz(b, pts, i, width))
@@ -209,8 +202,7 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
         _store_xyz(b, out_grad, i, grad, width)
     b.ret_void()
 
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_PTR] * 3 + [I64, I64]), name=GRADIENT_LIVE_KERNEL)
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
+    fn, b = define(module, abi.GRADIENT_LIVE)
     pts, out_value, out_grad, n, live = fn.args
     plan = plan_regions(value_tape)
     with for_range(b, b.sdiv(n, ir.Constant(I64, width))) as i:
@@ -224,8 +216,8 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     b.ret_void()
 
     enclose = _natural(value_tape, plan)
-    _interval_kernel(module, "implc_interval", width, directed, enclose)
-    _octant_kernel(module, OCTANT_KERNEL, width, directed, enclose)
+    _interval_kernel(module, abi.INTERVAL, width, directed, enclose)
+    _octant_kernel(module, abi.OCTANT, width, directed, enclose)
     return str(module)
 
 
@@ -240,6 +232,6 @@ def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "
         if plan.fold is not None:  # over the live terms only, and each child gets its own mask
             return emit_pruned_mean_value(vb, value_tape, plan, lo, hi, live_in)
         return (*emit_mean_value(vb, value_tape, gradient_tape, lo, hi), broadcast(vb.b, live_in, vb.width))
-    _interval_kernel(module, MEAN_VALUE_KERNEL, width, directed, enclose)
-    _octant_kernel(module, MEAN_VALUE_OCTANT_KERNEL, width, directed, enclose)
+    _interval_kernel(module, abi.INTERVAL_MVF, width, directed, enclose)
+    _octant_kernel(module, abi.OCTANT_MVF, width, directed, enclose)
     return str(module)

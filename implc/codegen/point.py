@@ -13,7 +13,7 @@ _LIBM_UNARY = {"exp": "exp", "log": "log", "sin": "sin", "cos": "cos", "tan": "t
 
 
 def powi(vb: VectorBuilder, a, n: int):
-    """a ** n by repeated squaring, the product order of :func:`implc.interval.powi_point`."""
+    """a ** n by repeated squaring, the product order of :func:`implc.reference.powi_point`."""
     result = None
     base = a
     while n:

@@ -3,7 +3,7 @@
 Where a tape's chain is a fold over terms (:class:`implc.regions.Fold`), F equals the fold over the terms
 live in a box's parent at every point of the box (a dead term is 0 there, or never the extremum), so the
 mean-value form F(c) + ∇F(B)·(B − c) may be taken of that smaller function: its value at the centre and
-its natural enclosure come from the pruned interval fold (:func:`implc.codegen.interval.emit_interval_regions`,
+its natural enclosure come from the pruned interval fold (:func:`implc.codegen.pruned_interval.emit_interval_regions`,
 which also gives each box its own live mask), and ∇F(B) from a fold over the live terms of interval dual
 numbers (value and three partials, each an interval): each term's on its own gradient tape
 (:func:`implc.gradient.with_gradient` of :meth:`implc.ir.Tape.subtape`), combined by :data:`DUAL_RULES`,
@@ -14,13 +14,9 @@ from __future__ import annotations
 
 from ..gradient import with_gradient
 from .fold import IDENTITY, fold_live_terms
-from .interval import (
-    IntervalEmitter,
-    box_centre,
-    emit_interval_outputs,
-    emit_interval_regions,
-    intersect_mean_value,
-)
+from .interval_rules import IntervalEmitter, emit_interval_outputs
+from .mean_value import box_centre, intersect_mean_value
+from .pruned_interval import emit_interval_regions
 from .vector import VectorBuilder
 
 
@@ -65,7 +61,7 @@ each an interval (lo, hi)."""
 
 def emit_pruned_mean_value(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask):
     """(lo, hi, masks): the natural enclosure over the live terms intersected with their mean-value form,
-    and each box's live mask (as :func:`implc.codegen.interval.emit_interval_regions`)."""
+    and each box's live mask (as :func:`implc.codegen.pruned_interval.emit_interval_regions`)."""
     em = IntervalEmitter(vb)
     nat_lo, nat_hi, masks = emit_interval_regions(vb, tape, plan, lo_coords, hi_coords, live_mask)
     centre = box_centre(vb, lo_coords, hi_coords)

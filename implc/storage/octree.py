@@ -3,32 +3,24 @@
 Nodes are rows of an (M, 8) int32 array: entry c of node n is its child in octant c (x bit | y bit << 1 |
 z bit << 2), 0 meaning empty (the root, node 0, is nobody's child). Nodes at level depth − 1 hold
 ``voxel index + 1`` instead: the payload, a normal per voxel, lives in ``normals``. Insertion and
-traversal run natively (:mod:`implc.codegen.runtime`).
+traversal run natively (:mod:`implc.codegen.octree_index`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..codegen.runtime import DEPTH, LEVEL_COUNTS, NODE_COUNT, OCTREE_STATE_WORDS
+from ..abi import DEPTH, LEVEL_COUNTS, NODE_COUNT, OCTREE_STATE_WORDS
 from ..runtime import Runtime
 
 
 class Octree:
-    def __init__(self, depth: int, bounds, nodes: np.ndarray, normals: np.ndarray, level_counts: np.ndarray,
-                 runtime: Runtime | None = None):
+    def __init__(self, depth: int, bounds, nodes: np.ndarray, normals: np.ndarray, level_counts: np.ndarray):
         self.depth = depth
         self.bounds = bounds
         self.nodes = nodes
         self.normals = normals
         self.level_counts = level_counts
-        self._runtime = runtime
-
-    @property
-    def runtime(self) -> Runtime:
-        if self._runtime is None:
-            self._runtime = Runtime()
-        return self._runtime
 
     def __len__(self) -> int:
         return len(self.normals)
@@ -67,7 +59,7 @@ class Octree:
         coords = np.empty((count, 3), dtype=np.uint32)
         payload = np.empty(count, dtype=np.int64)
         nodes = np.ascontiguousarray(self.nodes, dtype=np.int32)
-        got = self.runtime.octree_traverse(nodes.ctypes.data, self.depth, level, coords.ctypes.data,
+        got = Runtime.shared().octree_traverse(nodes.ctypes.data, self.depth, level, coords.ctypes.data,
                                            payload.ctypes.data)
         assert got == count, f"octree traversal found {got} nodes at level {level}, expected {count}"
         return coords, payload
@@ -93,13 +85,12 @@ class OctreeBuilder:
     ``finish()`` (the voxelizer does, to avoid a second copy).
     """
 
-    def __init__(self, keep_normals: bool = True, runtime: Runtime | None = None):
+    def __init__(self, keep_normals: bool = True):
         self.keep_normals = keep_normals
-        self.runtime = runtime
 
     def begin(self, depth, bounds):
         self.depth, self.bounds = depth, bounds
-        self.runtime = self.runtime or Runtime()
+        self.runtime = Runtime.shared()
         self.nodes = np.zeros((1024, 8), dtype=np.int32)
         self.state = np.zeros(OCTREE_STATE_WORDS, dtype=np.int64)
         self.state[NODE_COUNT] = 1  # the root
@@ -139,6 +130,6 @@ class OctreeBuilder:
         used = int(self.state[NODE_COUNT])
         normals = np.concatenate(self._normals) if self._normals else np.zeros((0, 3), np.float32)
         counts = self.state[LEVEL_COUNTS: LEVEL_COUNTS + self.depth + 1].copy()
-        tree = Octree(self.depth, self.bounds, self.nodes[:used], normals, counts, self.runtime)
+        tree = Octree(self.depth, self.bounds, self.nodes[:used], normals, counts)
         self.nodes = self._normals = None
         return tree

@@ -5,8 +5,7 @@ import pytest
 from plyfile import PlyData
 
 import implc
-from implc import io as voxel_io
-from implc import shapes
+from implc import shapes, voxel_files
 
 
 @pytest.fixture(scope="module")
@@ -15,8 +14,8 @@ def voxels():
 
 
 def test_npz_round_trip_is_exact(voxels, tmp_path):
-    voxel_io.save(voxels, tmp_path / "v.npz")
-    back = voxel_io.load_npz(tmp_path / "v.npz")
+    voxel_files.save(voxels, tmp_path / "v.npz")
+    back = voxel_files.load_npz(tmp_path / "v.npz")
     np.testing.assert_array_equal(back.coords, voxels.coords)
     np.testing.assert_array_equal(back.normals, voxels.normals)
     assert back.depth == voxels.depth and back.bounds == voxels.bounds
@@ -25,7 +24,7 @@ def test_npz_round_trip_is_exact(voxels, tmp_path):
 
 
 def test_ply_reads_back_with_plyfile(voxels, tmp_path):
-    voxel_io.save(voxels, tmp_path / "v.ply")
+    voxel_files.save(voxels, tmp_path / "v.ply")
     ply = PlyData.read(str(tmp_path / "v.ply"))
     vertex = ply["vertex"]
     assert ply.text is False and vertex.count == len(voxels)
@@ -36,16 +35,16 @@ def test_ply_reads_back_with_plyfile(voxels, tmp_path):
 
 
 def test_dense_npy_is_the_occupancy(voxels, tmp_path):
-    voxel_io.save(voxels, tmp_path / "v.npy")
+    voxel_files.save(voxels, tmp_path / "v.npy")
     np.testing.assert_array_equal(np.load(tmp_path / "v.npy"), voxels.to_dense())
 
 
 def test_bad_files_are_named(tmp_path):
     (tmp_path / "other.npz").write_bytes(b"PK\x03\x04 nonsense")
-    with pytest.raises(voxel_io.VoxelFileError, match="cannot read"):
-        voxel_io.load_npz(tmp_path / "other.npz")
+    with pytest.raises(voxel_files.VoxelFileError, match="cannot read"):
+        voxel_files.load_npz(tmp_path / "other.npz")
     np.savez(tmp_path / "foreign.npz", a=np.zeros(3))
-    with pytest.raises(voxel_io.VoxelFileError, match="not an implc voxel file"):
-        voxel_io.load_npz(tmp_path / "foreign.npz")
+    with pytest.raises(voxel_files.VoxelFileError, match="not an implc voxel file"):
+        voxel_files.load_npz(tmp_path / "foreign.npz")
     with pytest.raises(ValueError, match="unknown output format"):
-        voxel_io.save(None, tmp_path / "v.obj")
+        voxel_files.save(None, tmp_path / "v.obj")

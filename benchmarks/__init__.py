@@ -1,1 +1,0 @@
-"""implc's benchmark suite (installed as implc.benchmarks; run it with `implc bench`)."""

@@ -1,0 +1,105 @@
+"""The native ABI: every exported entry point and the memory layouts native code shares with Python.
+
+Each entry point is declared once, here: its name, its parameters with their kinds, its return kind.
+The code generators declare functions from :meth:`Entry.llvm_type` (and call through function pointers
+of that type); :class:`implc.jit.NativeModule` binds them with :meth:`Entry.ctypes_type`. A signature
+cannot differ between the two sides, and a call through ctypes cannot disagree with the code it calls.
+
+Pointers cross as plain addresses (``ctypes.c_void_p``: numpy's ``.ctypes.data`` or None for NULL).
+"""
+
+from __future__ import annotations
+
+import ctypes
+from dataclasses import dataclass
+
+from llvmlite import ir
+
+# -- kinds of parameters and results --------------------------------------------------------------
+_LLVM_KINDS = {
+    "i32": ir.IntType(32),
+    "i64": ir.IntType(64),
+    "f64*": ir.PointerType(ir.DoubleType()),
+    "f32*": ir.PointerType(ir.FloatType()),
+    "i32*": ir.PointerType(ir.IntType(32)),
+    "i64*": ir.PointerType(ir.IntType(64)),
+    "fn*": ir.PointerType(ir.IntType(8)),  # the address of another entry point
+}
+_CTYPES_KINDS = {"i32": ctypes.c_int32, "i64": ctypes.c_int64}  # every pointer kind: c_void_p
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One exported native function: ``name(params...) -> returns`` (None: void)."""
+
+    name: str
+    params: tuple[tuple[str, str], ...]  # (parameter name, kind)
+    returns: str | None = None
+
+    def llvm_type(self) -> ir.FunctionType:
+        ret = ir.VoidType() if self.returns is None else _LLVM_KINDS[self.returns]
+        return ir.FunctionType(ret, [_LLVM_KINDS[kind] for _, kind in self.params])
+
+    def ctypes_type(self):
+        def ctype(kind):
+            return _CTYPES_KINDS.get(kind, ctypes.c_void_p)
+        ret = None if self.returns is None else ctype(self.returns)
+        return ctypes.CFUNCTYPE(ret, *[ctype(kind) for _, kind in self.params])
+
+    @property
+    def param_names(self) -> list[str]:
+        return [name for name, _ in self.params]
+
+
+def _entry(name, params: str, returns=None) -> Entry:
+    """``params``: "name:kind name:kind ..." (kinds as in _LLVM_KINDS)."""
+    return Entry(name, tuple(tuple(p.split(":")) for p in params.split()), returns)
+
+
+# -- a surface's kernels (implc.codegen.kernels); n is a multiple of the vector width -------------------
+POINT = _entry("implc_point", "pts:f64* out:f64* n:i64")
+GRADIENT = _entry("implc_gradient", "pts:f64* out_value:f64* out_grad:f64* n:i64")
+GRADIENT_LIVE = _entry("implc_gradient_live", "pts:f64* out_value:f64* out_grad:f64* n:i64 live:i64")
+INTERVAL = _entry("implc_interval", "lo:f64* hi:f64* out_lo:f64* out_hi:f64* n:i64 live_in:i64* live_out:i64*")
+OCTANT = _entry("implc_octant", "geom:f64* cell:i32* level:i64 live_in:i64 live_out:i64*", "i32")
+SURFACE_ENTRIES = (POINT, GRADIENT, GRADIENT_LIVE, INTERVAL, OCTANT)
+
+# ... and the mean-value module, compiled on first use
+INTERVAL_MVF = Entry("implc_interval_mvf", INTERVAL.params)
+OCTANT_MVF = Entry("implc_octant_mvf", OCTANT.params, OCTANT.returns)
+MEAN_VALUE_ENTRIES = (INTERVAL_MVF, OCTANT_MVF)
+
+# -- the generic runtime module (implc.codegen.runtime_module), one per process ------------------------
+SUBDIVIDE = _entry("implc_subdivide",
+                   "octant:fn* fine_octant:fn* fine_level:i64 prune:i64 refine:i64 geom:f64* stack:i32* "
+                   "masks:i64* state:i64* out:i32* out_masks:i64* capacity:i64 stats:i64* cancel:i32*", "i64")
+NORMALS = _entry("implc_normals", "gradient_live:fn* point:fn* leaf_geom:f64* coords:i32* masks:i64* n:i64 out:f32*")
+OCTREE_INSERT = _entry("implc_octree_insert", "nodes:i32* node_capacity:i64 state:i64* coords:i32* n:i64 "
+                                              "first_index:i64", "i64")
+OCTREE_TRAVERSE = _entry("implc_octree_traverse", "nodes:i32* depth:i64 level:i64 out:i32* payload:i64*", "i64")
+SPLAT = _entry("implc_splat", "px:i64* py:i64* sizes:i64* depth:f64* n:i64 size:i64 zbuf:f64* winner:i64*")
+RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, OCTREE_INSERT, OCTREE_TRAVERSE, SPLAT)
+
+# -- layouts shared by native code and Python ------------------------------------------------------
+MAX_DEPTH = 21
+"""The deepest grid (2^21 cells per axis: cell indices fit in uint32 with room for a child level)."""
+
+STACK_ENTRIES = 7 * (MAX_DEPTH + 1) + 8
+"""The subdivider's depth-first stack bound: at most 7 pending siblings per level plus one octant's 8
+children. An entry is four int32 (i, j, k, level) in ``stack`` and one int64 live-term mask in ``masks``."""
+
+GEOMETRY_DOUBLES = 6 + 3 * (MAX_DEPTH + 2)
+"""Subdivision geometry (``geom``): origin (3), outward pad (3), then cell size per level (3 per level,
+one level past the deepest grid for leaf refinement)."""
+
+SUBDIVIDE_STATE_WORDS = 2
+"""``implc_subdivide``'s resumable state (int64): stack size, grid depth."""
+
+# implc_octree_insert's state (int64 words)
+NODE_COUNT, DEPTH, STARTED, PREV = 0, 1, 2, 3
+"""Indices of the node count, the grid depth, whether a voxel was inserted, the previous voxel (3 words)."""
+LEVEL_COUNTS = 8
+"""Start of the nodes-per-level counts (MAX_DEPTH + 2 words)."""
+PATH = LEVEL_COUNTS + MAX_DEPTH + 2
+"""Start of the previous voxel's path of node indices from the root (MAX_DEPTH + 2 words)."""
+OCTREE_STATE_WORDS = PATH + MAX_DEPTH + 2

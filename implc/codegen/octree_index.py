@@ -1,0 +1,148 @@
+"""The index-based octree's native routines: insertion (Fig. 2) and traversal (Fig. 6).
+
+- ``implc_octree_insert``: Morton-ordered voxels go into an (M, 8) int32 node array, each starting from
+  the previous voxel's path and ascending only to the common parent; it clears each node it creates, so
+  the node array may be reserved uninitialised. Its state words are laid out in :mod:`implc.abi`.
+- ``implc_octree_traverse``: depth-first traversal yielding the nodes of one level in order.
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from .. import abi
+from .control import (
+    I32,
+    I64,
+    Local,
+    at,
+    bump,
+    const,
+    copy_words,
+    define,
+    for_range,
+    if_,
+    load_at,
+    local_array,
+    store_at,
+    while_true,
+)
+
+
+def _child_index(b, xyz, bit):
+    """Child slot (x bit | y bit << 1 | z bit << 2) of coordinates xyz at bit position ``bit``."""
+    slot = const(I32, 0)
+    for a in range(3):
+        slot = b.or_(slot, b.shl(b.and_(b.lshr(xyz[a], bit), const(I32, 1)), const(I32, a)))
+    return b.zext(slot, I64)
+
+
+def emit_octree_insert(module: ir.Module):
+    fn, b = define(module, abi.OCTREE_INSERT)
+    nodes, node_cap, state, coords, n, first_index = fn.args
+    for arg in (nodes, state, coords):
+        arg.add_attribute("noalias")
+    ctlz = module.globals.get("llvm.ctlz.i32") or ir.Function(
+        module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.ctlz.i32")
+    depth = load_at(b, state, abi.DEPTH)
+    depth32 = b.trunc(depth, I32)
+    # the state lives in locals (registers, a stack-resident path) during the call, written back at the end
+    node_count = Local(b, I64, load_at(b, state, abi.NODE_COUNT), "node_count")
+    started = Local(b, ir.IntType(1), b.icmp_signed("!=", load_at(b, state, abi.STARTED), const(I64, 0)), "started")
+    prev = [Local(b, I32, b.trunc(load_at(b, state, abi.PREV + a), I32), f"prev{a}") for a in range(3)]
+    levels = abi.MAX_DEPTH + 2
+    path = local_array(b, I64, levels, "path")
+    counts = local_array(b, I64, levels, "counts")
+    copy_words(b, state, abi.PATH, path, 0, levels)
+    copy_words(b, state, abi.LEVEL_COUNTS, counts, 0, levels)
+    inserted = Local(b, I64, 0, "inserted")
+    with while_true(b) as loop:
+        v = inserted.get()
+        loop.break_if(b.icmp_signed(">=", v, n))
+        xyz = [load_at(b, coords, b.add(b.mul(v, const(I64, 3)), const(I64, a))) for a in range(3)]
+        diff = b.or_(b.or_(b.xor(xyz[0], prev[0].get()), b.xor(xyz[1], prev[1].get())), b.xor(xyz[2], prev[2].get()))
+        # the deepest level whose node is shared with the previous voxel (Fig. 2's ascent)
+        top_bit = b.sub(const(I32, 31), b.call(ctlz, [diff, const(ir.IntType(1), 0)]))
+        shared = b.select(b.icmp_signed("==", diff, const(I32, 0)), b.sub(depth32, const(I32, 1)),
+                          b.sub(b.sub(depth32, const(I32, 1)), top_bit))
+        start = b.zext(b.select(started.get(), shared, const(I32, 0)), I64)
+        # room for the nodes this voxel may create (levels start+1 .. depth-1)
+        needed = b.sub(b.sub(depth, const(I64, 1)), start)
+        loop.break_if(b.icmp_signed(">", b.add(node_count.get(), needed), node_cap))
+        with for_range(b, b.sub(depth, const(I64, 1)), start=start) as level:  # descend, creating nodes
+            bit = b.trunc(b.sub(b.sub(depth, const(I64, 1)), level), I32)
+            slot = b.add(b.mul(load_at(b, path, level), const(I64, 8)), _child_index(b, xyz, bit))
+            entry = Local(b, I32, load_at(b, nodes, slot))
+            with if_(b, b.icmp_signed("==", entry.get(), const(I32, 0))):
+                fresh = node_count.get()
+                row = b.bitcast(at(b, nodes, b.mul(fresh, const(I64, 8))), ir.PointerType(ir.VectorType(I32, 8)))
+                b.store(ir.Constant(ir.VectorType(I32, 8), [0] * 8), row, align=4)  # rows arrive uninitialised
+                entry.set(b.trunc(fresh, I32))
+                store_at(b, entry.get(), nodes, slot)
+                node_count.set(b.add(fresh, const(I64, 1)))
+                bump(b, counts, b.add(level, const(I64, 1)))
+            store_at(b, b.sext(entry.get(), I64), path, b.add(level, const(I64, 1)))
+        leaf_parent = load_at(b, path, b.sub(depth, const(I64, 1)))
+        slot = b.add(b.mul(leaf_parent, const(I64, 8)), _child_index(b, xyz, const(I32, 0)))
+        with if_(b, b.icmp_signed("==", load_at(b, nodes, slot), const(I32, 0))):
+            bump(b, counts, depth)
+        store_at(b, b.trunc(b.add(b.add(first_index, v), const(I64, 1)), I32), nodes, slot)
+        for a in range(3):
+            prev[a].set(xyz[a])
+        started.set(const(ir.IntType(1), 1))
+        inserted.set(b.add(v, const(I64, 1)))
+    store_at(b, node_count.get(), state, abi.NODE_COUNT)
+    store_at(b, b.zext(started.get(), I64), state, abi.STARTED)
+    for a in range(3):
+        store_at(b, b.zext(prev[a].get(), I64), state, abi.PREV + a)
+    copy_words(b, path, 0, state, abi.PATH, levels)
+    copy_words(b, counts, 0, state, abi.LEVEL_COUNTS, levels)
+    b.ret(inserted.get())
+
+
+def emit_octree_traverse(module: ir.Module):
+    fn, b = define(module, abi.OCTREE_TRAVERSE)
+    nodes, depth, target, out, payload = fn.args
+    node_stack = local_array(b, I64, abi.MAX_DEPTH + 2, "node_stack")
+    next_child = local_array(b, I64, abi.MAX_DEPTH + 2, "next_child")
+    level = Local(b, I64, 0, "level")
+    xyz = [Local(b, I32, 0, n) for n in "XYZ"]
+    count = Local(b, I64, 0, "count")
+    store_at(b, const(I64, 0), node_stack, 0)
+    store_at(b, const(I64, 0), next_child, 0)
+    with while_true(b) as loop:
+        lv = level.get()
+        i = load_at(b, next_child, lv)
+        done_here = b.icmp_signed("==", i, const(I64, 8))
+        loop.break_if(b.and_(done_here, b.icmp_signed("==", lv, const(I64, 0))))
+        with b.if_else(done_here) as (ascend, visit):
+            with ascend:  # every child seen: up one level
+                level.set(b.sub(lv, const(I64, 1)))
+                for v in xyz:
+                    v.set(b.lshr(v.get(), const(I32, 1)))
+            with visit:
+                store_at(b, b.add(i, const(I64, 1)), next_child, lv)
+                entry = load_at(b, nodes, b.add(b.mul(load_at(b, node_stack, lv), const(I64, 8)), i))
+                with if_(b, b.icmp_signed("!=", entry, const(I32, 0))):
+                    i32 = b.trunc(i, I32)
+                    child = [b.or_(b.shl(xyz[a].get(), const(I32, 1)), b.and_(b.lshr(i32, const(I32, a)), const(I32, 1)))
+                             for a in range(3)]
+                    child_level = b.add(lv, const(I64, 1))
+                    with b.if_else(b.icmp_signed("==", child_level, target)) as (emit, descend):
+                        with emit:
+                            k = count.get()
+                            for a in range(3):
+                                store_at(b, child[a], out, b.add(b.mul(k, const(I64, 3)), const(I64, a)))
+                            is_leaf = b.icmp_signed("==", child_level, depth)
+                            value = b.sext(entry, I64)
+                            store_at(b, b.select(is_leaf, b.sub(value, const(I64, 1)), value), payload, k)
+                            count.set(b.add(k, const(I64, 1)))
+                        with descend:
+                            store_at(b, b.sext(entry, I64), node_stack, child_level)
+                            store_at(b, const(I64, 0), next_child, child_level)
+                            level.set(child_level)
+                            for a in range(3):
+                                xyz[a].set(child[a])
+    b.ret(count.get())
+
+

@@ -1,0 +1,25 @@
+"""The generic runtime module: the native routines shared by every surface, in one LLVM module.
+
+Subdivision (:mod:`.subdivision`), normals (:mod:`.normals`), the octree (:mod:`.octree_index`) and
+splatting (:mod:`.splat`); :class:`implc.runtime.Runtime` compiles it once per process.
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from .normals import emit_normals
+from .octree_index import emit_octree_insert, emit_octree_traverse
+from .splat import emit_splat
+from .subdivision import emit_subdivide
+
+
+def build_runtime() -> str:
+    """The LLVM IR text of the runtime module."""
+    module = ir.Module(name="implc_runtime")
+    emit_subdivide(module)
+    emit_normals(module)
+    emit_octree_insert(module)
+    emit_octree_traverse(module)
+    emit_splat(module)
+    return str(module)

@@ -1,1 +1,0 @@
-"""The built-in scene files (installed as implc.scenes; see implc.scene for the format)."""
