@@ -1,4 +1,4 @@
-"""The ``implc`` command: list scenes, voxelize, render, inspect files, and the demo.
+"""The ``implc`` command: list scenes, voxelize, render, inspect files, the kernel cache, and the demo.
 
 Every failure the user can cause (a missing or broken scene, a bad formula, depth or size, an unwritable
 output) ends with one line on stderr and exit status 2; Ctrl-C ends with status 130.
@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import voxel_files
+from . import kernel_cache, voxel_files
 from . import scene as scenes
 from .errors import CompileError
 from .expr import ExprError
@@ -160,6 +160,23 @@ def cmd_bench(argv) -> int:
     return module.main(argv)
 
 
+def cmd_cache(args) -> int:
+    if args.action == "clear":
+        removed = kernel_cache.clear()
+        folder = kernel_cache.directory()
+        print(f"removed {removed} cached kernel modules from {folder}" if folder else "the kernel cache is off")
+        return 0
+    cache = kernel_cache.info()
+    if cache.directory is None:
+        print("kernel cache  off (IMPLC_CACHE_DIR=off)")
+        return 0
+    print(f"kernel cache  {cache.directory}")
+    print(f"entries       {cache.entries}")
+    print(f"size          {cache.bytes / 2**20:.2f} MiB of at most {cache.limit / 2**20:.0f} MiB "
+          "(IMPLC_CACHE_MAX_MB; least recently used entries go first)")
+    return 0
+
+
 def cmd_demo(args) -> int:
     out_dir = Path(args.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -217,6 +234,11 @@ def _parser():
     i.set_defaults(run=cmd_info)
 
     sub.add_parser("bench", help="run the benchmark suite (options: 'implc bench --help')", add_help=False)
+
+    c = sub.add_parser("cache", help="show the kernel cache's location and size, or clear it")
+    c.add_argument("action", nargs="?", choices=["info", "clear"], default="info",
+                   help="info (default): where it is and how big; clear: remove every entry")
+    c.set_defaults(run=cmd_cache)
 
     d = sub.add_parser("demo", help="voxelize the paper's three scenes at 512³ and render them")
     d.add_argument("--depth", type=int, default=9, help="grid depth (default 9: 512³)")

@@ -21,6 +21,7 @@ from . import rounding as R
 from .gradient import with_gradient
 from .ir import Tape
 
+
 # -- point rules -------------------------------------------------------------------------------------
 def _point_select(g, cond, a, b):
     """The branch ``cond`` picks; undefined where the condition's value g is."""

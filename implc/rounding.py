@@ -36,15 +36,9 @@ TINY = 2.0**-1074
 PI_LO = 3.141592653589793  # the double nearest pi lies below pi
 PI_HI = math.nextafter(PI_LO, math.inf)
 TWO_PI_HI = math.nextafter(2 * PI_LO, math.inf)
-HALF_PI_HI = math.nextafter(PI_LO / 2, math.inf)
 
 TRIG_MAX_ARG = 1e9
 """Beyond this |argument|, sin/cos/tan intervals are [-1, 1] / the whole line (period reduction loses digits)."""
-
-
-def peak_margin(a, b):
-    """How far outside [a, b] a sin/cos peak is still counted as inside (covers rounding of the test)."""
-    return 1e-12 * (1.0 + abs(a) + abs(b))
 
 
 def powi_slack(n: int) -> float:

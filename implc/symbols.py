@@ -11,8 +11,6 @@ r = sympy.Symbol("r", nonnegative=True)
 theta = sympy.Symbol("theta", real=True)
 phi = sympy.Symbol("phi", real=True)
 
-CARTESIAN = (x, y, z)
-SPHERICAL = (r, theta, phi)
 NAMES = ("x", "y", "z", "r", "theta", "phi")
 
 

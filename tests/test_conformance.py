@@ -8,8 +8,6 @@ import zlib
 import numpy as np
 import pytest
 import sympy
-from implc.codegen.interval_rules import IntervalEmitter
-from implc.reference import INTERVAL_RULES as RULES
 from sympy import (
     Abs,
     Max,
@@ -34,8 +32,10 @@ from sympy import (
 
 import implc
 from implc import ir, reference
+from implc.codegen.interval_rules import IntervalEmitter
 from implc.gradient import DERIVATIVE_RULES
 from implc.jit import host_has_avx512
+from implc.reference import INTERVAL_RULES as RULES
 from implc.symbols import phi, r, theta, x, y, z
 
 from .truth import TrueValues, adversarial_boxes, assert_encloses

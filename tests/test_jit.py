@@ -1,16 +1,39 @@
-"""The JIT: compiled code is cached on disk across processes, keyed by what it computes, and kernels
-run correctly from several threads at once."""
+"""The JIT and its disk cache: compiled code is reused across processes, keyed by everything that decides
+it (the whole package's source included), bounded in size, and kernels run correctly from several
+threads at once."""
 
+import os
+import shutil
 import subprocess
 import sys
 import textwrap
+import time
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 import numpy as np
 import sympy
 
 import implc
-from implc import x, y, z
+from implc import kernel_cache, x, y, z
+from implc.cli import main
+
+PROBE = textwrap.dedent("""
+    import sympy, implc
+    s = implc.compile(sympy.cos(implc.x) * implc.y - implc.z)
+    print(implc.__file__, s.from_cache)
+""")
+
+
+def _probe(env_cache, pythonpath=None):
+    env = {"IMPLC_CACHE_DIR": str(env_cache), "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
+           "PYTHONDONTWRITEBYTECODE": "1"}
+    if pythonpath:
+        env["PYTHONPATH"] = str(pythonpath)
+    run = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, check=True,
+                         cwd=env_cache.parent)  # not the checkout: "" on sys.path would import it first
+    module, from_cache = run.stdout.split()
+    return Path(module), from_cache == "True"
 
 
 def test_second_compile_loads_from_the_cache(tmp_path, monkeypatch):
@@ -23,23 +46,33 @@ def test_second_compile_loads_from_the_cache(tmp_path, monkeypatch):
     assert second.from_cache
     pts = np.random.default_rng(0).uniform(-1, 1, (100, 3))
     np.testing.assert_array_equal(first.eval(pts), second.eval(pts))
-    other = implc.compile(expr + 1)
-    assert not other.from_cache  # a different surface is a different key
+    assert not implc.compile(expr + 1).from_cache  # a different surface is a different key
+    assert not implc.compile(expr, vector_width=4).from_cache  # and so are other compile options
+    assert not implc.compile(expr, rounding="widen").from_cache
 
 
 def test_another_process_reuses_the_cache(tmp_path):
-    code = textwrap.dedent("""
-        import sympy, implc
-        s = implc.compile(sympy.cos(implc.x) * implc.y - implc.z)
-        print(s.from_cache)
-    """)
-    env = {"IMPLC_CACHE_DIR": str(tmp_path), "PATH": "/usr/bin:/bin"}
-    runs = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
-            for _ in range(2)]
-    assert [run.stdout.strip() for run in runs] == ["False", "True"]
+    assert [_probe(tmp_path)[1] for _ in range(2)] == [False, True]
 
 
-def test_cache_can_be_disabled(tmp_path, monkeypatch):
+def test_editing_any_module_of_the_package_invalidates_the_cache(tmp_path):
+    """A comment appended to a module that the code generator never reads as code (the region planner,
+    the IR, the gradient, the package's __init__) is still a different package: no cached kernel of the
+    old source may be served."""
+    copy = tmp_path / "src"
+    shutil.copytree(Path(implc.__file__).parent, copy / "implc", ignore=shutil.ignore_patterns("__pycache__"))
+    cache = tmp_path / "cache"
+    module, from_cache = _probe(cache, copy)
+    assert module == copy / "implc" / "__init__.py" and not from_cache
+    assert _probe(cache, copy)[1]
+    for name in ("regions.py", "ir.py", "gradient.py", "__init__.py", "storage/grid.py"):
+        with open(copy / "implc" / name, "a") as f:
+            f.write("\n# edited\n")
+        assert not _probe(cache, copy)[1], name
+        assert _probe(cache, copy)[1], name
+
+
+def test_cache_can_be_disabled(monkeypatch):
     monkeypatch.setenv("IMPLC_CACHE_DIR", "off")
     assert not implc.compile(x + 2 * y).from_cache
     assert not implc.compile(x + 2 * y).from_cache
@@ -53,6 +86,57 @@ def test_a_corrupt_cache_entry_is_not_trusted_blindly(tmp_path, monkeypatch):
     s = implc.compile(x - y * 5)
     assert not s.from_cache
     np.testing.assert_array_equal(s.eval(np.array([[1.0, 1.0, 0.0]])), [-4.0])
+
+
+def test_the_cache_is_bounded_least_recently_used_first(tmp_path, monkeypatch):
+    monkeypatch.setenv("IMPLC_CACHE_DIR", str(tmp_path))
+    exprs = [x - k * y for k in range(1, 5)]
+    for k, expr in enumerate(exprs):
+        implc.compile(expr)
+        (newest,) = [p for p in tmp_path.glob("*.o") if p.stat().st_mtime_ns == max(
+            q.stat().st_mtime_ns for q in tmp_path.glob("*.o"))]
+        os.utime(newest, (1000.0 + k, 1000.0 + k))  # a clear order of use: exprs[0] oldest
+    sizes = sorted(p.stat().st_size for p in tmp_path.glob("*.o"))
+    assert len(sizes) == 4
+    assert implc.compile(exprs[0]).from_cache  # a hit is a use: exprs[0] is now the most recent
+    limit = sum(sizes[-3:]) + 1  # room for three entries
+    monkeypatch.setenv("IMPLC_CACHE_MAX_MB", str(limit / 2**20))
+    implc.compile(x - 99 * y)  # a fifth entry: the two least recently used go
+    assert sum(p.stat().st_size for p in tmp_path.glob("*.o")) <= limit
+    assert implc.compile(exprs[0]).from_cache
+    assert not implc.compile(exprs[1]).from_cache
+
+
+def test_eviction_keeps_the_entry_just_written(tmp_path):
+    old, new = tmp_path / "a.o", tmp_path / "b.o"
+    old.write_bytes(b"x" * 100)
+    new.write_bytes(b"y" * 100)
+    os.utime(old, (time.time() - 100,) * 2)
+    assert kernel_cache.evict(tmp_path, limit=50, keep="b") == 1
+    assert new.exists() and not old.exists()
+
+
+def test_cache_command_shows_and_clears(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("IMPLC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("IMPLC_CACHE_MAX_MB", "64")
+    implc.compile(x * y - 3)
+    implc.compile(x * y - 4)
+    assert main(["cache"]) == 0
+    out = capsys.readouterr().out
+    assert str(tmp_path) in out and "entries       2" in out and "at most 64 MiB" in out
+    assert main(["cache", "clear"]) == 0
+    assert "removed 2 cached kernel modules" in capsys.readouterr().out
+    assert not list(tmp_path.glob("*.o"))
+    monkeypatch.setenv("IMPLC_CACHE_MAX_MB", "lots")
+    assert main(["cache"]) == 2
+    assert "IMPLC_CACHE_MAX_MB must be a number" in capsys.readouterr().err
+
+
+def test_the_suite_uses_its_own_cache():
+    """conftest.py points every compile of the run at a temporary folder, never the user's cache."""
+    folder = kernel_cache.directory()
+    assert folder is not None and folder != Path.home() / ".cache" / "implc"
+    assert not str(folder).startswith(str(Path(__file__).resolve().parent.parent))  # not in the checkout
 
 
 def test_kernels_run_from_threads():

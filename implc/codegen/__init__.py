@@ -1,0 +1,1 @@
+"""The LLVM code generators: the IR of every kernel and of the generic runtime module."""

@@ -1,0 +1,68 @@
+"""One ABI: every entry point declared in implc/abi.py is exported by its module with exactly the
+declared LLVM signature, its ctypes prototype has the same parameters, and nothing else is exported."""
+
+import ctypes
+import re
+
+import llvmlite.binding as llvm
+import pytest
+import sympy
+
+import implc
+from implc import abi, x, y, z
+from implc.codegen.kernels import build_mean_value_module, build_module
+from implc.codegen.runtime_module import build_runtime
+
+DEFINE = re.compile(r'^define\s+(.*?)\s*@"?([\w.]+)"?\((.*?)\)', re.M)
+
+
+def exported(ir_text: str) -> dict[str, str]:
+    """name -> "ret (arg types)" of every function the module text defines (typed pointers, as written)."""
+    llvm.parse_assembly(ir_text).verify()
+    out = {}
+    for ret, name, args in DEFINE.findall(ir_text):
+        types = [arg.split()[0] for arg in args.split(", ")] if args else []
+        out[name] = f"{ret} ({', '.join(types)})"
+    return out
+
+
+@pytest.fixture(scope="module")
+def surface():
+    return implc.compile(sympy.Min(x**2 + y**2 - 1, sympy.exp(z) - 2) + sympy.sin(x))
+
+
+@pytest.mark.parametrize("module_entries", ["surface", "mean_value", "runtime"])
+def test_every_entry_is_exported_with_its_declared_signature(module_entries, surface):
+    if module_entries == "surface":
+        text, entries = build_module(surface.tape, surface.gradient_tape), abi.SURFACE_ENTRIES
+    elif module_entries == "mean_value":
+        text, entries = build_mean_value_module(surface.tape, surface.gradient_tape), abi.MEAN_VALUE_ENTRIES
+    else:
+        text, entries = build_runtime(), abi.RUNTIME_ENTRIES
+    defined = exported(text)
+    assert set(defined) == {e.name for e in entries}  # no entry missing, none undeclared
+    for entry in entries:
+        assert defined[entry.name] == str(entry.llvm_type()), entry.name
+
+
+def test_ctypes_prototypes_follow_the_declarations():
+    for entry in (*abi.SURFACE_ENTRIES, *abi.MEAN_VALUE_ENTRIES, *abi.RUNTIME_ENTRIES):
+        proto = entry.ctypes_type()
+        assert len(proto._argtypes_) == len(entry.params)
+        for (name, kind), ctype in zip(entry.params, proto._argtypes_):
+            expected = {"i64": ctypes.c_int64, "i32": ctypes.c_int32}.get(kind, ctypes.c_void_p)
+            assert ctype is expected, (entry.name, name)
+        assert proto._restype_ is {None: None, "i32": ctypes.c_int32, "i64": ctypes.c_int64}[entry.returns]
+
+
+def test_every_surface_entry_binds(surface):
+    for entry in (*abi.SURFACE_ENTRIES, *abi.MEAN_VALUE_ENTRIES):
+        assert surface.kernel_address(entry) != 0
+        assert isinstance(surface.kernel(entry), ctypes._CFuncPtr)
+    with pytest.raises(LookupError, match="implc_subdivide is not a surface kernel"):
+        surface.kernel(abi.SUBDIVIDE)
+
+
+def test_one_runtime_per_process(surface):
+    from implc.runtime import Runtime
+    assert surface.runtime is Runtime.shared() is implc.compile(x - y).runtime
