@@ -348,6 +348,12 @@ def _columns(points):
 
 def eval_point(tape: Tape, points) -> list[np.ndarray]:
     """Every output of ``tape`` at the (N, 3) ``points``."""
+    vals = point_nodes(tape, points)
+    return [vals[o] for o in tape.outputs]
+
+
+def point_nodes(tape: Tape, points) -> list[np.ndarray]:
+    """The value of every node of ``tape`` at the (N, 3) ``points``, in tape order."""
     cols = _columns(points)
     n = len(cols[0])
     vals: list = []
@@ -367,7 +373,7 @@ def eval_point(tape: Tape, points) -> list[np.ndarray]:
             else:
                 v = POINT_RULES[op](*a)
             vals.append(v)
-    return [vals[o] for o in tape.outputs]
+    return vals
 
 
 def eval_interval(tape: Tape, lo, hi) -> tuple[np.ndarray, np.ndarray]:
@@ -380,6 +386,16 @@ def eval_interval(tape: Tape, lo, hi) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _interval_outputs(tape: Tape, lo_cols, hi_cols) -> list:
+    vals = _interval_nodes(tape, lo_cols, hi_cols)
+    return [vals[o] for o in tape.outputs]
+
+
+def interval_nodes(tape: Tape, lo, hi) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The enclosure of every node of ``tape`` over the boxes [lo, hi], in tape order (NaN kept)."""
+    return _interval_nodes(tape, _columns(lo), _columns(hi))
+
+
+def _interval_nodes(tape: Tape, lo_cols, hi_cols) -> list:
     n = len(lo_cols[0])
     vals: list = []
     with np.errstate(all="ignore"):
@@ -392,7 +408,7 @@ def _interval_outputs(tape: Tape, lo_cols, hi_cols) -> list:
             else:
                 v = INTERVAL_RULES[op](a, attr)
             vals.append(v)
-    return [vals[o] for o in tape.outputs]
+    return vals
 
 
 def _whole_line_if_undefined(lo, hi):

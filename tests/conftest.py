@@ -36,10 +36,29 @@ def pytest_unconfigure(config):
         shutil.rmtree(folder, ignore_errors=True)
 
 
+class _Recorder:
+    """``recorder[(surface, depth)] = ratio``: kept in the test's report, so that it reaches the process
+    that prints the summary (the xdist controller, or this one)."""
+
+    def __init__(self, node):
+        self.node = node
+
+    def __setitem__(self, key, ratio):
+        self.node.user_properties.append(("over_inclusion", (*key, float(ratio))))
+
+
 @pytest.fixture
-def over_inclusion():
+def over_inclusion(request):
     """Tests record voxels / sign-change cells here; the ratios are printed at the end of the run."""
-    return _RATIOS
+    return _Recorder(request.node)
+
+
+def pytest_runtest_logreport(report):
+    if report.when == "call":
+        for key, value in report.user_properties:
+            if key == "over_inclusion":
+                name, depth, ratio = value
+                _RATIOS[(name, depth)] = ratio
 
 
 def pytest_terminal_summary(terminalreporter):

@@ -2,9 +2,12 @@
 
 import json
 
+import pytest
+
 from implc.cli import main
 
 
+@pytest.mark.slow
 def test_bench_suite_small(tmp_path, capsys):
     status = main(["bench", "--depth", "5", "--workers", "1,2", "--repeats", "1", "--baseline-depths", "5",
                    "--growth-depths", "5,6", "--tightness-scenes", "torus,paper_blobs", "--tightness-depth", "6",

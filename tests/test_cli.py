@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
+from plyfile import PlyData
 
 from implc import voxel_files
 from implc.cli import main
@@ -49,17 +51,26 @@ def test_voxelize_expr_and_formats(tmp_path):
         out = tmp_path / f"s{suffix}"
         assert main(["voxelize", "--expr", "sin(4*theta)*sin(8*phi) - r", "--depth", "5", "--quiet",
                      "-o", str(out)]) == 0
-        assert out.stat().st_size > 0
+    voxels = voxel_files.load_npz(tmp_path / "s.npz")
     dense = np.load(tmp_path / "s.npy")
     assert dense.shape == (32, 32, 32) and dense.dtype == bool
-    assert dense.sum() == len(voxel_files.load_npz(tmp_path / "s.npz"))
+    np.testing.assert_array_equal(dense, voxels.to_dense())
+    vertex = PlyData.read(str(tmp_path / "s.ply"))["vertex"]
+    assert vertex.count == len(voxels) > 0
+    np.testing.assert_allclose(np.column_stack([vertex["x"], vertex["y"], vertex["z"]]), voxels.centers(),
+                               rtol=1e-6, atol=1e-7)
 
 
 def test_render_scene_directly_with_perspective(tmp_path):
     png = tmp_path / "t.png"
     assert main(["render", "torus", "--depth", "6", "--quiet", "-o", str(png), "--size", "96", "--perspective",
                  "--color", "0.2,0.5,0.9"]) == 0
-    assert png.exists()
+    image = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    assert image.shape == (96, 96, 3)
+    covered = np.any(image != image[0, 0], axis=2)
+    assert 0.05 < covered.mean() < 0.9  # the torus, not an empty or a filled frame
+    lit = image[covered]
+    assert np.median(lit[:, 2]) > np.median(lit[:, 0])  # in the colour asked for: blue over red
 
 
 @pytest.mark.parametrize("formula", [
@@ -92,9 +103,6 @@ def test_user_errors_are_one_line_with_exit_2(tmp_path):
     broken.write_text("import sympy\nsurface = (\n")
     empty = tmp_path / "empty.py"
     empty.write_text("bounds = ((-1, 1),) * 3\n")
-    readonly = tmp_path / "ro"
-    readonly.mkdir()
-    readonly.chmod(0o500)
     cases = [
         (["voxelize", "nosuch", "-o", str(tmp_path / "a.npz")], "no scene 'nosuch'"),
         (["voxelize", str(tmp_path / "missing.py"), "-o", str(tmp_path / "a.npz")], "no scene"),
@@ -109,21 +117,38 @@ def test_user_errors_are_one_line_with_exit_2(tmp_path):
         (["voxelize", "torus", "--bounds", "1,2,3", "-o", str(tmp_path / "a.npz")], "--bounds must be six"),
         (["voxelize", "--expr", "x", "--bounds", "1,0,-1,1,-1,1", "-o", str(tmp_path / "a.npz")], "lo < hi"),
     ]
-    if os.geteuid() != 0:  # root writes anywhere
-        cases.append((["voxelize", "torus", "-o", str(readonly / "a.npz")], "permission denied"))
     for argv, message in cases:
-        status, out, err = run(*argv)
-        assert status == 2, (argv, status, err)
-        assert message in err, (argv, err)
-        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, (argv, err)
+        assert_one_line_error(argv, message)
+
+
+def assert_one_line_error(argv, message):
+    status, out, err = run(*argv)
+    assert status == 2, (argv, status, err)
+    assert message in err, (argv, err)
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, (argv, err)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="running as root: every folder is writable, so no permission "
+                                               "error can be provoked")
+def test_an_unwritable_output_is_one_line_with_exit_2(tmp_path):
+    readonly = tmp_path / "ro"
+    readonly.mkdir()
+    readonly.chmod(0o500)
+    assert_one_line_error(["voxelize", "torus", "-o", str(readonly / "a.npz")], "permission denied")
 
 
 def test_demo_writes_the_three_renders(tmp_path, capsys):
     assert main(["demo", "--depth", "5", "--size", "64", "--out-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
+    images = {}
     for name in ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4"):
         assert name in out
-        assert (tmp_path / f"{name}.png").stat().st_size > 0
+        image = np.asarray(Image.open(tmp_path / f"{name}.png").convert("RGB"))
+        assert image.shape == (64, 64, 3)
+        covered = np.any(image != image[0, 0], axis=2)
+        assert 0.05 < covered.mean() < 0.95, name  # a surface in the frame
+        images[name] = covered
+    assert not np.array_equal(images["paper_blobs"], images["paper_sin4_sin8"])  # each scene its own picture
 
 
 def test_console_script_is_declared():

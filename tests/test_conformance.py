@@ -1,9 +1,22 @@
-"""Every op through every evaluator: the numpy reference and the compiled kernels agree, intervals enclose
-high-precision true values over adversarial boxes, and gradients match differences and the reference.
-Kernels compile with the host's default rounding (directed where the CPU has AVX-512); the comparisons
-with the reference, which widens, use kernels compiled to widen as well."""
+"""The conformance harness, fidget-style: a table of op cases and a list of evaluators, every evaluator
+running every case against the numpy reference, each op with its declared tolerance.
+
+Tolerances (:data:`OP_BUDGET`): the IEEE-exact ops (+, −, ×, ÷, sqrt, integer powers, min, max, abs,
+selects, ...) must agree **bit for bit** with the reference, in widened kernels, where both compute the
+same rounded operations and the same widening (:mod:`implc.rounding`). Ops that call a math library may
+differ by what the two libraries differ by (numpy's and the C library's results are each within 1-2 ulps
+of the true value; the widening of either is 4 ulps): a budget of :data:`LIBM_ULPS` ulps of the size of
+the values computed in the case. sin, cos and atan2 run in vector registers in the kernels
+(:mod:`implc.codegen.elementary`: error proven below 1.1e-15, interval bounds widened by 2^-45 absolute,
+:data:`implc.rounding.SIN_ERROR`) and in numpy in the reference: their budget is that absolute widening
+twice. A case's budget adds its nodes' budgets (a case that multiplies an elementary result by a constant
+states the factor, :data:`AMPLIFICATION`). Kernels compiled with directed rounding are checked separately:
+they nest inside the widened ones and hold the high-precision truth. Truth tests (40 digits) check
+every op's enclosures, values and gradients independently of the reference.
+"""
 
 import zlib
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -31,11 +44,12 @@ from sympy import (
 )
 
 import implc
-from implc import ir, reference
+from implc import abi, ir, reference
+from implc import rounding as R
 from implc.codegen.interval_rules import IntervalEmitter
 from implc.gradient import DERIVATIVE_RULES
 from implc.jit import host_has_avx512
-from implc.reference import INTERVAL_RULES as RULES
+from implc.reference import INTERVAL_RULES
 from implc.symbols import phi, r, theta, x, y, z
 
 from .truth import TrueValues, adversarial_boxes, assert_encloses
@@ -87,34 +101,284 @@ OP_CASES = {
 }
 
 
+
+
+# -- tolerances -------------------------------------------------------------------------------------------
+LIBM_ULPS = 4
+"""ulps (of the case's scale) two math libraries may differ by per call, widening included."""
+
+VECTOR_OPS = ("sin", "cos", "atan2", "atan2_wrapped")
+"""Ops the kernels compute with :mod:`implc.codegen.elementary` in interval kernels and normals."""
+
+
+@dataclass(frozen=True)
+class Budget:
+    """|kernel − reference| <= ulps · ulp(scale) + absolute, scale the largest magnitude of any node's value
+    (or bound) at that point (box); Budget() means bit-identical."""
+
+    ulps: float = 0.0
+    absolute: float = 0.0
+
+    def __add__(self, other):
+        return Budget(self.ulps + other.ulps, self.absolute + other.absolute)
+
+    def __mul__(self, k):
+        return Budget(self.ulps * k, self.absolute * k)
+
+    @property
+    def exact(self) -> bool:
+        return self.ulps == 0 and self.absolute == 0
+
+
+EXACT = Budget()
+OP_BUDGET = {op: EXACT for op in ir.OPS}
+OP_BUDGET.update({op: Budget(ulps=LIBM_ULPS) for op in ir.LIBM_OPS})
+INTERVAL_BUDGET = dict(OP_BUDGET)
+INTERVAL_BUDGET.update({op: Budget(ulps=LIBM_ULPS, absolute=2 * R.SIN_ERROR) for op in VECTOR_OPS})
+VECTOR_POINT_BUDGET = dict(OP_BUDGET)  # the normals' kernel: vector functions without widening
+VECTOR_POINT_BUDGET.update({op: Budget(ulps=LIBM_ULPS, absolute=2.0**-48) for op in VECTOR_OPS})  # > 1.1e-15
+
+AMPLIFICATION = {"cos": 5, "sin": 7, "spherical": 8, "atan2_wrapped": 3}
+"""Cases that scale a math-library result before using it: sin(7x + y) moves a bound by up to 7 times
+the difference of its argument's bounds; sin(8·phi) by 8; sin(3·phi) by 3; cos(5x) by 5."""
+
+
+def case_budget(tape, table) -> Budget:
+    total = EXACT
+    for op, _, _ in tape.nodes:
+        total = total + table[op]
+    return total
+
+
+def _scale(nodes):
+    scale = np.zeros(len(nodes[0][0]) if isinstance(nodes[0], tuple) else len(nodes[0]))
+    for node in nodes:
+        for v in (node if isinstance(node, tuple) else (node,)):
+            scale = np.maximum(scale, np.where(np.isfinite(v), np.abs(v), 0.0))
+    return scale
+
+
+def assert_conforms(got, expected, budget: Budget, scale, what):
+    """Equal where the budget is exact (NaN and infinities included); else the same non-finite values and
+    finite ones within the budget."""
+    got, expected = np.asarray(got, dtype=np.float64), np.asarray(expected, dtype=np.float64)
+    if budget.exact:
+        np.testing.assert_array_equal(got, expected, err_msg=f"{what}: not bit-identical")
+        return
+    finite = np.isfinite(expected)
+    np.testing.assert_array_equal(got[~finite], expected[~finite], err_msg=f"{what}: non-finite values differ")
+    assert np.all(np.isfinite(got[finite])), f"{what}: non-finite where the reference is finite"
+    scale = np.broadcast_to(scale.reshape(scale.shape + (1,) * (expected.ndim - 1)), expected.shape)
+    allowed = budget.ulps * np.spacing(np.maximum(np.abs(scale), np.abs(expected))) + budget.absolute
+    with np.errstate(invalid="ignore"):  # inf - inf where both are infinite: those were compared above
+        excess = np.abs(got - expected) - allowed
+    worst = int(np.argmax(np.where(finite, excess, -np.inf)))
+    assert np.all(excess[finite] <= 0), (
+        f"{what}: {got.flat[worst]!r} vs reference {expected.flat[worst]!r} exceeds {budget} at scale "
+        f"{scale.flat[worst]!r}")
+
+
+# -- evaluators ---------------------------------------------------------------------------------------------
+def seed(name: str) -> int:
+    return zlib.crc32(name.encode())  # stable across runs, unlike hash()
+
+
+def _boxes(name, n=64):
+    return adversarial_boxes(np.random.default_rng(seed(name) + 5), n)
+
+
+def _points(name, n=64):
+    return np.random.default_rng(seed(name) + 6).uniform(-1.5, 1.5, (n, 3))
+
+
+def _padded(arrays, width):
+    """Zero-pad (n, 3) arrays to a multiple of the vector width (the raw kernels take whole vectors)."""
+    n = len(arrays[0])
+    m = -(-n // width) * width
+    out = []
+    for a in arrays:
+        p = np.zeros((m, 3))
+        p[:n] = a
+        out.append(p)
+    return out, n
+
+
+def _interval_with_all_live(s, lo, hi, entry):
+    """The kernel ``entry`` with a live-term mask of all ones: the pruned path with every term live."""
+    (lo_p, hi_p), n = _padded([lo, hi], 8)
+    f_lo, f_hi = np.empty(len(lo_p)), np.empty(len(lo_p))
+    live_in = np.full(len(lo_p) // 8, -1, dtype=np.int64)
+    live_out = np.empty(len(lo_p), dtype=np.int64)
+    s.kernel(entry)(lo_p.ctypes.data, hi_p.ctypes.data, f_lo.ctypes.data, f_hi.ctypes.data, len(lo_p),
+                    live_in.ctypes.data, live_out.ctypes.data)
+    return f_lo[:n], f_hi[:n]
+
+
+def _gradient_live(s, pts):
+    (p,), n = _padded([pts], s.width)
+    value, grad = np.empty(len(p)), np.empty((len(p), 3))
+    s.kernel(abi.GRADIENT_LIVE)(p.ctypes.data, value.ctypes.data, grad.ctypes.data, len(p), -1)
+    return value[:n], grad[:n]
+
+
+INTERVAL_EVALUATORS = {
+    "kernel": lambda s, lo, hi: s.interval(lo, hi),
+    "pruned kernel, every term live": lambda s, lo, hi: _interval_with_all_live(s, lo, hi, abi.INTERVAL),
+}
+MEAN_VALUE_EVALUATORS = {
+    "mean-value kernel": lambda s, lo, hi: s.interval(lo, hi, mean_value=True),
+    "pruned mean-value kernel, every term live": lambda s, lo, hi: _interval_with_all_live(s, lo, hi,
+                                                                                           abi.INTERVAL_MVF),
+}
+WIDTHS = (8, 4, 2, 1)
+
+
+@pytest.fixture(scope="module")
+def compiled():
+    """Surfaces compiled on first use: (case, rounding, width) -> Surface."""
+    cache = {}
+
+    def get(name, rounding="widen", width=8):
+        key = (name, rounding, width)
+        if key not in cache:
+            cache[key] = implc.compile(OP_CASES[name], rounding=rounding, vector_width=width)
+        return cache[key]
+    return get
+
+
 def test_every_op_has_every_rule():
     ops = set(ir.OPS) - {"const", "var"}
-    assert ops == set(RULES), "numpy interval rules"
+    assert ops == set(INTERVAL_RULES), "numpy interval rules"
     assert ops == set(DERIVATIVE_RULES), "derivative rules"
     assert ops <= set(reference.POINT_RULES) | {"powi", "powf", "scale"}, "point rules"
     assert all(hasattr(IntervalEmitter, f"i_{op}") for op in ops), "LLVM interval emitters"
+    assert set(OP_BUDGET) == set(INTERVAL_BUDGET) == set(ir.OPS), "a declared tolerance per op"
 
 
-def test_op_cases_cover_every_op():
-    covered = set()
-    for expr in OP_CASES.values():
-        covered.update(op for op, _, _ in implc.compile(expr).gradient_tape.nodes)
-    assert covered == set(ir.OPS)
+@pytest.mark.parametrize("width", WIDTHS)
+@pytest.mark.parametrize("name", sorted(OP_CASES))
+def test_interval_evaluators_conform(name, width, compiled):
+    s = compiled(name, width=width)
+    lo, hi = _boxes(name)
+    nodes = reference.interval_nodes(s.tape, lo, hi)
+    scale = _scale(nodes)
+    budget = case_budget(s.tape, INTERVAL_BUDGET) * AMPLIFICATION.get(name, 1)
+    r_lo, r_hi = reference.eval_interval(s.tape, lo, hi)
+    evaluators = INTERVAL_EVALUATORS if width == 8 else {"kernel": INTERVAL_EVALUATORS["kernel"]}
+    for label, evaluate in evaluators.items():
+        f_lo, f_hi = evaluate(s, lo, hi)
+        assert_conforms(f_lo, r_lo, budget, scale, f"{name} {label} width {width}: lower bounds")
+        assert_conforms(f_hi, r_hi, budget, scale, f"{name} {label} width {width}: upper bounds")
+
+
+@pytest.mark.parametrize("name", sorted(OP_CASES))
+def test_mean_value_evaluators_conform(name, compiled):
+    s = compiled(name)
+    lo, hi = _boxes(name)
+    small = np.random.default_rng(seed(name)).random(len(lo)) < 0.5  # the form pays on small boxes
+    hi[small] = lo[small] + (hi[small] - lo[small]) * 1e-3
+    scale = _scale(reference.interval_nodes(s.gradient_tape, lo, hi))
+    # the gradient tape's nodes and the centre's value, each as the reference's (their budgets add up)
+    budget = (case_budget(s.gradient_tape, INTERVAL_BUDGET) + case_budget(s.tape, INTERVAL_BUDGET)) * \
+        AMPLIFICATION.get(name, 1)
+    r_lo, r_hi = reference.eval_interval_mean_value(s.tape, lo, hi)
+    for label, evaluate in MEAN_VALUE_EVALUATORS.items():
+        f_lo, f_hi = evaluate(s, lo, hi)
+        assert_conforms(f_lo, r_lo, budget, scale, f"{name} {label}: lower bounds")
+        assert_conforms(f_hi, r_hi, budget, scale, f"{name} {label}: upper bounds")
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+@pytest.mark.parametrize("name", sorted(OP_CASES))
+def test_point_and_gradient_evaluators_conform(name, width, compiled):
+    s = compiled(name, width=width)
+    pts = _points(name)
+    scale = _scale(reference.point_nodes(s.gradient_tape, pts))
+    budget = case_budget(s.gradient_tape, OP_BUDGET) * AMPLIFICATION.get(name, 1)
+    ref_value, ref_grad = reference.eval_gradient(s.tape, pts)
+    assert_conforms(s.eval(pts), ref_value, budget, scale, f"{name} point width {width}")
+    value, grad = s.value_and_gradient(pts)
+    assert_conforms(value, ref_value, budget, scale, f"{name} gradient's value width {width}")
+    assert_conforms(grad, ref_grad, budget, scale, f"{name} gradient width {width}")
+    value, grad = _gradient_live(s, pts)
+    live_budget = case_budget(s.gradient_tape, VECTOR_POINT_BUDGET) * AMPLIFICATION.get(name, 1)
+    assert_conforms(value, ref_value, live_budget, scale, f"{name} gradient over live terms' value width {width}")
+    assert_conforms(grad, ref_grad, live_budget, scale, f"{name} gradient over live terms width {width}")
+
+
+@pytest.mark.parametrize("name", sorted(OP_CASES))
+def test_octant_kernel_conforms(name, compiled):
+    """implc_octant generates an octant's eight children from its cell index and geometry: its keep bits
+    and child masks are those of the batched kernel on the same eight boxes, exactly."""
+    s = compiled(name)
+    parents_lo, parents_hi = _boxes(name, 24)
+    bits = np.array([[(c >> a) & 1 for a in range(3)] for c in range(8)], dtype=np.float64)
+    octant = s.kernel(abi.OCTANT)
+    cell = np.zeros(3, dtype=np.int32)
+    for p_lo, p_hi in zip(parents_lo, parents_hi):
+        geom = np.zeros(abi.GEOMETRY_DOUBLES)
+        h = (p_hi - p_lo) / 2
+        geom[:3], geom[9:12] = p_lo, h  # origin; level 1's cell size (the pad stays 0)
+        lo, hi = p_lo + bits * h, p_lo + (bits + 1) * h  # the same rounded operations as the kernel
+        masks = np.empty(8, dtype=np.int64)
+        kept = octant(geom.ctypes.data, cell.ctypes.data, 1, -1, masks.ctypes.data)
+        f_lo, f_hi = _interval_with_all_live(s, lo, hi, abi.INTERVAL)
+        expected = sum(1 << c for c in range(8) if f_lo[c] <= 0 <= f_hi[c])
+        assert kept == expected, f"{name}: parent {p_lo}..{p_hi}"
+        live_out = np.empty(8, dtype=np.int64)
+        s.kernel(abi.INTERVAL)(lo.ctypes.data, hi.ctypes.data, np.empty(8).ctypes.data, np.empty(8).ctypes.data,
+                               8, np.array([-1], dtype=np.int64).ctypes.data, live_out.ctypes.data)
+        np.testing.assert_array_equal(masks, live_out)
+
+
+needs_avx512 = pytest.mark.skipif(not host_has_avx512(), reason="directed rounding needs AVX-512F; this CPU has none")
+
+
+@needs_avx512
+@pytest.mark.parametrize("name", sorted(OP_CASES))
+def test_directed_rounding_is_never_looser_than_widening(name, compiled):
+    """Each directed bound is the nearest double outward of its operation's exact result; widening moves
+    at least as far, and every rule is monotone in its operands' bounds, so the enclosures nest."""
+    directed, widened = compiled(name, "directed"), compiled(name)
+    rng = np.random.default_rng(seed(name) + 3)
+    lo, hi = adversarial_boxes(rng, 200)
+    for mean_value in (False, True):
+        d_lo, d_hi = directed.interval(lo, hi, mean_value)
+        w_lo, w_hi = widened.interval(lo, hi, mean_value)
+        assert np.all(d_lo >= w_lo) and np.all(d_hi <= w_hi), f"mean_value={mean_value}"
+    assert_encloses(directed, OP_CASES[name], lo[:40], hi[:40], rng)
+
+
+def test_directed_rounding_is_refused_without_avx512(monkeypatch):
+    """On a CPU without AVX-512F, asking for directed rounding is a CompileError that says why, and
+    "auto" widens (simulated here by hiding the host's AVX-512 features)."""
+    from implc import jit, surface
+    monkeypatch.setattr(surface, "host_has_avx512", lambda: False)
+    with pytest.raises(implc.CompileError, match="AVX-512"):
+        implc.compile(x + y, rounding="directed")
+    assert not implc.compile(x + y, rounding="auto").directed
+    assert jit.host_has_avx512() == ("+avx512f" in jit._host()[1].split(","))
+
+
+def test_the_harness_sees_a_lost_ulp():
+    """A kernel that lost its one-ulp widening on add would differ from the reference in the last bit:
+    an exact budget must fail on it."""
+    expected = np.array([1.0, -2.5, 3.0e-300])
+    with pytest.raises(AssertionError, match="not bit-identical"):
+        assert_conforms(np.nextafter(expected, 0), expected, EXACT, np.abs(expected), "add")
+    with pytest.raises(AssertionError, match="exceeds"):
+        assert_conforms(expected + 1e-9, expected, Budget(ulps=4), np.abs(expected), "exp")
+
+
+# -- against the truth (40 digits), independent of the reference ---------------------------------------------
+@pytest.fixture(scope="module")
+def surfaces(compiled):
+    return {name: compiled(name, "auto") for name in OP_CASES}
 
 
 @pytest.fixture(scope="module")
-def surfaces():
-    return {name: implc.compile(expr) for name, expr in OP_CASES.items()}
-
-
-@pytest.fixture(scope="module")
-def widened():
-    """The same surfaces with round-to-nearest-then-widen interval arithmetic, as the reference does."""
-    return {name: implc.compile(expr, rounding="widen") for name, expr in OP_CASES.items()}
-
-
-def seed(name: str) -> int:
-    return zlib.crc32(name.encode())  # stable across runs, unlike hash()
+def widened(compiled):
+    return {name: compiled(name) for name in OP_CASES}
 
 
 @pytest.mark.parametrize("name", sorted(OP_CASES))
@@ -132,25 +396,7 @@ def test_widened_intervals_enclose_true_values(name, widened):
 
 
 @pytest.mark.parametrize("name", sorted(OP_CASES))
-def test_directed_rounding_is_never_looser_than_widening(name, surfaces, widened):
-    """Each directed bound is the nearest double outward of its operation's exact result; widening moves
-    at least as far, and every rule is monotone in its operands' bounds, so the enclosures nest."""
-    if not host_has_avx512():
-        with pytest.raises(implc.CompileError, match="AVX-512"):
-            implc.compile(OP_CASES[name], rounding="directed")
-        return
-    directed = implc.compile(OP_CASES[name], rounding="directed")
-    rng = np.random.default_rng(seed(name) + 3)
-    lo, hi = adversarial_boxes(rng, 200)
-    for mean_value in (False, True):
-        d_lo, d_hi = directed.interval(lo, hi, mean_value)
-        w_lo, w_hi = widened[name].interval(lo, hi, mean_value)
-        assert np.all(d_lo >= w_lo) and np.all(d_hi <= w_hi), f"mean_value={mean_value}"
-    assert_encloses(directed, OP_CASES[name], lo[:40], hi[:40], rng)
-
-
-@pytest.mark.parametrize("name", sorted(OP_CASES))
-def test_mean_value_form_encloses_and_never_loosens(name, surfaces, widened):
+def test_mean_value_form_encloses_and_never_loosens(name, surfaces):
     s = surfaces[name]
     rng = np.random.default_rng(seed(name) + 1)
     lo, hi = adversarial_boxes(rng, 60)
@@ -160,10 +406,13 @@ def test_mean_value_form_encloses_and_never_loosens(name, surfaces, widened):
     n_lo, n_hi = s.interval(lo, hi)
     m_lo, m_hi = s.interval(lo, hi, mean_value=True)
     assert np.all(m_lo >= n_lo) and np.all(m_hi <= n_hi)
-    r_lo, r_hi = reference.eval_interval_mean_value(s.tape, lo, hi)
-    m_lo, m_hi = widened[name].interval(lo, hi, mean_value=True)
-    np.testing.assert_allclose(m_lo, r_lo, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(m_hi, r_hi, rtol=1e-12, atol=1e-12)
+
+
+def test_op_cases_cover_every_op():
+    covered = set()
+    for expr in OP_CASES.values():
+        covered.update(op for op, _, _ in implc.compile(expr).gradient_tape.nodes)
+    assert covered == set(ir.OPS)
 
 
 def test_mean_value_form_is_tighter_on_small_boxes():
@@ -188,8 +437,10 @@ def test_atan2_corners_match_the_reference_on_every_kind_of_box(name, widened):
     s = widened[name]
     f_lo, f_hi = s.interval(lo, hi)
     r_lo, r_hi = reference.eval_interval(s.tape, lo, hi)
-    np.testing.assert_allclose(f_lo, r_lo, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(f_hi, r_hi, rtol=1e-12, atol=1e-12)
+    scale = _scale(reference.interval_nodes(s.tape, lo, hi))
+    budget = case_budget(s.tape, INTERVAL_BUDGET) * AMPLIFICATION.get(name, 1)
+    assert_conforms(f_lo, r_lo, budget, scale, f"{name}: lower bounds")
+    assert_conforms(f_hi, r_hi, budget, scale, f"{name}: upper bounds")
 
 
 def test_jumps_never_use_the_mean_value_form():
@@ -201,24 +452,6 @@ def test_jumps_never_use_the_mean_value_form():
     lo, hi = np.array([[-1.0, -1e-3, 0]]), np.array([[-0.999, 1e-3, 0]])
     f_lo, f_hi = cut.interval(lo, hi, mean_value=True)
     assert f_lo[0] <= -3.14 and f_hi[0] >= 3.14
-
-
-@pytest.mark.parametrize("name", sorted(OP_CASES))
-def test_compiled_matches_reference(name, widened):
-    s = widened[name]
-    rng = np.random.default_rng(7)
-    pts = rng.uniform(-1.5, 1.5, (203, 3))
-    np.testing.assert_allclose(s.eval(pts), reference.eval_point(s.tape, pts)[0], rtol=1e-12, atol=1e-12)
-    value, grad = s.value_and_gradient(pts)
-    ref_value, ref_grad = reference.eval_gradient(s.tape, pts)
-    np.testing.assert_allclose(value, ref_value, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(grad, ref_grad, rtol=1e-12, atol=1e-12)
-    lo, hi = adversarial_boxes(rng, 203)
-    f_lo, f_hi = s.interval(lo, hi)
-    r_lo, r_hi = reference.eval_interval(s.tape, lo, hi)
-    # same rules and rounding; only libm implementations (numpy's vs the C library's) may differ
-    np.testing.assert_allclose(f_lo, r_lo, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(f_hi, r_hi, rtol=1e-12, atol=1e-12)
 
 
 @pytest.mark.parametrize("width", [1, 2, 4])

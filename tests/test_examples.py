@@ -3,7 +3,12 @@
 import runpy
 from pathlib import Path
 
+import numpy as np
 import pytest
+from PIL import Image
+from plyfile import PlyData
+
+from implc import voxel_files
 
 EXAMPLES = sorted((Path(__file__).parent.parent / "examples").glob("*.py"))
 
@@ -19,5 +24,19 @@ def test_example_runs(path, tmp_path, monkeypatch):
     lines = path.read_text().splitlines()
     assert 5 <= len([line for line in lines if line.strip()]) <= 20
     runpy.run_path(str(path), run_name="__main__")
-    written = [p for p in tmp_path.iterdir() if p.suffix in (".png", ".ply", ".npz")]
-    assert written and all(p.stat().st_size > 0 for p in written)
+    written = sorted(p for p in tmp_path.iterdir() if p.suffix in (".png", ".ply", ".npz"))
+    assert written
+    counts = set()
+    for out in written:
+        if out.suffix == ".png":  # a picture of a surface: a background and shaded points of many tones
+            image = np.asarray(Image.open(out).convert("RGB"))
+            covered = np.any(image != image[0, 0], axis=2)
+            assert 0.02 < covered.mean() < 0.95, out.name
+            assert len(np.unique(image[covered].reshape(-1, 3), axis=0)) > 20, f"{out.name}: not shaded"
+        elif out.suffix == ".npz":
+            voxels = voxel_files.load_npz(out)
+            assert voxels.depth == 5 and len(voxels) > 0
+            counts.add(len(voxels))
+        else:
+            counts.add(PlyData.read(str(out))["vertex"].count)
+    assert len(counts) <= 1, f"the files disagree on the voxel count: {counts}"

@@ -3,6 +3,7 @@
 from fractions import Fraction
 
 import numpy as np
+import pytest
 import sympy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -40,6 +41,7 @@ def _expressions():
         lambda e: isinstance(e, sympy.Expr) and not e.is_number and e.is_real is not False)
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(expr=_expressions(), seed=st.integers(0, 2**32 - 1))
 def test_random_expressions_are_enclosed(expr, seed):

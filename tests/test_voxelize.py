@@ -99,6 +99,7 @@ def test_tightest_settings_reach_the_paper_scenes_targets(compiled):
         assert len(v) / cells.sum() <= bound, (name, len(v) / cells.sum())
 
 
+@pytest.mark.slow
 def test_pruning_dead_terms_changes_nothing_it_should_not(compiled):
     import random
     random.seed(3)
@@ -249,6 +250,7 @@ def test_normals_are_unit_and_follow_the_gradient(compiled):
     np.testing.assert_allclose(sphere.normals, radial, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_normals_over_live_terms_follow_the_full_gradient(compiled):
     """Each voxel's normal is computed over the terms live in its cell only; dead terms add nothing to
     the gradient there, so it must match the full tape's gradient (blends, unions, CSG)."""
