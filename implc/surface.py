@@ -1,8 +1,8 @@
 """``implc.compile``: a SymPy expression becomes a :class:`Surface` with native kernels.
 
 A Surface owns its tapes, its :class:`~implc.jit.NativeModule` (and the mean-value one, compiled on
-first use), its kernels bound from :mod:`implc.abi`, and batched entry points that validate their arrays, run the compiled code over whole vectors and
-handle the ragged tail.
+first use), its kernels bound from :mod:`implc.abi`, and batched entry points that validate their
+arrays, run the compiled code over whole vectors and handle the ragged tail.
 """
 
 from __future__ import annotations

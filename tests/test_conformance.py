@@ -352,12 +352,11 @@ def test_directed_rounding_is_never_looser_than_widening(name, compiled):
 def test_directed_rounding_is_refused_without_avx512(monkeypatch):
     """On a CPU without AVX-512F, asking for directed rounding is a CompileError that says why, and
     "auto" widens (simulated here by hiding the host's AVX-512 features)."""
-    from implc import jit, surface
+    from implc import surface
     monkeypatch.setattr(surface, "host_has_avx512", lambda: False)
     with pytest.raises(implc.CompileError, match="AVX-512"):
         implc.compile(x + y, rounding="directed")
     assert not implc.compile(x + y, rounding="auto").directed
-    assert jit.host_has_avx512() == ("+avx512f" in jit._host()[1].split(","))
 
 
 def test_the_harness_sees_a_lost_ulp():
