@@ -3,7 +3,8 @@ report of the sampling tests.
 
 The suite never touches the user's kernel cache: every compile (in this process, its xdist workers and
 the subprocesses they start) goes to one temporary cache folder for the whole run, removed at the end.
-``IMPLC_TEST_CACHE_DIR`` names a folder to use instead (kept: a warm cache across runs).
+``IMPLC_TEST_CACHE_DIR`` names a folder to use instead (kept: a warm cache across runs). Hypothesis keeps
+its files in the run's temporary folder too, not in ``.hypothesis/`` of the checkout.
 """
 
 import os
@@ -11,8 +12,11 @@ import shutil
 import sys
 import tempfile
 
+from pathlib import Path
+
 import pytest
 from hypothesis import settings
+from hypothesis.configuration import set_hypothesis_home_dir
 
 sys.dont_write_bytecode = True  # nothing written into the checkout
 settings.register_profile("implc", database=None)  # no .hypothesis/ folder in the checkout
@@ -22,18 +26,18 @@ _RATIOS = {}
 
 
 def pytest_configure(config):
-    if hasattr(config, "workerinput"):  # an xdist worker: the controller has set the cache up
-        return
-    chosen = os.environ.get("IMPLC_TEST_CACHE_DIR")
-    folder = chosen or tempfile.mkdtemp(prefix="implc-test-cache-")
-    config._implc_cache = None if chosen else folder
-    os.environ["IMPLC_CACHE_DIR"] = folder  # inherited by xdist workers and subprocesses
+    if not hasattr(config, "workerinput"):  # the controller (or a run without xdist) sets the run's folder up
+        run = tempfile.mkdtemp(prefix="implc-test-")
+        config._implc_run = run
+        os.environ["IMPLC_TEST_RUN_DIR"] = run  # inherited by xdist workers and subprocesses
+        os.environ["IMPLC_CACHE_DIR"] = os.environ.get("IMPLC_TEST_CACHE_DIR") or os.path.join(run, "kernels")
+    set_hypothesis_home_dir(Path(os.environ["IMPLC_TEST_RUN_DIR"]) / "hypothesis")
 
 
 def pytest_unconfigure(config):
-    folder = getattr(config, "_implc_cache", None)
-    if folder:
-        shutil.rmtree(folder, ignore_errors=True)
+    run = getattr(config, "_implc_run", None)
+    if run:
+        shutil.rmtree(run, ignore_errors=True)
 
 
 class _Recorder:
