@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import sys
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -71,8 +72,12 @@ def _next_up(v: float) -> float:
 
 
 def const_attr_from_fraction(value: Fraction) -> tuple[float, float, float]:
-    """(nearest, lo, hi) doubles of an exact rational."""
-    nearest = float(value)  # correctly rounded
+    """(nearest, lo, hi) doubles of an exact rational. Beyond the largest double the bound on that side is
+    infinite and the other the largest double (the value is there), and so is ``nearest``."""
+    try:
+        nearest = float(value)  # correctly rounded
+    except OverflowError:
+        return (math.inf, sys.float_info.max, math.inf) if value > 0 else (-math.inf, -math.inf, -sys.float_info.max)
     lo = nearest if Fraction(nearest) <= value else _next_down(nearest)
     hi = nearest if Fraction(nearest) >= value else _next_up(nearest)
     return (nearest, lo, hi)

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 from fractions import Fraction
 
-import mpmath
 import sympy
 
 from .errors import CompileError
 from .ir import Tape, const_attr_from_fraction
+from .rounding import POWI_MAX
 from .symbols import NAMES
 
 _UNARY = {
@@ -24,19 +24,40 @@ _UNARY = {
 }
 
 
+_PERIODIC_FUNCTIONS = (sympy.sin, sympy.cos, sympy.tan)
+
+
 def is_periodic_in_phi(expr: sympy.Expr) -> bool:
-    """True when replacing phi by phi + 2π provably leaves ``expr`` unchanged."""
-    phis = [s for s in expr.free_symbols if s.name == "phi"]
-    if not phis:
-        return False
-    p = phis[0]
-    shifted = expr.xreplace({p: p + 2 * sympy.pi})
-    if shifted == expr:
-        return True
-    try:
-        return sympy.expand_trig(sympy.expand(shifted - expr)) == 0
-    except Exception:  # pragma: no cover - SymPy simplification failures only cost tightness
-        return False
+    """True when replacing phi by phi + 2π provably leaves ``expr`` unchanged.
+
+    A structural test, linear in the size of the expression: phi may occur only inside sin, cos or tan of
+    an argument k·phi + c with k an integer and c free of phi (then phi + 2π shifts the argument by a
+    multiple of 2π). Anything else counts as not periodic, which only costs tightness: phi then covers
+    [−π, π] on boxes that straddle its branch cut.
+    """
+    seen_phi = False
+    stack, seen = [expr], set()
+    while stack:
+        node = stack.pop()
+        if node in seen:
+            continue
+        seen.add(node)
+        if node.is_Symbol:
+            if node.name == "phi":
+                return False  # phi outside a periodic function
+            continue
+        if isinstance(node, _PERIODIC_FUNCTIONS):
+            argument = node.args[0]
+            phis = [a for a in sympy.preorder_traversal(argument) if a.is_Symbol and a.name == "phi"]
+            if not phis:
+                continue
+            k = argument.diff(phis[0])
+            if not (k.is_Integer and (argument - k * phis[0]).free_symbols.isdisjoint({phis[0]})):
+                return False
+            seen_phi = True
+            continue
+        stack.extend(node.args)
+    return seen_phi
 
 
 def _fraction_of_float(value: sympy.Float) -> Fraction:
@@ -45,28 +66,54 @@ def _fraction_of_float(value: sympy.Float) -> Fraction:
     return -f if man_sign else f
 
 
+_UNEVALUATED = (sympy.Integral, sympy.Sum, sympy.Product, sympy.Limit, sympy.Derivative)
+PRECISION = 60
+"""Decimal digits a numeric constant is evaluated to; it must agree with an evaluation at 80 to 50."""
+
+
 def number_bounds(expr: sympy.Expr) -> tuple[float, float, float]:
-    """(nearest, lo, hi) doubles enclosing a real SymPy number; CompileError for complex or infinite."""
+    """(nearest, lo, hi) doubles enclosing a real SymPy number; CompileError for complex or non-finite
+    numbers, and for numbers SymPy cannot evaluate to certified digits. A number beyond the largest double
+    gets an infinite bound on its side (see :func:`implc.ir.const_attr_from_fraction`)."""
     if expr.is_Integer or expr.is_Rational:
         return const_attr_from_fraction(Fraction(int(expr.p), int(expr.q)))
     if expr.is_Float:
         if not expr.is_finite:
             raise CompileError(f"unsupported non-finite number {expr}")
         return const_attr_from_fraction(_fraction_of_float(expr))
-    if expr.has(sympy.zoo, sympy.oo, -sympy.oo, sympy.nan):
-        raise CompileError(f"unsupported non-finite number {expr}")
-    value = expr.evalf(60)
+    if expr.has(*_UNEVALUATED):  # a sum, integral, ... in closed form if SymPy finds one
+        closed = expr.doit()
+        if closed.has(*_UNEVALUATED):
+            raise CompileError(f"the number {_short(expr)} has no closed form SymPy can find, and a numerical "
+                               "value carries no guarantee: give it in closed form or as a literal")
+        return number_bounds(closed)
+    try:
+        value = expr.evalf(PRECISION, strict=True)
+        check = expr.evalf(PRECISION + 20, strict=True)
+    except sympy.core.evalf.PrecisionExhausted:
+        raise CompileError(f"the number {_short(expr)} cannot be evaluated to {PRECISION} certified digits") from None
+    except (OverflowError, MemoryError, RecursionError):
+        raise CompileError(f"the number {_short(expr)} is too large to evaluate") from None
+    if value.has(sympy.zoo, sympy.oo, -sympy.oo, sympy.nan):
+        raise CompileError(f"unsupported non-finite number {_short(expr)}")
     if not value.is_real or value.has(sympy.I):
-        raise CompileError(f"complex number {expr} is not supported (surfaces are real)")
-    if not value.is_Float:
-        raise CompileError(f"cannot evaluate the number {expr}")
+        raise CompileError(f"complex number {_short(expr)} is not supported (surfaces are real)")
+    if not (value.is_Float and check.is_Float):
+        raise CompileError(f"cannot evaluate the number {_short(expr)}")
     approx = _fraction_of_float(value)
     err = abs(approx) * Fraction(1, 10**50) + Fraction(1, 10**300)
+    if abs(_fraction_of_float(check) - approx) > err:  # the two evaluations disagree: no digits to trust
+        raise CompileError(f"the number {_short(expr)} cannot be evaluated to {PRECISION} certified digits")
     _, lo, _ = const_attr_from_fraction(approx - err)
     _, _, hi = const_attr_from_fraction(approx + err)
-    with mpmath.workdps(60):
-        nearest = float(mpmath.mpf(value._mpf_))
+    nearest, _, _ = const_attr_from_fraction(approx)
     return (nearest, lo, hi)
+
+
+def _short(expr, limit: int = 80) -> str:
+    """An expression for a message, cut to ``limit`` characters."""
+    text = str(expr)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _meets_on_boundary(then_expr, else_expr, g) -> bool:
@@ -93,6 +140,14 @@ def _meets_on_boundary(then_expr, else_expr, g) -> bool:
         return p.domain.is_Exact and q.domain.is_Exact and p.rem(q).is_zero
     except (sympy.PolynomialError, sympy.GeneratorsNeeded, ValueError):
         return False
+
+
+def _integer_exponent(exp: sympy.Integer, base) -> int:
+    n = int(exp)
+    if abs(n) > POWI_MAX:
+        raise CompileError(f"the exponent {n} of {_short(base)} is beyond ±{POWI_MAX}, the largest integer power "
+                           "implc compiles")
+    return n
 
 
 class _Lowerer:
@@ -187,14 +242,16 @@ class _Lowerer:
         t = self.tape
         if base == sympy.E:
             return t.unary("exp", self.lower(exp))
+        if exp.is_Float and exp.is_finite and _fraction_of_float(exp).denominator == 1:
+            exp = sympy.Integer(int(_fraction_of_float(exp)))  # x ** 2.0 is x ** 2, also for x < 0
         if exp.is_Integer:
-            return t.powi(self.lower(base), int(exp))
+            return t.powi(self.lower(base), _integer_exponent(exp, base))
         b = self.lower(base)
         if exp.is_Rational:
             p, q = int(exp.p), int(exp.q)
             root = {2: "sqrt", 3: "cbrt"}.get(q)
             if root is not None:
-                return t.powi(t.unary(root, b), p)
+                return t.powi(t.unary(root, b), _integer_exponent(sympy.Integer(p), base))
             if p > 0:
                 return t.node("powf", (b,), float(exp))
             return t.div(t.const(1), t.node("powf", (b,), float(-exp)))

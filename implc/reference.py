@@ -47,12 +47,12 @@ NAN = np.nan
 INF = np.inf
 
 
-def widen_down(v, c):
-    return (v - np.abs(v) * c) - R.TINY
+def widen_down(v, c, tiny=R.TINY):
+    return (v - np.abs(v) * c) - tiny
 
 
-def widen_up(v, c):
-    return (v + np.abs(v) * c) + R.TINY
+def widen_up(v, c, tiny=R.TINY):
+    return (v + np.abs(v) * c) + tiny
 
 
 def powi_point(a, n: int):
@@ -123,13 +123,13 @@ def i_div(args, attr):
 
 def i_powi(args, n: int):
     (a,) = args
-    c = R.powi_slack(n)
+    c, tiny = R.powi_slack(n), R.powi_tiny(n)
     plo, phi = powi_point(a[0], n), powi_point(a[1], n)
     if n % 2:
-        return widen_down(plo, c), widen_up(phi, c)
-    lo = np.maximum(widen_down(np.minimum(plo, phi), c), 0.0)
+        return widen_down(plo, c, tiny), widen_up(phi, c, tiny)
+    lo = np.maximum(widen_down(np.minimum(plo, phi), c, tiny), 0.0)
     lo = np.where((a[0] <= 0) & (a[1] >= 0), 0.0, lo)
-    return lo, widen_up(np.maximum(plo, phi), c)
+    return lo, widen_up(np.maximum(plo, phi), c, tiny)
 
 
 def i_powf(args, e: float):

@@ -104,16 +104,16 @@ class IntervalEmitter:
 
     def i_powi(self, a, n):
         v = self.v
-        c = R.powi_slack(n)
+        c, tiny = R.powi_slack(n), R.powi_tiny(n)
         alo, ahi = a[0]
         if v.directed:
             return self.powi_directed(alo, ahi, n)
         plo, phi = powi(v, alo, n), powi(v, ahi, n)
         if n % 2:
-            return v.widen_down(plo, c), v.widen_up(phi, c)
-        lo = v.maximum(v.widen_down(v.minimum(plo, phi), c), v.splat(0.0))
+            return v.widen_down(plo, c, tiny), v.widen_up(phi, c, tiny)
+        lo = v.maximum(v.widen_down(v.minimum(plo, phi), c, tiny), v.splat(0.0))
         lo = v.select(self.contains_zero(a[0]), v.splat(0.0), lo)
-        return lo, v.widen_up(v.maximum(plo, phi), c)
+        return lo, v.widen_up(v.maximum(plo, phi), c, tiny)
 
     def powi_directed(self, alo, ahi, n):
         """a ** n by repeated squaring of magnitudes, every product rounded toward the bound it feeds."""

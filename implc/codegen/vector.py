@@ -201,8 +201,8 @@ class VectorBuilder:
                                         ir.Constant(ir.VectorType(i32, self.width), list(range(self.width))))
         return out
 
-    def widen_down(self, v, c: float):
-        return self.sub(self.sub(v, self.mul(self.fabs(v), self.splat(c))), self.splat(TINY))
+    def widen_down(self, v, c: float, tiny: float = TINY):
+        return self.sub(self.sub(v, self.mul(self.fabs(v), self.splat(c))), self.splat(tiny))
 
-    def widen_up(self, v, c: float):
-        return self.add(self.add(v, self.mul(self.fabs(v), self.splat(c))), self.splat(TINY))
+    def widen_up(self, v, c: float, tiny: float = TINY):
+        return self.add(self.add(v, self.mul(self.fabs(v), self.splat(c))), self.splat(tiny))
