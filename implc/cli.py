@@ -1,55 +1,74 @@
 """The ``implc`` command: list scenes, voxelize, render, inspect files, the kernel cache, and the demo.
 
-Every failure the user can cause (a missing or broken scene, a bad formula, depth or size, an unwritable
-output) ends with one line on stderr and exit status 2; Ctrl-C ends with status 130.
+Every failure the user can cause (a missing or broken scene or file, a bad formula, option or value, an
+unwritable output) ends with one line on stderr and exit status 2, and creates or damages no file (every
+output is written under a temporary name and renamed into place). Ctrl-C ends with status 130 and
+SIGTERM with 143, at any moment, imports included: this module imports only the standard library at
+load time and the rest of implc inside :func:`main`.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import math
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
-from . import kernel_cache, voxel_files
-from . import scene as scenes
-from .errors import CompileError
-from .expr import ExprError
-from .expr import parse as parse_expr
-from .render import Style, View, render_voxels, save_png
-from .surface import compile as compile_surface
-from .voxelize import voxelize
-
 PAPER_SCENES = ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4")
+MESSAGE_LIMIT = 300
+"""Longest error message printed (a 10,000-character formula is not repeated in full)."""
+DEFAULT_BOUNDS = "-1,1,-1,1,-1,1"
 
 
 class UsageError(Exception):
     """A problem with what the user asked for: reported in one line, exit status 2."""
 
 
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that cleanup (temporary files, worker threads) runs."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse prints a usage block; the contract is one line
+        raise UsageError(f"{message} (see '{self.prog} --help')")
+
+
 # -- helpers ---------------------------------------------------------------------------------------
-def _pair(text, what):
+_COUNT_WORDS = {2: "two", 3: "three", 6: "six"}
+
+
+def _numbers(text, count, what, example):
     try:
-        a, b = (float(v) for v in text.split(","))
+        values = [float(v) for v in text.split(",")]
     except ValueError:
-        raise UsageError(f"{what} must be two numbers 'A,B', got {text!r}") from None
-    return a, b
+        values = []
+    if len(values) != count:
+        raise UsageError(f"{what} must be {_COUNT_WORDS[count]} numbers '{example}', got {_short(text)}")
+    if not all(math.isfinite(v) for v in values):
+        raise UsageError(f"{what} must be finite numbers, got {_short(text)}")
+    return values
 
 
 def _bounds(text):
-    try:
-        v = [float(t) for t in text.split(",")]
-    except ValueError:
-        v = []
-    if len(v) != 6:
-        raise UsageError(f"--bounds must be six numbers 'x0,x1,y0,y1,z0,z1', got {text!r}")
+    v = _numbers(text, 6, "--bounds", "x0,x1,y0,y1,z0,z1")
     return ((v[0], v[1]), (v[2], v[3]), (v[4], v[5]))
 
 
+def _short(text, limit=80) -> str:
+    text = repr(text)
+    return text if len(text) <= limit else text[: limit - 4] + "...'"
+
+
 def _check_writable(path: Path, suffixes):
-    if path.suffix not in suffixes:
+    if path.is_dir():
+        raise UsageError(f"cannot write {path}: it is a folder")
+    suffix = path.suffix.lower()
+    if suffix not in suffixes:
         raise UsageError(f"unknown output format {path.suffix or '(none)'!r} for {path}: use {', '.join(suffixes)}")
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
@@ -58,43 +77,67 @@ def _check_writable(path: Path, suffixes):
         raise UsageError(f"cannot write {path}: permission denied")
 
 
+def _check_range(value, name, lo, hi):
+    if value is not None and not lo <= value <= hi:
+        raise UsageError(f"{name} must be an integer from {lo} to {hi}, got {value}")
+
+
 def _surface_from_args(args):
     """(name, compiled surface, scene or None) from SCENE or --expr."""
-    if getattr(args, "expr", None):
+    from .expr import ExprError
+    from .expr import parse as parse_expr
+    from .scene import load as load_scene
+    from .surface import compile as compile_surface
+    if args.expr is not None:
         if args.scene:
             raise UsageError("give either a SCENE or --expr, not both")
-        expr = parse_expr(args.expr)
-        bounds = _bounds(args.bounds) if args.bounds else ((-1, 1), (-1, 1), (-1, 1))
-        return args.expr, compile_surface(expr, bounds), None
+        if not args.expr.strip():
+            raise UsageError("--expr is empty: give a formula such as 'x**2 + y**2 + z**2 - 1'")
+        try:
+            expr = parse_expr(args.expr)
+        except ExprError as exc:
+            raise UsageError(f"--expr: {exc}") from None
+        return args.expr, compile_surface(expr, _bounds(args.bounds or DEFAULT_BOUNDS)), None
     if not args.scene:
         raise UsageError("name a SCENE (see 'implc scenes') or give --expr")
-    sc = scenes.load(args.scene)
-    bounds = _bounds(args.bounds) if getattr(args, "bounds", None) else sc.bounds
+    if Path(args.scene).suffix.lower() in (".npz", ".ply", ".npy"):
+        raise UsageError(f"{args.scene} is a voxel file: 'implc {args.command}' takes a scene or --expr"
+                         + (" (render reads .npz files)" if args.command == "voxelize" else ""))
+    sc = load_scene(args.scene)
+    bounds = _bounds(args.bounds) if args.bounds else sc.bounds
     return sc.name, compile_surface(sc.surface, bounds), sc
 
 
-def _voxelize(name, surface, depth, workers, quiet):
+def _voxelize(surface, depth, workers, quiet):
+    from .voxelization import voxelize
     t0 = time.perf_counter()
     voxels = voxelize(surface, depth, workers=workers, progress=not quiet and sys.stderr.isatty())
-    seconds = time.perf_counter() - t0
-    return voxels, seconds
+    return voxels, time.perf_counter() - t0
+
+
+def _check_surface_options(args):
+    _check_range(args.depth, "--depth", 1, 21)
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
 
 
 # -- commands --------------------------------------------------------------------------------------
 def cmd_scenes(args) -> int:
-    for name in scenes.available():
-        sc = scenes.load(name)
-        print(f"{name:<20} {sc.title}")
+    from .scene import available, load
+    for name in available():
+        print(f"{name:<20} {load(name).title}")
     return 0
 
 
 def cmd_voxelize(args) -> int:
+    from . import voxel_files
     out = Path(args.output)
-    _check_writable(out, (".npz", ".ply", ".npy"))
+    _check_writable(out, voxel_files.SUFFIXES)
+    _check_surface_options(args)
     name, surface, sc = _surface_from_args(args)
     depth = args.depth if args.depth is not None else (sc.depth if sc else 9)
-    voxels, seconds = _voxelize(name, surface, depth, args.workers, args.quiet)
-    voxel_files.save(voxels, out)
+    voxels, seconds = _voxelize(surface, depth, args.workers, args.quiet)
+    voxel_files.save(voxels, out, compress=args.compress)
     if not args.quiet:
         print(f"{name}: {len(voxels)} voxels at {1 << depth}³ in {seconds:.2f} s "
               f"(yield {voxels.stats.parallel_yield:.0%}) -> {out}")
@@ -102,21 +145,27 @@ def cmd_voxelize(args) -> int:
 
 
 def cmd_render(args) -> int:
+    from . import voxel_files
+    from .render import Style, View, render_voxels, save_png
     out = Path(args.output)
     _check_writable(out, (".png",))
-    if not 16 <= args.size <= 16384:
-        raise UsageError(f"--size must be from 16 to 16384 pixels, got {args.size}")
-    view_angles = _pair(args.view, "--view") if args.view else None
-    if args.scene and args.scene.endswith(".npz"):
+    _check_range(args.size, "--size", 16, 16384)
+    _check_surface_options(args)
+    view_angles = _numbers(args.view, 2, "--view", "azimuth,elevation") if args.view else None
+    style = Style(color=_color(args.color)) if args.color else Style()
+    if args.scene and Path(args.scene).suffix.lower() in (".npz", ".ply", ".npy"):
+        given = [flag for flag, value in (("--expr", args.expr), ("--depth", args.depth), ("--bounds", args.bounds),
+                                          ("--workers", args.workers)) if value is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)} cannot apply to a voxel file ({args.scene}): it is rendered as saved")
         voxels = voxel_files.load_npz(args.scene)
         default_view = None
     else:
-        name, surface, sc = _surface_from_args(args)
+        _, surface, sc = _surface_from_args(args)
         depth = args.depth if args.depth is not None else (sc.depth if sc else 9)
-        voxels, _ = _voxelize(name, surface, depth, args.workers, args.quiet)
+        voxels, _ = _voxelize(surface, depth, args.workers, args.quiet)
         default_view = sc.view if sc else None
     azimuth, elevation = view_angles or default_view or (35.0, 25.0)
-    style = Style(color=_color(args.color)) if args.color else Style()
     if args.lod is not None and not 1 <= args.lod <= voxels.depth:
         raise UsageError(f"--lod must be from 1 to {voxels.depth}, got {args.lod}")
     t0 = time.perf_counter()
@@ -129,22 +178,16 @@ def cmd_render(args) -> int:
 
 
 def _color(text):
-    rgb = [float(v) for v in text.split(",")] if text.count(",") == 2 else []
-    if len(rgb) != 3 or not all(0 <= c <= 1 for c in rgb):
-        raise UsageError(f"--color must be three numbers from 0 to 1 'R,G,B', got {text!r}")
+    rgb = _numbers(text, 3, "--color", "R,G,B")
+    if not all(0 <= c <= 1 for c in rgb):
+        raise UsageError(f"--color must be three numbers from 0 to 1 'R,G,B', got {_short(text)}")
     return tuple(rgb)
 
 
 def cmd_info(args) -> int:
-    voxels = voxel_files.load_npz(args.file)
-    n = 1 << voxels.depth
-    size = Path(args.file).stat().st_size
-    lo = voxels.coords.min(axis=0) if len(voxels) else [0, 0, 0]
-    hi = voxels.coords.max(axis=0) if len(voxels) else [0, 0, 0]
-    print(f"file     {args.file} ({size / 2**20:.1f} MiB)")
-    print(f"grid     {n}³ (depth {voxels.depth}) over {voxels.bounds}")
-    print(f"voxels   {len(voxels)} ({len(voxels) / n**3:.4%} of the cells)")
-    print(f"extent   cells {list(map(int, lo))} .. {list(map(int, hi))}")
+    from . import voxel_files
+    for line in voxel_files.describe(args.file):
+        print(line)
     return 0
 
 
@@ -161,6 +204,7 @@ def cmd_bench(argv) -> int:
 
 
 def cmd_cache(args) -> int:
+    from . import kernel_cache
     if args.action == "clear":
         removed = kernel_cache.clear()
         folder = kernel_cache.directory()
@@ -178,18 +222,25 @@ def cmd_cache(args) -> int:
 
 
 def cmd_demo(args) -> int:
+    from .render import View, render_voxels, save_png
+    from .scene import load as load_scene
+    from .surface import compile as compile_surface
+    _check_range(args.depth, "--depth", 1, 21)
+    _check_range(args.size, "--size", 16, 16384)
     out_dir = Path(args.out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UsageError(f"--out-dir {out_dir} exists and is not a folder")
     out_dir.mkdir(parents=True, exist_ok=True)
     n = 1 << args.depth
     print(f"implc demo: the paper's three scenes voxelized at {n}³ and rendered to {out_dir}/ "
           f"(paper, Table 1: 88 / 111 / 71 s on one SGI Challenge processor)")
     print(f"{'scene':<18}{'compile ms':>11}{'voxelize s':>11}{'voxels':>10}{'yield':>7}{'render s':>10}")
     for name in PAPER_SCENES:
-        sc = scenes.load(name)
+        sc = load_scene(name)
         t0 = time.perf_counter()
         surface = compile_surface(sc.surface, sc.bounds)
         compile_ms = (time.perf_counter() - t0) * 1e3
-        voxels, seconds = _voxelize(name, surface, args.depth, None, quiet=False)
+        voxels, seconds = _voxelize(surface, args.depth, None, quiet=False)
         t0 = time.perf_counter()
         image = render_voxels(voxels, size=args.size, view=View(*(sc.view or (35.0, 25.0))))
         save_png(image, out_dir / f"{name}.png")
@@ -200,9 +251,18 @@ def cmd_demo(args) -> int:
 
 
 # -- entry point -----------------------------------------------------------------------------------
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("implc")
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "unknown (not installed)"
+
+
 def _parser():
-    parser = argparse.ArgumentParser(prog="implc", description="symbolic implicit-surface compiler and voxelizer")
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = _Parser(prog="implc", description="symbolic implicit-surface compiler and voxelizer")
+    parser.add_argument("--version", action="version", version=f"implc {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     sub.add_parser("scenes", help="list the built-in scenes").set_defaults(run=cmd_scenes)
 
@@ -217,6 +277,7 @@ def _parser():
     v = sub.add_parser("voxelize", help="voxelize a scene or formula and write .npz, .ply or .npy")
     surface_args(v)
     v.add_argument("-o", "--output", required=True, help="output file: .npz, .ply (point cloud) or .npy (dense)")
+    v.add_argument("--compress", action="store_true", help="deflate the .npz (smaller, several times slower)")
     v.set_defaults(run=cmd_voxelize)
 
     r = sub.add_parser("render", help="render a scene, formula or .npz to a PNG")
@@ -229,7 +290,7 @@ def _parser():
     r.add_argument("--color", help="surface colour R,G,B in 0..1")
     r.set_defaults(run=cmd_render)
 
-    i = sub.add_parser("info", help="describe a voxel .npz")
+    i = sub.add_parser("info", help="describe a voxel file (.npz, .ply or .npy)")
     i.add_argument("file")
     i.set_defaults(run=cmd_info)
 
@@ -248,23 +309,73 @@ def _parser():
     return parser
 
 
+NUMBER_LIST_OPTIONS = ("--bounds", "--view", "--color")
+
+
+OPTIONS = ("-o", "--output", "--expr", "--bounds", "--depth", "--workers", "--quiet", "--compress", "--size",
+           "--view", "--lod", "--perspective", "--color", "-h", "--help")
+
+
+def _takes_dash_value(option: str, value: str) -> bool:
+    if not value.startswith("-"):
+        return False
+    if option in NUMBER_LIST_OPTIONS:
+        return value[1:2] in tuple("0123456789.,")
+    # "-x + 1" is a formula; an option name is not
+    return option == "--expr" and value.split("=")[0] not in OPTIONS
+
+
+def _attach_negative_values(argv: list[str]) -> list[str]:
+    """``--bounds -1,1,...`` as ``--bounds=-1,1,...`` (and ``--expr -x`` as ``--expr=-x``): argparse would
+    read a value starting with '-' as an option (the README's own example failed)."""
+    out, k = [], 0
+    while k < len(argv):
+        if k + 1 < len(argv) and _takes_dash_value(argv[k], argv[k + 1]):
+            out.append(f"{argv[k]}={argv[k + 1]}")
+            k += 2
+        else:
+            out.append(argv[k])
+            k += 1
+    return out
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated
+
+
+def _run(argv) -> int:
+    if argv[:1] == ["bench"]:  # the suite parses its own options
+        return cmd_bench(argv[1:])
+    args = _parser().parse_args(_attach_negative_values(argv))
+    return args.run(args)
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main_thread else None
     try:
-        if argv[:1] == ["bench"]:  # the suite parses its own options
-            return cmd_bench(argv[1:])
-        args = _parser().parse_args(argv)
-        return args.run(args)
-    except (UsageError, ExprError, CompileError, scenes.SceneError, voxel_files.VoxelFileError, MemoryError,
-            ValueError, OSError) as exc:
-        message = str(exc) or type(exc).__name__
-        if isinstance(exc, ExprError):
-            message = f"--expr: {message}"
+        return _run(argv)
+    except (UsageError, ValueError, MemoryError, OSError, RecursionError) as exc:
+        # ValueError covers CompileError, SceneError, VoxelFileError and the API's own checks
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        if isinstance(exc, RecursionError):
+            message = "the input is nested too deeply"
+        elif isinstance(exc, OSError) and exc.filename and exc.strerror:
+            message = f"{exc.filename}: {exc.strerror}"
+        if len(message) > MESSAGE_LIMIT:
+            message = message[: MESSAGE_LIMIT - 3] + "..."
         print(f"implc: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("implc: interrupted", file=sys.stderr)
         return 130
+    except _Terminated:
+        print("implc: terminated", file=sys.stderr)
+        return 143
+    finally:
+        if in_main_thread:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

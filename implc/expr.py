@@ -12,6 +12,7 @@ import operator
 
 import sympy
 
+from .rounding import POWI_MAX
 from .symbols import phi, r, theta, x, y, z
 
 NAMES = {"x": x, "y": y, "z": z, "r": r, "theta": theta, "phi": phi, "pi": sympy.pi, "E": sympy.E, "e": sympy.E}
@@ -24,7 +25,8 @@ FUNCTIONS = {
 BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
           ast.Pow: operator.pow}
 MAX_LENGTH = 10_000
-MAX_EXPONENT = 64
+MAX_NUMERIC_EXPONENT = 64
+"""The largest exponent of a number raised to a number (2**64**64 would take the machine's memory)."""
 
 
 class ExprError(ValueError):
@@ -34,11 +36,20 @@ class ExprError(ValueError):
 def parse(text: str) -> sympy.Expr:
     if len(text) > MAX_LENGTH:
         raise ExprError(f"expression longer than {MAX_LENGTH} characters")
+    if not text.strip():
+        raise ExprError("the expression is empty")
     try:
         tree = ast.parse(text.strip(), mode="eval")
+        return _build(tree.body)
     except SyntaxError as exc:
-        raise ExprError(f"cannot parse {text!r}: {exc.msg}") from None
-    return _build(tree.body)
+        raise ExprError(f"cannot parse {_short(text)}: {exc.msg}") from None
+    except (RecursionError, MemoryError):
+        raise ExprError("the expression is nested too deeply") from None
+
+
+def _short(text: str, limit: int = 60) -> str:
+    text = repr(text)
+    return text if len(text) <= limit else text[: limit - 4] + "...'"
 
 
 def _build(node) -> sympy.Expr:
@@ -50,8 +61,13 @@ def _build(node) -> sympy.Expr:
         raise ExprError(f"unknown name {node.id!r} (use x, y, z, r, theta, phi, pi, E)")
     if isinstance(node, ast.BinOp) and type(node.op) in BINARY:
         left, right = _build(node.left), _build(node.right)
-        if isinstance(node.op, ast.Pow) and right.is_number and not abs(right) <= MAX_EXPONENT:
-            raise ExprError(f"exponent {right} is too large (at most {MAX_EXPONENT})")
+        if isinstance(node.op, ast.Pow) and right.is_number:
+            limit = MAX_NUMERIC_EXPONENT if left.is_number else POWI_MAX
+            if not abs(right) <= limit:
+                raise ExprError(f"exponent {_short(str(right))} is too large (at most {limit}"
+                                f"{' for a number' if left.is_number else ''})")
+        if isinstance(node.op, ast.Div) and right == 0:
+            raise ExprError(f"division by zero in {_short(ast.unparse(node))}")
         return BINARY[type(node.op)](left, right)
     if isinstance(node, ast.BinOp) and isinstance(node.op, ast.BitXor):
         raise ExprError("'^' is not a power: write x**2")
@@ -64,6 +80,8 @@ def _build(node) -> sympy.Expr:
             raise ExprError(f"function {name!r} is not allowed (allowed: {', '.join(sorted(FUNCTIONS))})")
         if node.keywords:
             raise ExprError(f"keyword arguments are not allowed in {node.func.id}()")
+        if not node.args:
+            raise ExprError(f"{node.func.id}() needs an argument")
         try:
             return FUNCTIONS[node.func.id](*[_build(a) for a in node.args])
         except (TypeError, ValueError) as exc:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .atomic_file import replacing
 from .runtime import Runtime
 
 
@@ -106,7 +107,7 @@ def render_points(centers, normals, cell_size, bounds, *, size=1024, view: View 
 
 
 def render_voxels(voxels, *, size=1024, view: View = View(), style: Style = Style(), lod: int | None = None):
-    """Render a :class:`~implc.voxelize.Voxels` (or anything with coords, normals, depth, bounds)."""
+    """Render a :class:`~implc.voxelization.Voxels` (or anything with coords, normals, depth, bounds)."""
     depth = voxels.depth
     coords, normals = voxels.coords, voxels.normals
     if lod is not None:
@@ -121,6 +122,7 @@ def render_voxels(voxels, *, size=1024, view: View = View(), style: Style = Styl
 
 
 def save_png(image, path) -> None:
-    """Write an RGB uint8 image with Pillow."""
+    """Write an RGB uint8 image with Pillow, under a temporary name renamed into place."""
     from PIL import Image
-    Image.fromarray(np.ascontiguousarray(image), mode="RGB").save(path)
+    with replacing(path) as tmp:
+        Image.fromarray(np.ascontiguousarray(image), mode="RGB").save(tmp, format="PNG")

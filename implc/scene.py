@@ -9,9 +9,16 @@ package (``implc/scene_files/``, put there by ``setup.py`` at build time).
 
 from __future__ import annotations
 
+import math
 import runpy
 from dataclasses import dataclass
 from pathlib import Path
+
+import sympy
+
+from .abi import MAX_DEPTH
+from .errors import CompileError
+from .surface import check_bounds
 
 
 def _scenes_dir() -> Path:
@@ -54,14 +61,53 @@ def load(name_or_path: str) -> Scene:
     if path.suffix != ".py":
         path = SCENES_DIR / f"{name_or_path}.py"
     if not path.is_file():
-        raise SceneError(f"no scene {name_or_path!r} (known: {', '.join(available())})")
+        raise SceneError(f"no scene {name_or_path!r} (known: {', '.join(available())}; or a path to a .py "
+                         "scene file)")
     try:
         namespace = runpy.run_path(str(path))
     except Exception as exc:  # the scene's own error, reported with its file
         raise SceneError(f"scene {path} failed to load: {type(exc).__name__}: {exc}") from exc
     if "surface" not in namespace:
         raise SceneError(f"scene {path} defines no 'surface'")
-    return Scene(name=path.stem, surface=namespace["surface"],
-                 bounds=namespace.get("bounds", ((-1, 1), (-1, 1), (-1, 1))),
-                 depth=int(namespace.get("depth", 9)), view=namespace.get("view"),
-                 doc=namespace.get("__doc__") or "")
+    return Scene(name=path.stem, surface=_checked_surface(path, namespace["surface"]),
+                 bounds=_checked_bounds(path, namespace.get("bounds", ((-1, 1), (-1, 1), (-1, 1)))),
+                 depth=_checked_depth(path, namespace.get("depth", 9)),
+                 view=_checked_view(path, namespace.get("view")), doc=str(namespace.get("__doc__") or ""))
+
+
+def _checked_surface(path, surface):
+    if not isinstance(surface, sympy.Expr):
+        raise SceneError(f"scene {path}: 'surface' must be a SymPy expression, got {type(surface).__name__} "
+                         f"{_short(surface)}")
+    return surface
+
+
+def _checked_bounds(path, bounds):
+    try:
+        return check_bounds(bounds)
+    except CompileError as exc:
+        raise SceneError(f"scene {path}: 'bounds': {exc}") from None
+
+
+def _checked_depth(path, depth):
+    if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= MAX_DEPTH:
+        raise SceneError(f"scene {path}: 'depth' must be an integer from 1 to {MAX_DEPTH}, got {_short(depth)}")
+    return depth
+
+
+def _checked_view(path, view):
+    if view is None:
+        return None
+    try:
+        azimuth, elevation = (float(v) for v in view)
+    except (TypeError, ValueError):
+        raise SceneError(f"scene {path}: 'view' must be two numbers (azimuth, elevation) in degrees, got "
+                         f"{_short(view)}") from None
+    if not (math.isfinite(azimuth) and math.isfinite(elevation)):
+        raise SceneError(f"scene {path}: 'view' must be finite, got {_short(view)}")
+    return (azimuth, elevation)
+
+
+def _short(value, limit=60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."

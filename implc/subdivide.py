@@ -199,6 +199,8 @@ class Subdivider:
         the caller already made it."""
         cells, level = plan if plan is not None else self.plan()
         if level == self.depth:  # the plan already reached the leaves
+            if self.max_voxels is not None and len(cells) > self.max_voxels:
+                raise MemoryError(f"more than max_voxels={self.max_voxels} voxels at depth {self.depth}")
             t0 = time.perf_counter()
             normals = self._normals(cells, np.empty((len(cells), 3), dtype=np.float32))
             t1 = time.perf_counter()

@@ -8,11 +8,13 @@ arrays, run the compiled code over whole vectors and handle the ragged tail.
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 import sympy
 
 from . import abi
+from .abi import MAX_DEPTH
 from .codegen.kernels import WIDTH, WIDTHS, build_mean_value_module, build_module
 from .errors import CompileError
 from .gradient import with_gradient
@@ -23,6 +25,8 @@ from .runtime import Runtime
 
 DEFAULT_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
 ROUNDINGS = ("auto", "directed", "widen")
+CHUNK = 1 << 16
+"""Rows per native call of the batched entry points (a multiple of every vector width)."""
 
 
 def check_bounds(bounds) -> tuple[tuple[float, float], ...]:
@@ -43,6 +47,13 @@ def check_bounds(bounds) -> tuple[tuple[float, float], ...]:
             raise CompileError(f"{axis} bounds ({lo!r}, {hi!r}) are not finite")
         if not lo_f < hi_f:
             raise CompileError(f"{axis} bounds ({lo!r}, {hi!r}) need lo < hi")
+        width = hi_f - lo_f
+        # the width, the outward pad and the finest cell size (2^-(MAX_DEPTH + 1) of it, refined) must be
+        # ordinary doubles: a width beyond the doubles has no finite cells, a subnormal cell no exact edges
+        if not math.isfinite(width) or not math.isfinite(abs(lo_f) + abs(hi_f)):
+            raise CompileError(f"{axis} bounds ({lo!r}, {hi!r}) are too far apart: their width is not a finite double")
+        if width / 2.0 ** (MAX_DEPTH + 1) < sys.float_info.min:
+            raise CompileError(f"{axis} bounds ({lo!r}, {hi!r}) are too close: the finest cells would be subnormal")
         out.append((lo_f, hi_f))
     return tuple(out)
 
@@ -128,14 +139,16 @@ class Surface:
 
     # -- batched evaluation -----------------------------------------------------------------------
     def _run(self, kernel, inputs: list[np.ndarray], out_shapes: list[tuple], extra=()) -> list[np.ndarray]:
-        """Run ``kernel`` over whole vectors, then once more over the zero-padded tail (``extra``: trailing
-        arguments, e.g. NULL live masks)."""
+        """Run ``kernel`` over whole vectors, in chunks of :data:`CHUNK` rows (Ctrl-C is seen between
+        them), then once more over the zero-padded tail (``extra``: trailing arguments, e.g. NULL live
+        masks)."""
         n = len(inputs[0])
         outs = [np.empty((n, *shape), dtype=np.float64) for shape in out_shapes]
         width = self.width
         main = n - n % width
-        if main:
-            kernel(*[a.ctypes.data for a in inputs], *[o.ctypes.data for o in outs], main, *extra)
+        for start in range(0, main, CHUNK):
+            count = min(CHUNK, main - start)
+            kernel(*[a[start:].ctypes.data for a in inputs], *[o[start:].ctypes.data for o in outs], count, *extra)
         if main < n:
             tail_in = [np.zeros((width, 3)) for _ in inputs]
             for pad, a in zip(tail_in, inputs):
@@ -201,4 +214,8 @@ def compile(expr, bounds=DEFAULT_BOUNDS, *, vector_width: int = WIDTH, rounding:
     if rounding == "directed" and not host_has_avx512():
         raise CompileError("rounding='directed' needs a CPU with AVX-512F; this one has none (use 'auto' or 'widen')")
     directed = rounding == "directed" or (rounding == "auto" and host_has_avx512())
-    return Surface(expr, checked, lower(expr), vector_width, directed)
+    try:
+        tape = lower(expr)
+    except RecursionError:
+        raise CompileError("the expression is nested too deeply for the front end") from None
+    return Surface(expr, checked, tape, vector_width, directed)

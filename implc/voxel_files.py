@@ -1,53 +1,163 @@
-"""Voxel files: ``.npz`` (exact round trip), binary ``.ply`` point clouds with normals, dense ``.npy``."""
+"""Voxel files: ``.npz`` (exact round trip), binary ``.ply`` point clouds with normals, dense ``.npy``.
+
+Every file is written under a temporary name and renamed into place (:mod:`implc.atomic_file`): an
+interrupted save never damages an existing file. Reading checks what a file is by its first bytes and
+validates an ``.npz`` completely (depth, bounds, coordinates inside the grid, finite unit normals), so a
+foreign, truncated or damaged file is a :class:`VoxelFileError` naming the problem.
+"""
 
 from __future__ import annotations
 
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 
-from .voxelize import Voxels
+from .abi import MAX_DEPTH
+from .atomic_file import replacing
+from .voxelization import Voxels
 
 FORMAT_VERSION = 1
+SUFFIXES = (".npz", ".ply", ".npy")
+_MAGIC = {b"PK\x03\x04": ".npz", b"PK\x05\x06": ".npz", b"\x93NUMPY": ".npy", b"ply\n": ".ply", b"ply\r": ".ply"}
 
 
 class VoxelFileError(ValueError):
-    """A voxel file is missing, unreadable or not one of ours."""
+    """A voxel file is missing, unreadable, damaged or not one of ours."""
 
 
-def save(voxels, path) -> Path:
-    """Write ``voxels`` in the format named by the extension: .npz, .ply or .npy (dense occupancy)."""
+def suffix_of(path) -> str:
+    """The format a path names by its extension, in lower case (``A.NPZ`` is an .npz)."""
+    return Path(path).suffix.lower()
+
+
+def save(voxels, path, *, compress: bool = False) -> Path:
+    """Write ``voxels`` in the format named by the extension: .npz, .ply or .npy (dense occupancy).
+
+    ``compress``: deflate the .npz (about 3x smaller for Morton-ordered voxels, and several times slower).
+    """
     path = Path(path)
-    writers = {".npz": save_npz, ".ply": save_ply, ".npy": save_dense}
-    if path.suffix not in writers:
-        raise ValueError(f"unknown output format {path.suffix!r} for {path}: use .npz, .ply or .npy")
-    writers[path.suffix](voxels, path)
+    writers = {".npz": lambda v, p: save_npz(v, p, compress=compress), ".ply": save_ply, ".npy": save_dense}
+    suffix = suffix_of(path)
+    if suffix not in writers:
+        raise ValueError(f"unknown output format {path.suffix or '(none)'!r} for {path}: use .npz, .ply or .npy")
+    writers[suffix](voxels, path)
     return path
 
 
-def save_npz(voxels, path) -> None:
-    np.savez_compressed(path, implc_voxels=FORMAT_VERSION, coords=voxels.coords, normals=voxels.normals,
-                        depth=voxels.depth, bounds=np.asarray(voxels.bounds, dtype=np.float64))
+def save_npz(voxels, path, *, compress: bool = False) -> None:
+    arrays = dict(implc_voxels=FORMAT_VERSION, coords=voxels.coords, normals=voxels.normals, depth=voxels.depth,
+                  bounds=np.asarray(voxels.bounds, dtype=np.float64))
+    with replacing(path) as tmp:
+        (np.savez_compressed if compress else np.savez)(tmp, **arrays)
 
 
-def load_npz(path):
-    """The :class:`~implc.voxelize.Voxels` stored in an ``.npz`` written by :func:`save_npz`."""
-    path = Path(path)
+def sniff(path) -> str:
+    """The format of an existing file by its first bytes: ".npz", ".npy", ".ply" or "" (unknown)."""
+    with open(path, "rb") as f:
+        head = f.read(8)
+    return next((fmt for magic, fmt in _MAGIC.items() if head.startswith(magic)), "")
+
+
+def _check_readable(path: Path) -> str:
+    if not path.is_file():
+        raise VoxelFileError(f"cannot read {path}: no such file")
     try:
-        with np.load(path) as data:
+        fmt = sniff(path)
+    except OSError as exc:
+        raise VoxelFileError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if not fmt:
+        size = path.stat().st_size
+        raise VoxelFileError(f"{path} is {'empty' if size == 0 else 'not a voxel file'} "
+                             "(implc reads the .npz, .ply and .npy files it writes)")
+    return fmt
+
+
+def load_npz(path) -> Voxels:
+    """The :class:`~implc.voxelization.Voxels` stored in an ``.npz`` written by :func:`save_npz`, validated."""
+    path = Path(path)
+    fmt = _check_readable(path)
+    if fmt != ".npz":
+        what = {".ply": "a PLY point cloud", ".npy": "a dense .npy occupancy grid"}[fmt]
+        raise VoxelFileError(f"{path} is {what}: voxels are read back from the .npz files implc writes")
+    try:
+        with np.load(path, allow_pickle=False) as data:
             if "implc_voxels" not in data:
                 raise VoxelFileError(f"{path} is not an implc voxel file (no 'implc_voxels' entry)")
-            coords, normals = data["coords"], data["normals"]
-            depth, bounds = int(data["depth"]), tuple(tuple(b) for b in data["bounds"].tolist())
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
-        if isinstance(exc, VoxelFileError):
-            raise
-        raise VoxelFileError(f"cannot read {path}: {exc}") from exc
-    if coords.ndim != 2 or coords.shape[1] != 3 or normals.shape != coords.shape:
-        raise VoxelFileError(f"{path}: coords and normals must both be (N, 3)")
-    return Voxels(coords.astype(np.uint32, copy=False), normals.astype(np.float32, copy=False), depth, bounds,
-                  stats=None)
+            missing = [k for k in ("coords", "normals", "depth", "bounds") if k not in data]
+            if missing:
+                raise VoxelFileError(f"{path}: damaged implc voxel file, missing {', '.join(missing)}")
+            coords, normals, depth, bounds = data["coords"], data["normals"], data["depth"], data["bounds"]
+    except VoxelFileError:
+        raise
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise VoxelFileError(f"cannot read {path}: damaged or truncated ({type(exc).__name__}: {exc})") from None
+    return Voxels(*_validated(path, coords, normals, depth, bounds), stats=None)
+
+
+def _validated(path, coords, normals, depth, bounds):
+    """(coords, normals, depth, bounds) checked to be what save_npz writes; VoxelFileError otherwise."""
+    if depth.shape != () or depth.dtype.kind not in "iu" or not 1 <= int(depth) <= MAX_DEPTH:
+        raise VoxelFileError(f"{path}: depth must be an integer from 1 to {MAX_DEPTH}, got {depth!r}")
+    depth = int(depth)
+    if bounds.shape != (3, 2) or bounds.dtype.kind != "f" or not np.all(np.isfinite(bounds)) \
+            or not np.all(bounds[:, 0] < bounds[:, 1]):
+        raise VoxelFileError(f"{path}: bounds must be three finite (lo, hi) pairs with lo < hi, got "
+                             f"{np.array2string(bounds, threshold=12)}")
+    if coords.ndim != 2 or coords.shape[1:] != (3,) or coords.dtype.kind not in "iu":
+        raise VoxelFileError(f"{path}: coords must be an (N, 3) integer array, got {coords.dtype} {coords.shape}")
+    if normals.shape != coords.shape or normals.dtype.kind != "f":
+        raise VoxelFileError(f"{path}: normals must be an (N, 3) float array like coords, got "
+                             f"{normals.dtype} {normals.shape}")
+    if len(coords) and (coords.min() < 0 or coords.max() >= 1 << depth):
+        raise VoxelFileError(f"{path}: coordinates outside the {1 << depth}³ grid of depth {depth}")
+    if not np.all(np.isfinite(normals)) or (len(normals) and np.abs(np.linalg.norm(normals, axis=1) - 1).max() > 1e-3):
+        raise VoxelFileError(f"{path}: normals must be finite unit vectors")
+    return (coords.astype(np.uint32, copy=False), normals.astype(np.float32, copy=False), depth,
+            tuple(tuple(b) for b in bounds.tolist()))
+
+
+def describe(path) -> list[str]:
+    """Lines describing any voxel file implc writes (for ``implc info``)."""
+    path = Path(path)
+    fmt = _check_readable(path)
+    size = f"{path} ({path.stat().st_size / 2**20:.1f} MiB)"
+    if fmt == ".npz":
+        voxels = load_npz(path)
+        n = 1 << voxels.depth
+        lo = voxels.coords.min(axis=0) if len(voxels) else [0, 0, 0]
+        hi = voxels.coords.max(axis=0) if len(voxels) else [0, 0, 0]
+        return [f"file     {size}, implc voxels",
+                f"grid     {n}³ (depth {voxels.depth}) over {voxels.bounds}",
+                f"voxels   {len(voxels)} ({len(voxels) / n**3:.4%} of the cells)",
+                f"extent   cells {list(map(int, lo))} .. {list(map(int, hi))}"]
+    if fmt == ".npy":
+        try:
+            grid = np.load(path, mmap_mode="r", allow_pickle=False)
+        except (OSError, ValueError, EOFError) as exc:
+            raise VoxelFileError(f"cannot read {path}: damaged or truncated ({exc})") from None
+        if grid.ndim != 3 or grid.dtype != bool:
+            raise VoxelFileError(f"{path}: not a dense occupancy grid (a 3-D bool array), got {grid.dtype} {grid.shape}")
+        return [f"file     {size}, dense occupancy grid", f"grid     {'x'.join(map(str, grid.shape))}",
+                f"voxels   {int(np.count_nonzero(grid))}"]
+    header = _ply_header(path)
+    count = next((int(line.split()[2]) for line in header if line.startswith("element vertex ")), None)
+    comment = next((line[len("comment "):] for line in header if line.startswith("comment implc")), "")
+    return [f"file     {size}, PLY point cloud", f"points   {count}", *([f"comment  {comment}"] if comment else [])]
+
+
+def _ply_header(path) -> list[str]:
+    lines = []
+    with open(path, "rb") as f:
+        for raw in f:
+            line = raw.decode("ascii", errors="replace").strip()
+            lines.append(line)
+            if line == "end_header" or len(lines) > 64:
+                break
+    if lines[-1:] != ["end_header"]:
+        raise VoxelFileError(f"{path}: damaged PLY header")
+    return lines
 
 
 def save_ply(voxels, path) -> None:
@@ -64,11 +174,12 @@ def save_ply(voxels, path) -> None:
         *[f"property float {n}" for n in ("x", "y", "z", "nx", "ny", "nz")],
         "end_header",
     ]) + "\n"
-    with open(path, "wb") as f:
+    with replacing(path) as tmp, open(tmp, "wb") as f:
         f.write(header.encode("ascii"))
         f.write(vertex.tobytes())
 
 
 def save_dense(voxels, path) -> None:
     """Dense occupancy as a bool ``.npy`` indexed [i, j, k]."""
-    np.save(path, voxels.to_dense())
+    with replacing(path) as tmp:
+        np.save(tmp, voxels.to_dense())

@@ -1,6 +1,7 @@
 """The benchmark suite runs end to end on a small setting and its figures are consistent (not timed)."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -8,12 +9,18 @@ from implc.cli import main
 
 
 @pytest.mark.slow
-def test_bench_suite_small(tmp_path, capsys):
+def test_bench_suite_small(tmp_path, capsys, monkeypatch):
+    """Run from another folder without --out: the results go to ./implc-bench there, never into the
+    checkout (the README quotes benchmarks/results/)."""
+    results = Path(__file__).resolve().parent.parent / "benchmarks" / "results"
+    quoted = {p.name: p.read_bytes() for p in results.iterdir()}
+    monkeypatch.chdir(tmp_path)
     status = main(["bench", "--depth", "5", "--workers", "1,2", "--repeats", "1", "--baseline-depths", "5",
-                   "--growth-depths", "5,6", "--tightness-scenes", "torus,paper_blobs", "--tightness-depth", "6",
-                   "--out", str(tmp_path)])
+                   "--growth-depths", "5,6", "--tightness-scenes", "torus,paper_blobs", "--tightness-depth", "6"])
     assert status == 0
     assert "Table 1 at 32³" in capsys.readouterr().out
+    assert {p.name: p.read_bytes() for p in results.iterdir()} == quoted
+    tmp_path = tmp_path / "implc-bench"
     data = json.loads((tmp_path / "latest.json").read_text())
     assert data["machine"]["cores"] >= 1 and data["machine"]["llvmlite"]
     table = data["table1"]

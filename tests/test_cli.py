@@ -98,43 +98,14 @@ def test_expr_never_executes_code(formula, tmp_path):
     assert not (tmp_path / "x.npz").exists()
 
 
-def test_user_errors_are_one_line_with_exit_2(tmp_path):
-    broken = tmp_path / "broken.py"
-    broken.write_text("import sympy\nsurface = (\n")
-    empty = tmp_path / "empty.py"
-    empty.write_text("bounds = ((-1, 1),) * 3\n")
-    cases = [
-        (["voxelize", "nosuch", "-o", str(tmp_path / "a.npz")], "no scene 'nosuch'"),
-        (["voxelize", str(tmp_path / "missing.py"), "-o", str(tmp_path / "a.npz")], "no scene"),
-        (["voxelize", str(broken), "-o", str(tmp_path / "a.npz")], "failed to load: SyntaxError"),
-        (["voxelize", str(empty), "-o", str(tmp_path / "a.npz")], "defines no 'surface'"),
-        (["voxelize", "torus", "--depth", "0", "-o", str(tmp_path / "a.npz")], "depth must be an integer from 1 to 21"),
-        (["voxelize", "torus", "-o", str(tmp_path / "a.txt")], "unknown output format '.txt'"),
-        (["voxelize", "torus", "-o", str(tmp_path / "no" / "a.npz")], "does not exist"),
-        (["render", "torus", "--size", "5", "-o", str(tmp_path / "a.png")], "--size must be from 16 to 16384"),
-        (["render", "torus", "--view", "up", "-o", str(tmp_path / "a.png")], "--view must be two numbers"),
-        (["info", str(tmp_path / "nothing.npz")], "cannot read"),
-        (["voxelize", "torus", "--bounds", "1,2,3", "-o", str(tmp_path / "a.npz")], "--bounds must be six"),
-        (["voxelize", "--expr", "x", "--bounds", "1,0,-1,1,-1,1", "-o", str(tmp_path / "a.npz")], "lo < hi"),
-    ]
-    for argv, message in cases:
-        assert_one_line_error(argv, message)
-
-
-def assert_one_line_error(argv, message):
-    status, out, err = run(*argv)
-    assert status == 2, (argv, status, err)
-    assert message in err, (argv, err)
-    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, (argv, err)
-
-
 @pytest.mark.skipif(os.geteuid() == 0, reason="running as root: every folder is writable, so no permission "
                                                "error can be provoked")
 def test_an_unwritable_output_is_one_line_with_exit_2(tmp_path):
     readonly = tmp_path / "ro"
     readonly.mkdir()
     readonly.chmod(0o500)
-    assert_one_line_error(["voxelize", "torus", "-o", str(readonly / "a.npz")], "permission denied")
+    status, _, err = run("voxelize", "torus", "-o", str(readonly / "a.npz"))
+    assert status == 2 and err.strip() == f"implc: error: cannot write {readonly / 'a.npz'}: permission denied"
 
 
 def test_demo_writes_the_three_renders(tmp_path, capsys):

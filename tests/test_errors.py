@@ -17,6 +17,7 @@ from implc import CompileError, x, y, z
     (sympy.gamma(x), "unsupported function gamma(x)"),
     (sympy.floor(x), "unsupported function floor(x)"),
     (x + sympy.oo, "non-finite"),
+    (x + sympy.zoo, "non-finite"),
     (sympy.Integral(x, y), "unsupported expression"),
     (sympy.Piecewise((x, sympy.Contains(y, sympy.Interval(0, 1))), (y, True)), "unsupported Piecewise condition"),
     (x < y, "real-valued expression"),
@@ -46,6 +47,8 @@ def test_non_sympy_argument_is_a_type_error(bad):
     (((-1, 1), ("a", 1), (-1, 1)), "not numbers"),
     ((1, 2, 3), "three"),
     (5, "three"),
+    (((-1e308, 1e308), (-1, 1), (-1, 1)), "x bounds .* too far apart"),
+    (((-1, 1), (0, 1e-310), (-1, 1)), "y bounds .* too close"),
 ])
 def test_bad_bounds_are_named(bounds, message):
     with pytest.raises(CompileError, match=message):

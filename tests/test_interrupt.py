@@ -31,3 +31,53 @@ def test_ctrl_c_stops_promptly():
     assert proc.returncode == 3, (out, err)
     assert out.strip() == "interrupted 1"  # only the main thread is left
     assert elapsed < 1.0, f"took {elapsed:.2f} s to stop"
+
+
+BATCH_SCRIPT = textwrap.dedent("""
+    import sys, numpy as np, sympy, implc
+    from implc import theta, phi, r
+    s = implc.compile(sympy.sin(4 * theta) * sympy.sin(8 * phi) - r)
+    points = np.random.default_rng(0).uniform(-1, 1, (10**7, 3))
+    print("started", flush=True)
+    try:
+        s.gradient(points)  # about 2 s on this machine: one native call per 65536 points
+    except KeyboardInterrupt:
+        print("interrupted", flush=True)
+        sys.exit(3)
+    print("finished", flush=True)
+""")
+
+
+def test_ctrl_c_stops_a_large_batched_evaluation_promptly():
+    proc = subprocess.Popen([sys.executable, "-c", BATCH_SCRIPT], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    assert proc.stdout.readline().strip() == "started"
+    time.sleep(0.3)
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    elapsed = time.monotonic() - sent
+    assert proc.returncode == 3 and out.strip() == "interrupted", (out, err)
+    assert elapsed < 1.0, f"took {elapsed:.2f} s to stop"
+
+
+STARTER = ("import sys, runpy; print('ready', flush=True); sys.argv = ['implc', 'scenes']; "
+           "runpy.run_module('implc', run_name='__main__', alter_sys=True)")
+
+
+def test_ctrl_c_at_start_up_is_one_line():
+    """SIGINT while `python -m implc` starts (SymPy, NumPy and LLVM being imported: about a second) ends
+    with 'interrupted' and status 130, never a traceback. What remains outside implc's reach is the first
+    few milliseconds, while the interpreter and importlib load the stdlib-only entry modules (the child
+    says "ready" once the interpreter itself is up)."""
+    for delay in (0.08, 0.12, 0.2, 0.3, 0.45, 0.7):
+        proc = subprocess.Popen([sys.executable, "-c", STARTER], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+        assert proc.stdout.readline().strip() == "ready"
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        assert "Traceback" not in err, (delay, err)
+        assert proc.returncode in (0, 130, -signal.SIGINT), (delay, proc.returncode, err)
+        if proc.returncode == 130:
+            assert err.strip() == "implc: interrupted", err

@@ -104,10 +104,21 @@ class _Collect:
         return self.coords[: self.count], self.normals[: self.count]
 
 
+def _check_count(name, value) -> int:
+    """A whole number >= 1 (an int or a numpy integer, not a bool or a float)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
+    return int(value)
+
+
 def _check_depth(depth):
     if isinstance(depth, bool) or not isinstance(depth, (int, np.integer)) or not MIN_DEPTH <= depth <= MAX_DEPTH:
         raise ValueError(f"depth must be an integer from {MIN_DEPTH} to {MAX_DEPTH}, got {depth!r}")
     return int(depth)
+
+
+ESTIMATE_MARGIN = 1.5
+"""The memory check's allowance for the estimate running low (measured up to about 1.5x below the peak)."""
 
 
 def _estimate_voxels(planned_cells, plan_level, depth):
@@ -117,7 +128,7 @@ def _estimate_voxels(planned_cells, plan_level, depth):
 
 def _check_memory(depth, storage, estimate_voxels, available):
     """Refuse before starting when the result cannot fit."""
-    estimate = estimate_voxels * bytes_per_voxel(storage)
+    estimate = estimate_voxels * bytes_per_voxel(storage) * ESTIMATE_MARGIN
     if storage == "grid":
         estimate += dense_bytes(depth)
     if estimate > available:
@@ -139,9 +150,9 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     if not isinstance(surface, Surface):
         raise TypeError(f"voxelize expects an implc.Surface (from implc.compile), got {type(surface).__name__}")
     depth = _check_depth(depth)
-    workers = default_workers() if workers is None else int(workers)
-    if workers < 1:
-        raise ValueError(f"workers must be at least 1, got {workers}")
+    workers = default_workers() if workers is None else _check_count("workers", workers)
+    if max_voxels is not None:
+        max_voxels = _check_count("max_voxels", max_voxels)
     if isinstance(mean_value_levels, bool) or not isinstance(mean_value_levels, int) or mean_value_levels < 0:
         raise ValueError(f"mean_value_levels must be a whole number >= 0, got {mean_value_levels!r}")
     available = available_memory()
