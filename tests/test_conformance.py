@@ -230,7 +230,8 @@ MEAN_VALUE_EVALUATORS = {
     "pruned mean-value kernel, every term live": lambda s, lo, hi: _interval_with_all_live(s, lo, hi,
                                                                                            abi.INTERVAL_MVF),
 }
-WIDTHS = (8, 4, 2, 1)
+WIDTHS = (8, 1, pytest.param(4, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow))
+"""Every vector width runs every case; 4 and 2 (the same code as 8 on fewer lanes) only in the slow run."""
 
 
 @pytest.fixture(scope="module")
