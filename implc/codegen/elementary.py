@@ -64,7 +64,32 @@ PIO2_1, PIO2_2, PIO2_3 = 1.5707963267341256, 6.077100506303966e-11, 2.0222662487
 """π/2 in three pieces: the first two have 33 significant bits, the third is the rest, rounded."""
 
 
-def atan2(vb: VectorBuilder, y, x):
+OUTLINE_ABOVE = 8
+"""A tape with more sin, cos and atan2 nodes than this calls them as functions of its module (one copy
+each, never inlined) instead of expanding ~40-80 instructions at every use: its IR, and LLVM's time, stay
+proportional to the tape (a sum of 50 sines compiled in 4.8 s expanded)."""
+
+
+def outlined(name: str, arity: int, body):
+    """``body(vb, *args)`` as an internal, never-inlined function of the vector builder's module, called
+    where ``vb.outline_elementary`` is set; expanded in place otherwise."""
+    def call(vb: VectorBuilder, *args):
+        if not vb.outline_elementary:
+            return body(vb, *args)
+        symbol = f"implc.elementary.{name}.w{vb.width}"
+        fn = vb.module.globals.get(symbol)
+        if fn is None:
+            fn = ir.Function(vb.module, ir.FunctionType(vb.vtype, [vb.vtype] * arity), name=symbol)
+            fn.linkage = "internal"
+            fn.attributes.add("noinline")
+            inner = VectorBuilder(ir.IRBuilder(fn.append_basic_block("entry")), vb.width)
+            inner.b.ret(body(inner, *fn.args))
+        return vb.b.call(fn, list(args))
+    call.__doc__ = body.__doc__
+    return call
+
+
+def _atan2(vb: VectorBuilder, y, x):
     """atan2(y, x) lane by lane, within :data:`implc.rounding.ATAN2_ERROR` of the true value."""
     ax, ay = vb.fabs(x), vb.fabs(y)
     big, small = vb.maximum(ax, ay), vb.minimum(ax, ay)
@@ -88,14 +113,24 @@ def atan2(vb: VectorBuilder, y, x):
     return _c_library_where_irregular(vb, vb.copysign(angle, y), regular, "atan2", y, x)
 
 
-def sin(vb: VectorBuilder, x):
+def _sin(vb: VectorBuilder, x):
     """sin(x) lane by lane, within :data:`implc.rounding.SIN_ERROR` of the true value."""
     return _sin_cos(vb, x, 0, "sin")
 
 
-def cos(vb: VectorBuilder, x):
+def _cos(vb: VectorBuilder, x):
     """cos(x) lane by lane, within :data:`implc.rounding.SIN_ERROR` of the true value."""
     return _sin_cos(vb, x, 1, "cos")
+
+
+atan2 = outlined("atan2", 2, _atan2)
+sin = outlined("sin", 1, _sin)
+cos = outlined("cos", 1, _cos)
+
+
+def count_in(tape) -> int:
+    """How many nodes of ``tape`` the vector functions compute (in its interval or normals kernels)."""
+    return sum(op in ("sin", "cos", "atan2", "atan2_wrapped") for op, _, _ in tape.nodes)
 
 
 def _sin_cos(vb: VectorBuilder, x, quarter_turns: int, name: str):

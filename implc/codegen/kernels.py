@@ -33,6 +33,7 @@ from llvmlite import ir
 from .. import abi
 from ..ir import Tape
 from ..regions import plan_regions
+from . import elementary
 from .control import define, for_range
 from .interval_rules import emit_interval
 from .mean_value import emit_mean_value
@@ -119,12 +120,12 @@ def _parent_mask(builder, live_in, block, width):
     return builder.load(ptr)
 
 
-def _interval_kernel(module, entry, width, directed, enclose):
+def _interval_kernel(module, entry, width, directed, outline, enclose):
     """Emit the batched kernel ``entry(lo, hi, out_lo, out_hi, n, live_in, live_out)`` over ``enclose``."""
     fn, b, blocks = _kernel(module, entry, width)
     lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
     with for_range(b, blocks) as i:
-        vb = VectorBuilder(b, width, directed)
+        vb = VectorBuilder(b, width, directed, outline)
         f_lo, f_hi, masks = enclose(vb, _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width),
                                     _parent_mask(b, live_in, i, width))
         _store(b, out_lo, i, f_lo, width)
@@ -133,12 +134,12 @@ def _interval_kernel(module, entry, width, directed, enclose):
     b.ret_void()
 
 
-def _octant_kernel(module, entry, width, directed, enclose):
+def _octant_kernel(module, entry, width, directed, outline, enclose):
     """Emit ``entry`` (see the module docstring); ``enclose(vb, lo, hi, live_in) -> (lo, hi, masks)``."""
     i32 = ir.IntType(32)
     fn, b = define(module, entry)
     geom, cell, level, live_in, live_out = fn.args
-    vb = VectorBuilder(b, width, directed)
+    vb = VectorBuilder(b, width, directed, outline)
     vb.octant_lanes = True  # lane c: child first + c (first a multiple of the width)
     ivec = ir.VectorType(i32, width)
 
@@ -205,8 +206,9 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     fn, b = define(module, abi.GRADIENT_LIVE)
     pts, out_value, out_grad, n, live = fn.args
     plan = plan_regions(value_tape)
+    outline = elementary.count_in(gradient_tape) > elementary.OUTLINE_ABOVE
     with for_range(b, b.sdiv(n, ir.Constant(I64, width))) as i:
-        vb = VectorBuilder(b, width)
+        vb = VectorBuilder(b, width, outline_elementary=outline)
         if plan.fold is not None:
             value, grad = emit_pruned_gradient(vb, value_tape, plan, _load_xyz(b, pts, i, width), live)
         else:  # nothing to prune; normals need no more than the vector functions' 1e-15
@@ -216,8 +218,8 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     b.ret_void()
 
     enclose = _natural(value_tape, plan)
-    _interval_kernel(module, abi.INTERVAL, width, directed, enclose)
-    _octant_kernel(module, abi.OCTANT, width, directed, enclose)
+    _interval_kernel(module, abi.INTERVAL, width, directed, outline, enclose)
+    _octant_kernel(module, abi.OCTANT, width, directed, outline, enclose)
     return str(module)
 
 
@@ -232,6 +234,7 @@ def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "
         if plan.fold is not None:  # over the live terms only, and each child gets its own mask
             return emit_pruned_mean_value(vb, value_tape, plan, lo, hi, live_in)
         return (*emit_mean_value(vb, value_tape, gradient_tape, lo, hi), broadcast(vb.b, live_in, vb.width))
-    _interval_kernel(module, abi.INTERVAL_MVF, width, directed, enclose)
-    _octant_kernel(module, abi.OCTANT_MVF, width, directed, enclose)
+    outline = elementary.count_in(gradient_tape) > elementary.OUTLINE_ABOVE
+    _interval_kernel(module, abi.INTERVAL_MVF, width, directed, outline, enclose)
+    _octant_kernel(module, abi.OCTANT_MVF, width, directed, outline, enclose)
     return str(module)

@@ -29,12 +29,15 @@ def broadcast(builder: ir.IRBuilder, value, width: int):
 class VectorBuilder:
     """Wraps an IRBuilder with the vector operations the point and interval emitters need."""
 
-    def __init__(self, builder: ir.IRBuilder, width: int, directed: bool = False):
+    def __init__(self, builder: ir.IRBuilder, width: int, directed: bool = False, outline_elementary: bool = False):
         """``directed``: round add, sub, mul and sqrt bounds with AVX-512 embedded rounding (the host
-        must have AVX-512F); otherwise round to nearest and widen by :data:`implc.rounding.ARITH`."""
+        must have AVX-512F); otherwise round to nearest and widen by :data:`implc.rounding.ARITH`.
+        ``outline_elementary``: call the vector sin, cos and atan2 as functions of the module instead of
+        expanding them at each use (:mod:`implc.codegen.elementary`; for tapes with many of them)."""
         self.b = builder
         self.width = width
         self.directed = directed
+        self.outline_elementary = outline_elementary
         self.octant_lanes = False  # lane c holds child c of one octant (see depends_on)
         self.lane_sources = list(range(width))
         self.vtype = ir.VectorType(DOUBLE, width)
