@@ -303,7 +303,8 @@ class Subdivider:
             for _ in threads:
                 in_flight.release()  # wake any worker blocked on the semaphore
             for th in threads:
-                th.join()
+                if th.ident is not None:  # Ctrl-C may come while the threads are being started
+                    th.join()
         self.stats.seconds["subdivide"] = time.perf_counter() - t_start
         self.stats.seconds["storage"] = storage_seconds[0]
         for w in workers:

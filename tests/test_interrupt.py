@@ -81,3 +81,31 @@ def test_ctrl_c_at_start_up_is_one_line():
         assert proc.returncode in (0, 130, -signal.SIGINT), (delay, proc.returncode, err)
         if proc.returncode == 130:
             assert err.strip() == "implc: interrupted", err
+
+
+def test_ctrl_c_while_the_workers_start(monkeypatch):
+    """An interrupt while the worker threads are being started (found by interrupting the CLI at random
+    moments) stops the run with the interrupt itself, not with an error about joining a thread that never
+    started."""
+    import threading
+
+    import pytest
+
+    import implc
+    s = implc.compile(implc.x**2 + implc.y**2 + implc.z**2 - 0.5)
+    original = threading.Thread.start
+    started = []
+
+    def start_then_interrupt(self):
+        if self.name.startswith("implc-worker") and started:
+            raise KeyboardInterrupt  # the second worker's start is interrupted
+        started.append(self)
+        original(self)
+    monkeypatch.setattr(threading.Thread, "start", start_then_interrupt)
+    before = threading.active_count()
+    with pytest.raises(KeyboardInterrupt):
+        implc.voxelize(s, 7, workers=3)
+    monkeypatch.undo()
+    for th in started:
+        th.join(5)
+    assert threading.active_count() == before
