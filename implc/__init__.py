@@ -9,11 +9,11 @@ from importlib import import_module
 _EXPORTS = {
     "CompileError": "errors", "Surface": "surface", "compile": "surface", "Voxels": "voxelization",
     "voxelize": "voxelization", "x": "symbols", "y": "symbols", "z": "symbols", "r": "symbols", "theta": "symbols",
-    "phi": "symbols",
+    "phi": "symbols", "load_vm": "vm",
 }
 
-__all__ = ["CompileError", "Surface", "Voxels", "compile", "phi", "r", "shapes", "theta", "voxelize", "x", "y",
-           "z"]
+__all__ = ["CompileError", "Surface", "Voxels", "compile", "load_vm", "phi", "r", "shapes", "theta", "voxelize",
+           "x", "y", "z"]
 __version__ = "0.1.0"
 
 

@@ -100,6 +100,10 @@ def _surface_from_args(args):
         return args.expr, compile_surface(expr, _bounds(args.bounds or DEFAULT_BOUNDS)), None
     if not args.scene:
         raise UsageError("name a SCENE (see 'implc scenes') or give --expr")
+    if Path(args.scene).suffix.lower() == ".vm":  # a model from fidget or MPR
+        from .vm import load_vm
+        model = load_vm(args.scene)
+        return model.name, compile_surface(model, _bounds(args.bounds) if args.bounds else None), None
     if Path(args.scene).suffix.lower() in (".npz", ".ply", ".npy"):
         raise UsageError(f"{args.scene} is a voxel file: 'implc {args.command}' takes a scene or --expr"
                          + (" (render reads .npz files)" if args.command == "voxelize" else ""))
@@ -186,6 +190,12 @@ def _color(text):
 
 def cmd_info(args) -> int:
     from . import voxel_files
+    if Path(args.file).suffix.lower() == ".vm":
+        from .vm import load_vm
+        model = load_vm(args.file)
+        print(f"model    {args.file}: {model.instructions} instructions, {len(model.tape)} after sharing")
+        print(f"bounds   {model.bounds} (suggested by its --scale, or [-1, 1]³)")
+        return 0
     for line in voxel_files.describe(args.file):
         print(line)
     return 0
@@ -267,7 +277,7 @@ def _parser():
     sub.add_parser("scenes", help="list the built-in scenes").set_defaults(run=cmd_scenes)
 
     def surface_args(p):
-        p.add_argument("scene", nargs="?", help="scene name (see 'implc scenes') or path to a scene .py")
+        p.add_argument("scene", nargs="?", help="scene name (see 'implc scenes'), a scene .py or a model .vm")
         p.add_argument("--expr", help="a formula instead of a scene, e.g. 'sin(4*theta)*sin(8*phi) - r'")
         p.add_argument("--bounds", help="x0,x1,y0,y1,z0,z1 (default: the scene's, or -1,1 on each axis)")
         p.add_argument("--depth", type=int, help="grid depth: 2^depth cells per axis (default: the scene's, or 9)")
@@ -290,7 +300,7 @@ def _parser():
     r.add_argument("--color", help="surface colour R,G,B in 0..1")
     r.set_defaults(run=cmd_render)
 
-    i = sub.add_parser("info", help="describe a voxel file (.npz, .ply or .npy)")
+    i = sub.add_parser("info", help="describe a voxel file (.npz, .ply or .npy) or a model (.vm)")
     i.add_argument("file")
     i.set_defaults(run=cmd_info)
 

@@ -90,7 +90,7 @@ class Tape:
         self.nodes: list[tuple[str, tuple[int, ...], object]] = []
         self.outputs: list[int] = []
         self._index: dict[tuple, int] = {}
-        self._nonnegative: dict[int, bool] = {}
+        self._nonnegative: list[bool] = []
         self._axes: list[int] = []
 
     # -- insertion --------------------------------------------------------------------------------
@@ -219,11 +219,12 @@ class Tape:
         return self.node(op, (a,))
 
     def is_nonnegative(self, i: int) -> bool:
-        """Whether node ``i`` is >= 0 wherever it is defined, by a structural argument."""
-        found = self._nonnegative.get(i)
-        if found is None:
-            found = self._nonnegative[i] = self._prove_nonnegative(i)
-        return found
+        """Whether node ``i`` is >= 0 wherever it is defined, by a structural argument (decided for every
+        node up to ``i`` in order, each from its operands: no recursion, whatever the depth)."""
+        known = self._nonnegative
+        while len(known) <= i:
+            known.append(self._prove_nonnegative(len(known)))
+        return known[i]
 
     def _prove_nonnegative(self, i: int) -> bool:
         op, args, attr = self.nodes[i]

@@ -70,25 +70,27 @@ def _is_zero(tape, i) -> bool:
     return tape.exact_value(i) == 0
 
 
+def _leaves(tape, root, through) -> list[int]:
+    """The nodes below ``root`` reached through ops in ``through`` (their operands, left to right), in
+    order: an explicit stack, so that chains of any depth are fine."""
+    out, stack = [], [root]
+    while stack:
+        i = stack.pop()
+        op, args, _ = tape.nodes[i]
+        if op in through:
+            stack.extend(reversed(args))
+        else:
+            out.append(i)
+    return out
+
+
 def _sum_leaves(tape, i, out):
-    op, args, _ = tape.nodes[i]
-    if op in ("add", "sub"):
-        _sum_leaves(tape, args[0], out)
-        _sum_leaves(tape, args[1], out)
-    elif op in ("neg", "scale"):
-        _sum_leaves(tape, args[0], out)
-    else:
-        out.append(i)
+    out.extend(_leaves(tape, i, ("add", "sub", "neg", "scale")))
     return out
 
 
 def _chain_leaves(tape, i, op, out):
-    node_op, args, _ = tape.nodes[i]
-    if node_op == op:
-        _chain_leaves(tape, args[0], op, out)
-        _chain_leaves(tape, args[1], op, out)
-    else:
-        out.append(i)
+    out.extend(_leaves(tape, i, (op,)))
     return out
 
 
@@ -127,9 +129,11 @@ def plan_regions(tape) -> RegionPlan:
     candidates, chain_leaves = _candidates(tape)
     roots = [c[0] for c in candidates]
     while True:
-        closures = {r: _closure(tape, [r]) for r in roots}
-        # a term needed inside another term cannot be dropped on its own
-        nested = {r for r in roots for s in roots if s != r and r in closures[s]}
+        # a term needed inside another term cannot be dropped on its own (linear in the closures' sizes)
+        candidates_set = set(roots)
+        nested = set()
+        for s in roots:
+            nested |= (_closure(tape, [s]) & candidates_set) - {s}
         if not nested:
             break
         roots = [r for r in roots if r not in nested]

@@ -22,6 +22,7 @@ from .ir import Tape
 from .jit import NativeModule, host_has_avx512
 from .lower import lower
 from .runtime import Runtime
+from .vm import VmModel
 
 DEFAULT_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
 ROUNDINGS = ("auto", "directed", "widen")
@@ -190,8 +191,10 @@ class Surface:
         return f_lo, f_hi
 
 
-def compile(expr, bounds=DEFAULT_BOUNDS, *, vector_width: int = WIDTH, rounding: str = "auto") -> Surface:
-    """Compile the surface ``expr = 0`` (a SymPy expression in x, y, z, r, theta, phi) over ``bounds``.
+def compile(expr, bounds=None, *, vector_width: int = WIDTH, rounding: str = "auto") -> Surface:
+    """Compile the surface ``expr = 0`` over ``bounds`` (default: a model's own, else [-1, 1]³).
+
+    ``expr``: a SymPy expression in x, y, z, r, theta, phi, or a model read by :func:`implc.load_vm`.
 
     ``vector_width``: lanes per kernel step (8 by default: an octant's children at once; 1 for scalar
     code, to measure what vectors bring). ``rounding``: how interval bounds are rounded outward:
@@ -199,13 +202,23 @@ def compile(expr, bounds=DEFAULT_BOUNDS, *, vector_width: int = WIDTH, rounding:
     "widen" (round to nearest, then move outward by a relative ulp or more: any CPU) or "auto" (directed
     where the host has AVX-512). Both are sound; directed is faster and a few ulps tighter.
     """
+    if isinstance(expr, VmModel):
+        return _compile_tape(expr, expr.tape, expr.bounds if bounds is None else bounds, vector_width, rounding)
     if not isinstance(expr, sympy.Basic):
-        raise TypeError(f"implc.compile expects a SymPy expression, got {type(expr).__name__}")
+        raise TypeError(f"implc.compile expects a SymPy expression or a .vm model, got {type(expr).__name__}")
     if isinstance(expr, sympy.Equality):
         expr = expr.lhs - expr.rhs
     if isinstance(expr, (sympy.core.relational.Relational, sympy.logic.boolalg.BooleanFunction,
                          sympy.logic.boolalg.BooleanAtom)):
         raise CompileError(f"expected a real-valued expression F (the surface is F = 0), got {expr}")
+    try:
+        tape = lower(expr)
+    except RecursionError:
+        raise CompileError("the expression is nested too deeply for the front end") from None
+    return _compile_tape(expr, tape, DEFAULT_BOUNDS if bounds is None else bounds, vector_width, rounding)
+
+
+def _compile_tape(expr, tape: Tape, bounds, vector_width, rounding) -> Surface:
     checked = check_bounds(bounds)
     if vector_width not in WIDTHS:
         raise CompileError(f"vector_width must be one of {WIDTHS}, got {vector_width!r}")
@@ -214,8 +227,4 @@ def compile(expr, bounds=DEFAULT_BOUNDS, *, vector_width: int = WIDTH, rounding:
     if rounding == "directed" and not host_has_avx512():
         raise CompileError("rounding='directed' needs a CPU with AVX-512F; this one has none (use 'auto' or 'widen')")
     directed = rounding == "directed" or (rounding == "auto" and host_has_avx512())
-    try:
-        tape = lower(expr)
-    except RecursionError:
-        raise CompileError("the expression is nested too deeply for the front end") from None
     return Surface(expr, checked, tape, vector_width, directed)

@@ -1,0 +1,127 @@
+"""Models from other tools: the ``.vm`` tapes of fidget and MPR, read straight into implc's IR.
+
+A ``.vm`` file is one SSA instruction per line, ``NAME OP ARG...``, ``#`` starting a comment; the last
+instruction is F (F < 0 inside). Each instruction becomes one node of a :class:`~implc.ir.Tape` as it is
+read (hash-consed, so repeated subexpressions are shared), in one pass and without recursion: a model of
+any size and depth loads in time linear in its length. Constants are decimal texts, enclosed exactly
+(``0.1`` is the interval of doubles around the decimal 0.1). A header comment ``--scale S`` (fidget's
+render setting) suggests the bounds [-1/S, 1/S]³; otherwise [-1, 1]³.
+
+:func:`load_vm` returns a :class:`VmModel`, which :func:`implc.compile` accepts like a SymPy expression.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+
+from .errors import CompileError
+from .ir import Tape, const_attr_from_fraction
+
+
+class VmError(CompileError):
+    """A ``.vm`` file that cannot be read: the message names the file, the line and the problem."""
+
+
+_UNARY = {"neg": None, "square": None, "sqrt": "sqrt", "exp": "exp", "ln": "log", "sin": "sin", "cos": "cos",
+          "abs": "abs", "tan": "tan", "asin": "asin", "acos": "acos", "atan": "atan"}
+_BINARY = {"add", "sub", "mul", "div", "min", "max", "atan2"}
+OPS = sorted({"var-x", "var-y", "var-z", "const", *_UNARY, *_BINARY})
+"""Every op this reader accepts (the models' README lists the ones in use)."""
+
+
+@dataclass(frozen=True)
+class VmModel:
+    """A model read from a ``.vm`` file: its tape (one output, F), suggested bounds and where it came from."""
+
+    name: str
+    tape: Tape
+    bounds: tuple
+    instructions: int
+
+    def __str__(self) -> str:
+        return f"{self.name}.vm ({self.instructions} instructions)"
+
+
+def load_vm(path) -> VmModel:
+    """Read a ``.vm`` file; :class:`VmError` for an unknown op, an undefined or redefined name, a bad
+    argument count or constant, an empty file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise VmError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    return parse_vm(text, name=path.stem, where=str(path))
+
+
+def parse_vm(text: str, name: str = "model", where: str = "<vm>") -> VmModel:
+    """A :class:`VmModel` from ``.vm`` text (see :func:`load_vm`)."""
+    tape = Tape()
+    names: dict[str, int] = {}
+    last = None
+    count = 0
+    scale = None
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line, _, comment = raw.partition("#")
+        found = re.search(r"--scale\s+([0-9.eE+-]+)", comment)
+        if found and scale is None:
+            scale = _number(found.group(1), where, number)
+        words = line.split()
+        if not words:
+            continue
+        if len(words) < 2:
+            raise VmError(f"{where}:{number}: expected 'NAME OP ARG...', got {line.strip()!r}")
+        target, op, args = words[0], words[1], words[2:]
+        if target in names:
+            raise VmError(f"{where}:{number}: {target!r} is defined twice (a .vm tape is SSA)")
+        names[target] = last = _instruction(tape, names, op, args, where, number)
+        count += 1
+    if last is None:
+        raise VmError(f"{where}: no instructions (an empty model)")
+    tape.outputs = [last]
+    tape = tape.compacted()
+    tape.verify()
+    half = 1.0 if scale is None or not scale > 0 else float(1 / scale)
+    return VmModel(name, tape, ((-half, half),) * 3, count)
+
+
+def _number(text, where, number) -> Fraction:
+    try:
+        return Fraction(text)
+    except (ValueError, ZeroDivisionError):
+        raise VmError(f"{where}:{number}: {text!r} is not a number") from None
+
+
+def _instruction(tape: Tape, names, op, args, where, number) -> int:
+    if op.startswith("var-") and op[4:] in ("x", "y", "z"):
+        _arity(op, args, 0, where, number)
+        return tape.var("xyz".index(op[4:]))
+    if op == "const":
+        _arity(op, args, 1, where, number)
+        value = _number(args[0], where, number)
+        return tape.const_bounds(*const_attr_from_fraction(value))
+    if op not in _UNARY and op not in _BINARY:
+        raise VmError(f"{where}:{number}: unknown op {op!r} (known: {', '.join(OPS)})")
+    _arity(op, args, 1 if op in _UNARY else 2, where, number)
+    operands = []
+    for arg in args:
+        if arg not in names:
+            raise VmError(f"{where}:{number}: {arg!r} is not defined before its use")
+        operands.append(names[arg])
+    if op == "neg":
+        return tape.neg(operands[0])
+    if op == "square":
+        return tape.powi(operands[0], 2)
+    if op in _UNARY:
+        return tape.unary(_UNARY[op], operands[0])
+    a, b = operands
+    if op in ("add", "sub", "mul", "div"):
+        return getattr(tape, op)(a, b)
+    return tape.node(op, (a, b))
+
+
+def _arity(op, args, expected, where, number):
+    if len(args) != expected:
+        raise VmError(f"{where}:{number}: {op} takes {expected} argument{'s' * (expected != 1)}, got {len(args)}")

@@ -1,0 +1,221 @@
+"""Models in the .vm tape format of fidget and MPR: read in one pass into a tape, compiled, and voxelized
+without missing a cell where a numpy interpreter of the .vm text (not implc's compiler) sees F change
+sign; clear errors for bad files; any depth without recursion."""
+
+import numpy as np
+import pytest
+
+import implc
+from implc import CompileError
+from implc.cli import main
+from implc.regions import plan_regions
+from implc.vm import VmError, parse_vm
+
+# every op of the format, in three small models written here
+CSG = """# a box minus a sphere, unioned with a rounded bump --scale 0.8
+x var-x
+y var-y
+z var-z
+h const 0.6
+ax abs x
+ay abs y
+az abs z
+bx sub ax h
+by sub ay h
+bz sub az h
+box max bx by
+box2 max box bz
+x2 square x
+y2 square y
+z2 square z
+s0 add x2 y2
+s1 add s0 z2
+d sqrt s1
+r const 0.75
+ball sub d r
+nball neg ball
+cut max box2 nball
+zt const 0.9
+dz sub z zt
+dz2 square dz
+b0 add x2 y2
+b1 add b0 dz2
+bd sqrt b1
+br const 0.3
+bump sub bd br
+out min cut bump
+"""
+
+BLEND = """# exp/ln/div blend with trig wiggles
+x var-x
+y var-y
+z var-z
+k const 8
+x2 square x
+y2 square y
+z2 square z
+s add x2 y2
+s2 add s z2
+c const 0.3
+a sub s2 c
+ka mul k a
+e1 exp ka
+xo const 0.45
+xs sub x xo
+xs2 square xs
+t add xs2 y2
+t2 add t z2
+c2 const 0.08
+b sub t2 c2
+kb mul k b
+e2 exp kb
+inv div e1 e2
+sum add e1 e2
+one const 1
+l ln sum
+kk div l k
+w const 0.05
+sx sin x
+cz cos z
+wave mul sx cz
+ww mul w wave
+out add kk ww
+"""
+
+TANGLE = """_x var-x
+_y var-y
+_z var-z
+_x2 square _x
+_x4 square _x2
+_y2 square _y
+_y4 square _y2
+_z2 square _z
+_z4 square _z2
+_5 const 5.0
+_x2_5 mul _x2 _5
+_y2_5 mul _y2 _5
+_z2_5 mul _z2 _5
+_s0 sub _x4 _x2_5
+_s1 add _s0 _y4
+_s2 sub _s1 _y2_5
+_s3 add _s2 _z4
+_s4 sub _s3 _z2_5
+_10 const 10.0
+_out add _s4 _10
+"""
+
+NUMPY_OPS = {
+    "add": np.add, "sub": np.subtract, "mul": np.multiply, "div": np.divide, "min": np.minimum,
+    "max": np.maximum, "neg": np.negative, "square": np.square, "sqrt": np.sqrt, "exp": np.exp, "ln": np.log,
+    "sin": np.sin, "cos": np.cos, "abs": np.abs,
+}
+
+
+def interpret(text, x, y, z):
+    """F of the .vm text at numpy arrays x, y, z: the independent truth of these tests."""
+    values = {}
+    last = None
+    with np.errstate(all="ignore"):
+        for line in text.splitlines():
+            words = line.split("#")[0].split()
+            if not words:
+                continue
+            name, op, args = words[0], words[1], words[2:]
+            if op.startswith("var-"):
+                v = {"x": x, "y": y, "z": z}[op[4:]]
+            elif op == "const":
+                v = np.full_like(x, float(args[0]))
+            else:
+                v = NUMPY_OPS[op](*[values[a] for a in args])
+            values[name] = last = v
+    return last
+
+
+def sign_change_cells(text, bounds, depth):
+    n = 1 << depth
+    axes = [np.linspace(lo, hi, n + 1) for lo, hi in bounds]
+    gx, gy, gz = np.meshgrid(*axes, indexing="ij")
+    f = interpret(text, gx, gy, gz)
+    lo, hi = np.full((n, n, n), np.inf), np.full((n, n, n), -np.inf)
+    undefined = np.zeros((n, n, n), bool)
+    for dx in (0, 1):
+        for dy in (0, 1):
+            for dz in (0, 1):
+                c = f[dx:dx + n, dy:dy + n, dz:dz + n]
+                lo, hi = np.minimum(lo, c), np.maximum(hi, c)
+                undefined |= np.isnan(c)
+    return ((lo <= 0) & (hi >= 0)) | undefined
+
+
+@pytest.mark.parametrize("name, text", [("csg", CSG), ("blend", BLEND), ("tangle", TANGLE)])
+def test_no_sign_change_cell_of_the_vm_text_is_missed(name, text):
+    model = parse_vm(text, name=name)
+    bounds = ((-4.5, 4.5),) * 3 if name == "tangle" else model.bounds
+    s = implc.compile(model, bounds)
+    depth = 6
+    voxels = implc.voxelize(s, depth, storage="coords").to_dense()
+    expected = sign_change_cells(text, bounds, depth)
+    assert expected.sum() > 100, "the surface must cross the box"
+    missed = np.argwhere(expected & ~voxels)
+    assert len(missed) == 0, f"{name}: {len(missed)} missed cells, e.g. {missed[:5].tolist()}"
+    assert voxels.sum() < voxels.size / 8  # and not everything either (x⁴ − 5x² keeps ~3.5x: issue 14)
+    pts = np.random.default_rng(0).uniform(bounds[0][0], bounds[0][1], (200, 3))
+    np.testing.assert_allclose(s.eval(pts), interpret(text, *pts.T), rtol=1e-12, atol=1e-12)
+
+
+def test_the_header_scale_suggests_the_bounds():
+    assert parse_vm(CSG).bounds == ((-1.25, 1.25),) * 3
+    assert parse_vm(TANGLE).bounds == ((-1.0, 1.0),) * 3
+    assert implc.compile(parse_vm(CSG)).bounds == ((-1.25, 1.25),) * 3
+
+
+def test_constants_are_enclosed_exactly():
+    model = parse_vm("x var-x\nc const 0.1\nout sub x c\n")
+    const = [attr for op, _, attr in model.tape.nodes if op == "const"][0]
+    from fractions import Fraction
+    assert Fraction(const[1]) < Fraction("0.1") < Fraction(const[2])
+
+
+@pytest.mark.parametrize("text, words", [
+    ("", "no instructions"),
+    ("# only a comment\n", "no instructions"),
+    ("x var-x\ny frob x\n", "unknown op 'frob'"),
+    ("x var-x\nout add x q\n", "'q' is not defined"),
+    ("x var-x\nout add x\n", "add takes 2 arguments, got 1"),
+    ("x var-x\nx var-y\n", "defined twice"),
+    ("c const abc\n", "'abc' is not a number"),
+    ("x\n", "expected 'NAME OP ARG"),
+])
+def test_bad_files_are_named_with_their_line(text, words):
+    with pytest.raises(VmError, match=words):
+        parse_vm(text, where="m.vm")
+    assert issubclass(VmError, CompileError)
+
+
+def test_any_depth_loads_without_recursion():
+    """A chain of 20,000 min instructions (deeper than Python's recursion limit) loads in one pass, and
+    its region plan finds all its leaves."""
+    lines = ["x var-x", "y var-y", "acc sub x y"]
+    for k in range(20_000):
+        lines += [f"c{k} const {k / 1000}", f"d{k} sub x c{k}", f"m{k} min acc d{k}" if k == 0 else
+                  f"m{k} min m{k - 1} d{k}"]
+    model = parse_vm("\n".join(lines))
+    assert model.instructions == 3 + 3 * 20_000
+    assert len(plan_regions(model.tape).chain_leaves) > 10_000
+
+
+def test_cli_takes_a_vm_file(tmp_path, capsys):
+    path = tmp_path / "csg.vm"
+    path.write_text(CSG)
+    out = tmp_path / "csg.npz"
+    assert main(["voxelize", str(path), "--depth", "5", "--quiet", "-o", str(out)]) == 0
+    from implc import voxel_files
+    v = voxel_files.load_npz(out)
+    assert v.bounds == ((-1.25, 1.25),) * 3 and len(v) > 0
+    assert main(["info", str(path)]) == 0
+    assert "31 instructions" in capsys.readouterr().out
+    (tmp_path / "bad.vm").write_text("x var-x\nout add x q\n")
+    assert main(["voxelize", str(tmp_path / "bad.vm"), "-o", str(tmp_path / "b.npz")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "bad.vm:2: 'q' is not defined" in err
+    assert not (tmp_path / "b.npz").exists()
