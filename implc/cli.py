@@ -19,6 +19,8 @@ import threading
 import time
 from pathlib import Path
 
+from .errors import shorten
+
 PAPER_SCENES = ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4")
 MESSAGE_LIMIT = 300
 """Longest error message printed (a 10,000-character formula is not repeated in full)."""
@@ -48,9 +50,10 @@ def _numbers(text, count, what, example):
     except ValueError:
         values = []
     if len(values) != count:
-        raise UsageError(f"{what} must be {_COUNT_WORDS[count]} numbers '{example}', got {_short(text)}")
+        raise UsageError(f"{what} must be {_COUNT_WORDS[count]} numbers '{example}', got "
+                         f"{shorten(text, quoted=True)}")
     if not all(math.isfinite(v) for v in values):
-        raise UsageError(f"{what} must be finite numbers, got {_short(text)}")
+        raise UsageError(f"{what} must be finite numbers, got {shorten(text, quoted=True)}")
     return values
 
 
@@ -58,10 +61,6 @@ def _bounds(text):
     v = _numbers(text, 6, "--bounds", "x0,x1,y0,y1,z0,z1")
     return ((v[0], v[1]), (v[2], v[3]), (v[4], v[5]))
 
-
-def _short(text, limit=80) -> str:
-    text = repr(text)
-    return text if len(text) <= limit else text[: limit - 4] + "...'"
 
 
 def _check_writable(path: Path, suffixes):
@@ -184,7 +183,8 @@ def cmd_render(args) -> int:
 def _color(text):
     rgb = _numbers(text, 3, "--color", "R,G,B")
     if not all(0 <= c <= 1 for c in rgb):
-        raise UsageError(f"--color must be three numbers from 0 to 1 'R,G,B', got {_short(text)}")
+        raise UsageError(f"--color must be three numbers from 0 to 1 'R,G,B', got "
+                         f"{shorten(text, quoted=True)}")
     return tuple(rgb)
 
 

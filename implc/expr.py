@@ -12,6 +12,7 @@ import operator
 
 import sympy
 
+from .errors import shorten
 from .rounding import POWI_MAX
 from .symbols import phi, r, theta, x, y, z
 
@@ -42,14 +43,10 @@ def parse(text: str) -> sympy.Expr:
         tree = ast.parse(text.strip(), mode="eval")
         return _build(tree.body)
     except SyntaxError as exc:
-        raise ExprError(f"cannot parse {_short(text)}: {exc.msg}") from None
+        raise ExprError(f"cannot parse {shorten(text, quoted=True)}: {exc.msg}") from None
     except (RecursionError, MemoryError):
         raise ExprError("the expression is nested too deeply") from None
 
-
-def _short(text: str, limit: int = 60) -> str:
-    text = repr(text)
-    return text if len(text) <= limit else text[: limit - 4] + "...'"
 
 
 def _build(node) -> sympy.Expr:
@@ -64,10 +61,10 @@ def _build(node) -> sympy.Expr:
         if isinstance(node.op, ast.Pow) and right.is_number:
             limit = MAX_NUMERIC_EXPONENT if left.is_number else POWI_MAX
             if not abs(right) <= limit:
-                raise ExprError(f"exponent {_short(str(right))} is too large (at most {limit}"
+                raise ExprError(f"exponent {shorten(right)} is too large (at most {limit}"
                                 f"{' for a number' if left.is_number else ''})")
         if isinstance(node.op, ast.Div) and right == 0:
-            raise ExprError(f"division by zero in {_short(ast.unparse(node))}")
+            raise ExprError(f"division by zero in {shorten(ast.unparse(node), quoted=True)}")
         return BINARY[type(node.op)](left, right)
     if isinstance(node, ast.BinOp) and isinstance(node.op, ast.BitXor):
         raise ExprError("'^' is not a power: write x**2")

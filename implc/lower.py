@@ -12,7 +12,7 @@ from fractions import Fraction
 
 import sympy
 
-from .errors import CompileError
+from .errors import CompileError, shorten
 from .ir import Tape, const_attr_from_fraction
 from .rounding import POWI_MAX
 from .symbols import NAMES
@@ -84,36 +84,31 @@ def number_bounds(expr: sympy.Expr) -> tuple[float, float, float]:
     if expr.has(*_UNEVALUATED):  # a sum, integral, ... in closed form if SymPy finds one
         closed = expr.doit()
         if closed.has(*_UNEVALUATED):
-            raise CompileError(f"the number {_short(expr)} has no closed form SymPy can find, and a numerical "
+            raise CompileError(f"the number {shorten(expr)} has no closed form SymPy can find, and a numerical "
                                "value carries no guarantee: give it in closed form or as a literal")
         return number_bounds(closed)
     try:
         value = expr.evalf(PRECISION, strict=True)
         check = expr.evalf(PRECISION + 20, strict=True)
     except sympy.core.evalf.PrecisionExhausted:
-        raise CompileError(f"the number {_short(expr)} cannot be evaluated to {PRECISION} certified digits") from None
+        raise CompileError(f"the number {shorten(expr)} cannot be evaluated to {PRECISION} certified digits") from None
     except (OverflowError, MemoryError, RecursionError):
-        raise CompileError(f"the number {_short(expr)} is too large to evaluate") from None
+        raise CompileError(f"the number {shorten(expr)} is too large to evaluate") from None
     if value.has(sympy.zoo, sympy.oo, -sympy.oo, sympy.nan):
-        raise CompileError(f"unsupported non-finite number {_short(expr)}")
+        raise CompileError(f"unsupported non-finite number {shorten(expr)}")
     if not value.is_real or value.has(sympy.I):
-        raise CompileError(f"complex number {_short(expr)} is not supported (surfaces are real)")
+        raise CompileError(f"complex number {shorten(expr)} is not supported (surfaces are real)")
     if not (value.is_Float and check.is_Float):
-        raise CompileError(f"cannot evaluate the number {_short(expr)}")
+        raise CompileError(f"cannot evaluate the number {shorten(expr)}")
     approx = _fraction_of_float(value)
     err = abs(approx) * Fraction(1, 10**50) + Fraction(1, 10**300)
     if abs(_fraction_of_float(check) - approx) > err:  # the two evaluations disagree: no digits to trust
-        raise CompileError(f"the number {_short(expr)} cannot be evaluated to {PRECISION} certified digits")
+        raise CompileError(f"the number {shorten(expr)} cannot be evaluated to {PRECISION} certified digits")
     _, lo, _ = const_attr_from_fraction(approx - err)
     _, _, hi = const_attr_from_fraction(approx + err)
     nearest, _, _ = const_attr_from_fraction(approx)
     return (nearest, lo, hi)
 
-
-def _short(expr, limit: int = 80) -> str:
-    """An expression for a message, cut to ``limit`` characters."""
-    text = str(expr)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _meets_on_boundary(then_expr, else_expr, g) -> bool:
@@ -145,9 +140,18 @@ def _meets_on_boundary(then_expr, else_expr, g) -> bool:
 def _integer_exponent(exp: sympy.Integer, base) -> int:
     n = int(exp)
     if abs(n) > POWI_MAX:
-        raise CompileError(f"the exponent {n} of {_short(base)} is beyond ±{POWI_MAX}, the largest integer power "
-                           "implc compiles")
+        raise CompileError(f"the exponent {shorten(exp)} of {shorten(base)} is beyond ±{POWI_MAX}, the largest "
+                           "integer power implc compiles")
     return n
+
+
+def _opens(node) -> bool:
+    """Whether the front end looks into ``node``'s parts: not atoms, and not the nodes with bound
+    variables (Sum, Integral, ...), which SymPy decides as wholes."""
+    if not node.args:
+        return False
+    number = getattr(type(node), "is_number", None)
+    return not isinstance(node, sympy.Expr) or number is sympy.Expr.is_number
 
 
 class _Lowerer:
@@ -155,6 +159,7 @@ class _Lowerer:
         self.tape = tape
         self.wrap_phi = wrap_phi
         self.memo: dict[sympy.Basic, int] = {}
+        self.numeric: dict[sympy.Basic, bool] = {}  # SymPy's is_number, decided bottom up (it recurses)
 
     # spherical coordinates, built once and shared
     def _symbol(self, name: str) -> int:
@@ -172,10 +177,41 @@ class _Lowerer:
         raise CompileError(f"unknown symbol {name} (use x, y, z, r, theta, phi)")
 
     def lower(self, e: sympy.Basic) -> int:
+        """The tape node of ``e``. Its subexpressions are lowered first, bottom up, with an explicit stack
+        (each shared one once), so that the rules below only look up their operands: no recursion, however
+        deep the expression. Numbers are lowered whole (never their parts)."""
         found = self.memo.get(e)
-        if found is None:
-            found = self.memo[e] = self._lower(e)
-        return found
+        if found is not None:
+            return found
+        self._mark_numbers(e)
+        stack, expanded = [(e, False)], set()
+        while stack:
+            node, ready = stack.pop()
+            if node in self.memo or (not ready and node in expanded):
+                continue
+            if not ready and _opens(node) and not self.numeric.get(node, False):
+                expanded.add(node)
+                stack.append((node, True))
+                stack.extend((arg, False) for arg in node.args if arg not in self.memo)
+            elif isinstance(node, sympy.Expr):
+                self.memo[node] = self._lower(node)
+            # other nodes (conditions, pairs, tuples) are lowered by their rule, from their lowered parts
+        return self.memo[e]
+
+    def _mark_numbers(self, e):
+        """SymPy's ``is_number`` for every subexpression, decided bottom up (SymPy's own recurses)."""
+        stack = [(e, False)]
+        while stack:
+            node, ready = stack.pop()
+            if node in self.numeric:
+                continue
+            if not ready and _opens(node):
+                stack.append((node, True))
+                stack.extend((arg, False) for arg in node.args if arg not in self.numeric)
+            elif _opens(node):
+                self.numeric[node] = isinstance(node, sympy.Expr) and all(self.numeric[a] for a in node.args)
+            else:
+                self.numeric[node] = bool(getattr(node, "is_number", False))
 
     def _lower(self, e: sympy.Basic) -> int:
         t = self.tape
@@ -183,7 +219,7 @@ class _Lowerer:
             if e.name not in NAMES:
                 raise CompileError(f"unknown symbol {e.name} (use x, y, z, r, theta, phi)")
             return self._symbol(e.name)
-        if e.is_number:
+        if self.numeric.get(e) if e in self.numeric else e.is_number:
             return t.const_bounds(*number_bounds(e))
         if e.is_Add:
             terms = [self.lower(a) for a in e.args]

@@ -17,7 +17,7 @@ from pathlib import Path
 import sympy
 
 from .abi import MAX_DEPTH
-from .errors import CompileError
+from .errors import CompileError, shorten
 from .surface import check_bounds
 
 
@@ -78,7 +78,7 @@ def load(name_or_path: str) -> Scene:
 def _checked_surface(path, surface):
     if not isinstance(surface, sympy.Expr):
         raise SceneError(f"scene {path}: 'surface' must be a SymPy expression, got {type(surface).__name__} "
-                         f"{_short(surface)}")
+                         f"{shorten(surface, quoted=True)}")
     return surface
 
 
@@ -91,7 +91,8 @@ def _checked_bounds(path, bounds):
 
 def _checked_depth(path, depth):
     if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= MAX_DEPTH:
-        raise SceneError(f"scene {path}: 'depth' must be an integer from 1 to {MAX_DEPTH}, got {_short(depth)}")
+        raise SceneError(f"scene {path}: 'depth' must be an integer from 1 to {MAX_DEPTH}, got "
+                         f"{shorten(depth, quoted=True)}")
     return depth
 
 
@@ -102,12 +103,7 @@ def _checked_view(path, view):
         azimuth, elevation = (float(v) for v in view)
     except (TypeError, ValueError):
         raise SceneError(f"scene {path}: 'view' must be two numbers (azimuth, elevation) in degrees, got "
-                         f"{_short(view)}") from None
+                         f"{shorten(view, quoted=True)}") from None
     if not (math.isfinite(azimuth) and math.isfinite(elevation)):
-        raise SceneError(f"scene {path}: 'view' must be finite, got {_short(view)}")
+        raise SceneError(f"scene {path}: 'view' must be finite, got {shorten(view, quoted=True)}")
     return (azimuth, elevation)
-
-
-def _short(value, limit=60) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -138,7 +138,8 @@ def describe(path) -> list[str]:
         except (OSError, ValueError, EOFError) as exc:
             raise VoxelFileError(f"cannot read {path}: damaged or truncated ({exc})") from None
         if grid.ndim != 3 or grid.dtype != bool:
-            raise VoxelFileError(f"{path}: not a dense occupancy grid (a 3-D bool array), got {grid.dtype} {grid.shape}")
+            raise VoxelFileError(f"{path}: not a dense occupancy grid (a 3-D bool array), got {grid.dtype} "
+                                 f"{grid.shape}")
         return [f"file     {size}, dense occupancy grid", f"grid     {'x'.join(map(str, grid.shape))}",
                 f"voxels   {int(np.count_nonzero(grid))}"]
     header = _ply_header(path)

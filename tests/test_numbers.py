@@ -88,3 +88,11 @@ def test_periodicity_detection_never_hangs(formula, tmp_path):
     proc = subprocess.run([sys.executable, "-m", "implc", "voxelize", "--expr", formula, "--depth", "5", "--quiet",
                            "-o", str(tmp_path / "h.npz")], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
+
+
+def test_messages_about_huge_integers_still_print():
+    """An exponent or a constant with more digits than Python prints (4,300) is named, not a ValueError."""
+    huge = sympy.Integer(2) ** 20000
+    with pytest.raises(CompileError, match=r"the exponent (<a Integer too large to print>|\d+\.\.\.) of x is "
+                                           "beyond ±65536"):  # cut, or named where Python may not print it
+        implc.compile(x ** (huge + 1) + x)

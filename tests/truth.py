@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import signal
+import sys
 
 import mpmath
 import numpy as np
@@ -15,6 +16,9 @@ TRUTH_SECONDS = 2.0
 """Budget for one 40-digit evaluation. mpmath can take minutes (or overflow Python's integers) on rare
 random expressions such as exp(exp(exp(x))), whose values have exponents of millions of digits; the
 check of such an expression stops there ("slow"): the oracle, not implc, is the limit."""
+
+
+sys.set_int_max_str_digits(0)  # lambdify prints the expression: random ones hold integers of 10^4 digits
 
 
 class _TooSlow(Exception):
