@@ -110,7 +110,6 @@ def number_bounds(expr: sympy.Expr) -> tuple[float, float, float]:
     return (nearest, lo, hi)
 
 
-
 def _meets_on_boundary(then_expr, else_expr, g) -> bool:
     """Whether then − else = g^k·h (k >= 1, h free of poles): the branches agree where g = 0, so the
     Piecewise is continuous there (needed before a mean-value enclosure may cross the boundary).
@@ -208,10 +207,9 @@ class _Lowerer:
             if not ready and _opens(node):
                 stack.append((node, True))
                 stack.extend((arg, False) for arg in node.args if arg not in self.numeric)
-            elif _opens(node):
-                self.numeric[node] = isinstance(node, sympy.Expr) and all(self.numeric[a] for a in node.args)
             else:
-                self.numeric[node] = bool(getattr(node, "is_number", False))
+                self.numeric[node] = (isinstance(node, sympy.Expr) and all(self.numeric[a] for a in node.args)
+                                      if _opens(node) else bool(getattr(node, "is_number", False)))
 
     def _lower(self, e: sympy.Basic) -> int:
         t = self.tape
@@ -219,7 +217,7 @@ class _Lowerer:
             if e.name not in NAMES:
                 raise CompileError(f"unknown symbol {e.name} (use x, y, z, r, theta, phi)")
             return self._symbol(e.name)
-        if self.numeric.get(e) if e in self.numeric else e.is_number:
+        if self.numeric[e]:  # marked by lower() before any node is lowered
             return t.const_bounds(*number_bounds(e))
         if e.is_Add:
             terms = [self.lower(a) for a in e.args]
