@@ -262,9 +262,10 @@ def kernels(args, out):
         sc = scene.load(name)
         s = implc.compile(sc.surface, sc.bounds)
         out_lo, out_hi, values, grads = np.empty(n), np.empty(n), np.empty(n), np.empty((n, 3))
-        interval_s, _ = median_time(lambda: s._interval(lo.ctypes.data, hi.ctypes.data, out_lo.ctypes.data,
-                                                        out_hi.ctypes.data, n, None, None), args.repeats)
-        gradient_s, _ = median_time(lambda: s._gradient(lo.ctypes.data, values.ctypes.data, grads.ctypes.data, n),
+        interval, gradient = s.kernel(implc.abi.INTERVAL), s.kernel(implc.abi.GRADIENT)
+        interval_s, _ = median_time(lambda: interval(lo.ctypes.data, hi.ctypes.data, out_lo.ctypes.data,
+                                                     out_hi.ctypes.data, n, None, None), args.repeats)
+        gradient_s, _ = median_time(lambda: gradient(lo.ctypes.data, values.ctypes.data, grads.ctypes.data, n),
                                     args.repeats)
         saved = os.environ.get("IMPLC_CACHE_DIR")
         try:
@@ -283,6 +284,51 @@ def kernels(args, out):
           "compile cached |", "|---|---|---|---|---|---|"]
     md += [f"| {r['scene']} | {r['ops']} | {r['interval_per_s'] / 1e6:.1f} M | {r['gradient_per_s'] / 1e6:.1f} M "
            f"| {r['compile_cold_s'] * 1e3:.0f} ms | {r['compile_cached_s'] * 1e3:.1f} ms |" for r in rows]
+    return md
+
+
+def models(args, out):
+    """The peer models (.vm tapes of fidget and MPR) from --models-dir: load, compile cold and cached, and
+    voxelize at 256³ and 512³ with all cores over each model's suggested bounds."""
+    folder = Path(args.models_dir)
+    paths = sorted(folder.glob("*.vm")) if folder.is_dir() else []
+    skip = set(args.models_skip.split(",")) if args.models_skip else set()
+    rows = []
+    for path in paths:
+        if path.stem in skip:
+            continue
+        t0 = time.perf_counter()
+        model = implc.load_vm(path)
+        load_s = time.perf_counter() - t0
+        saved = os.environ.get("IMPLC_CACHE_DIR")
+        try:
+            with tempfile.TemporaryDirectory() as tmp:
+                os.environ["IMPLC_CACHE_DIR"] = tmp
+                t0 = time.perf_counter()
+                s = implc.compile(model)
+                cold = time.perf_counter() - t0
+                cached, _ = median_time(lambda: implc.compile(model), args.repeats)
+        finally:
+            os.environ.pop("IMPLC_CACHE_DIR", None) if saved is None else os.environ.update(IMPLC_CACHE_DIR=saved)
+        row = {"model": path.stem, "instructions": model.instructions, "ops": len(model.tape), "load_s": load_s,
+               "compile_cold_s": cold, "compile_cached_s": cached}
+        row["depths"] = {}
+        for depth in args.models_depths:
+            implc.voxelize(s, depth)
+            seconds, v = median_time(lambda: implc.voxelize(s, depth), args.repeats)
+            row["depths"][depth] = {"seconds": seconds, "voxels": len(v)}
+        rows.append(row)
+    out["models"] = rows
+    md = ["### Peer models (.vm tapes of fidget and MPR), all cores", ""]
+    if not rows:
+        return md + [f"(no .vm files in {folder})"]
+    grids = "".join(f" {1 << d}³ s | voxels |" for d in args.models_depths)
+    md += [f"| model | instructions | ops | load s | compile cold s | cached ms |{grids}",
+           "|---" * (6 + 2 * len(args.models_depths)) + "|"]
+    for r in rows:
+        cells = "".join(f" {g['seconds']:.3f} | {g['voxels']} |" for g in r["depths"].values())
+        md.append(f"| {r['model']} | {r['instructions']} | {r['ops']} | {r['load_s']:.3f} | "
+                  f"{r['compile_cold_s']:.2f} | {r['compile_cached_s'] * 1e3:.0f} |{cells}")
     return md
 
 
@@ -347,7 +393,8 @@ def techniques(args, out):
     return md
 
 
-SECTIONS = {"table1": table1, "techniques": techniques, "baselines": baselines, "growth": growth, "tightness": tightness, "kernels": kernels}
+SECTIONS = {"table1": table1, "techniques": techniques, "baselines": baselines, "growth": growth,
+            "tightness": tightness, "kernels": kernels, "models": models}
 
 
 def parser():
@@ -364,6 +411,10 @@ def parser():
     p.add_argument("--growth-depths", default="7,8,9,10,11")
     p.add_argument("--tightness-scenes", default=None, help="default: every scene")
     p.add_argument("--tightness-depth", type=int, default=8)
+    p.add_argument("--models-dir", default=str(Path(__file__).resolve().parent.parent.parent / "shared" / "models"),
+                   help="folder of .vm models for the 'models' section (default: ../shared/models of the checkout)")
+    p.add_argument("--models-skip", default="prospero", help="comma list of model names to leave out")
+    p.add_argument("--models-depths", default="8,9", help="grid depths for the models (default 8,9: 256³, 512³)")
     p.add_argument("--out", default="implc-bench", help="folder for latest.md/.json (default ./implc-bench)")
     return p
 
@@ -376,6 +427,7 @@ def main(argv=None) -> int:
     args.baseline_depths = [int(d) for d in args.baseline_depths.split(",")]
     args.growth_scenes = args.growth_scenes.split(",")
     args.growth_depths = [int(d) for d in args.growth_depths.split(",")]
+    args.models_depths = [int(d) for d in args.models_depths.split(",")]
     args.tightness_scenes = args.tightness_scenes.split(",") if args.tightness_scenes else scene.available()
     sections = args.sections.split(",")
     unknown = [s for s in sections if s not in SECTIONS]

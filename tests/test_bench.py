@@ -15,8 +15,13 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
     results = Path(__file__).resolve().parent.parent / "benchmarks" / "results"
     quoted = {p.name: p.read_bytes() for p in results.iterdir()}
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "ball.vm").write_text("# --scale 0.5\nx var-x\ny var-y\nz var-z\nx2 square x\n"
+                                                  "y2 square y\nz2 square z\ns add x2 y2\nt add s z2\n"
+                                                  "r const 2.25\nout sub t r\n")
     status = main(["bench", "--depth", "5", "--workers", "1,2", "--repeats", "1", "--baseline-depths", "5",
-                   "--growth-depths", "5,6", "--tightness-scenes", "torus,paper_blobs", "--tightness-depth", "6"])
+                   "--growth-depths", "5,6", "--tightness-scenes", "torus,paper_blobs", "--tightness-depth", "6",
+                   "--models-dir", str(tmp_path / "models"), "--models-depths", "5,6"])
     assert status == 0
     assert "Table 1 at 32³" in capsys.readouterr().out
     assert {p.name: p.read_bytes() for p in results.iterdir()} == quoted
@@ -33,6 +38,9 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
         assert r["voxels"] >= r["numpy_cells"] > 0
         if "symengine llvm_cells" in r:
             assert r["symengine llvm_cells"] == r["numpy_cells"]
+    (model,) = data["models"]  # the ball of radius 1.5 over [-2, 2]³ (its --scale)
+    assert model["model"] == "ball" and model["instructions"] == 10
+    assert model["depths"]["6"]["voxels"] > model["depths"]["5"]["voxels"] > 0
     growth = data["growth"]
     assert growth[1]["voxels"] > growth[0]["voxels"]
     assert (tmp_path / "latest.md").read_text().startswith("## implc benchmarks")
