@@ -176,9 +176,13 @@ def test_an_interrupted_save_never_damages_the_old_file(tmp_path, sig):
     voxel_files.save(implc.voxelize(implc.compile(implc.x - 0.5), 3), keep)
     old = digest(keep)
     outcomes = set()
+    argv = ["implc", "voxelize", "torus", "--depth", "9", "--compress", "--quiet", "-o", str(keep)]
+    starter = (f"import sys, runpy; print('ready', flush=True); sys.argv = {argv!r}; "
+               "runpy.run_module('implc', run_name='__main__', alter_sys=True)")  # python -m implc, once it is up
     for delay in (0.3, 0.9, 1.3, 1.7, 2.4):
-        proc = subprocess.Popen([sys.executable, "-m", "implc", "voxelize", "torus", "--depth", "9", "--compress",
-                                 "--quiet", "-o", str(keep)], stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen([sys.executable, "-c", starter], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+        assert proc.stdout.readline().strip() == "ready"
         time.sleep(delay)
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
