@@ -454,7 +454,7 @@ def test_jumps_never_use_the_mean_value_form():
     assert f_lo[0] <= -3.14 and f_hi[0] >= 3.14
 
 
-@pytest.mark.parametrize("width", [1, 2, 4])
+@pytest.mark.parametrize("width", [1, pytest.param(2, marks=pytest.mark.slow), pytest.param(4, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("name", ["spherical", "select_le", "atan2_wrapped", "powi_even", "div_pole", "min"])
 def test_every_vector_width_computes_the_same(name, width, surfaces):
     s8, s = surfaces[name], implc.compile(OP_CASES[name], vector_width=width)
