@@ -203,7 +203,8 @@ def compile(expr, bounds=None, *, vector_width: int = WIDTH, rounding: str = "au
     where the host has AVX-512). Both are sound; directed is faster and a few ulps tighter.
     """
     if isinstance(expr, VmModel):
-        return _compile_tape(expr, expr.tape, expr.bounds if bounds is None else bounds, vector_width, rounding)
+        checked, directed = _check_options(expr.bounds if bounds is None else bounds, vector_width, rounding)
+        return Surface(expr, checked, expr.tape, vector_width, directed)
     if not isinstance(expr, sympy.Basic):
         raise TypeError(f"implc.compile expects a SymPy expression or a .vm model, got {type(expr).__name__}")
     if isinstance(expr, sympy.Equality):
@@ -211,14 +212,16 @@ def compile(expr, bounds=None, *, vector_width: int = WIDTH, rounding: str = "au
     if isinstance(expr, (sympy.core.relational.Relational, sympy.logic.boolalg.BooleanFunction,
                          sympy.logic.boolalg.BooleanAtom)):
         raise CompileError(f"expected a real-valued expression F (the surface is F = 0), got {expr}")
+    checked, directed = _check_options(DEFAULT_BOUNDS if bounds is None else bounds, vector_width, rounding)
     try:
         tape = lower(expr)
     except RecursionError:
         raise CompileError("the expression is nested too deeply for the front end") from None
-    return _compile_tape(expr, tape, DEFAULT_BOUNDS if bounds is None else bounds, vector_width, rounding)
+    return Surface(expr, checked, tape, vector_width, directed)
 
 
-def _compile_tape(expr, tape: Tape, bounds, vector_width, rounding) -> Surface:
+def _check_options(bounds, vector_width, rounding) -> tuple[tuple, bool]:
+    """(checked bounds, directed rounding?): the options validated before any work is done."""
     checked = check_bounds(bounds)
     if vector_width not in WIDTHS:
         raise CompileError(f"vector_width must be one of {WIDTHS}, got {vector_width!r}")
@@ -226,5 +229,4 @@ def _compile_tape(expr, tape: Tape, bounds, vector_width, rounding) -> Surface:
         raise CompileError(f"rounding must be one of {', '.join(ROUNDINGS)}, got {rounding!r}")
     if rounding == "directed" and not host_has_avx512():
         raise CompileError("rounding='directed' needs a CPU with AVX-512F; this one has none (use 'auto' or 'widen')")
-    directed = rounding == "directed" or (rounding == "auto" and host_has_avx512())
-    return Surface(expr, checked, tape, vector_width, directed)
+    return checked, rounding == "directed" or (rounding == "auto" and host_has_avx512())

@@ -15,6 +15,8 @@ import implc
 from implc import voxel_files
 from implc.cli import main
 
+from .test_cli import run
+
 SCENE_TEXT = {
     "string_surface.py": "surface = 'x**2 + y**2 - 1'\n",
     "string_view.py": "import implc\nsurface = implc.x**2 + implc.y**2 + implc.z**2 - 0.5\nview = 'front'\n",
@@ -23,11 +25,6 @@ SCENE_TEXT = {
     "broken.py": "import sympy\nsurface = (\n",
     "no_surface.py": "bounds = ((-1, 1),) * 3\n",
 }
-
-
-def run(*argv, timeout=120):
-    proc = subprocess.run([sys.executable, "-m", "implc", *argv], capture_output=True, text=True, timeout=timeout)
-    return proc.returncode, proc.stdout, proc.stderr
 
 
 @pytest.fixture(scope="module")

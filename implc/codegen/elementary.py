@@ -128,9 +128,10 @@ sin = outlined("sin", 1, _sin)
 cos = outlined("cos", 1, _cos)
 
 
-def count_in(tape) -> int:
-    """How many nodes of ``tape`` the vector functions compute (in its interval or normals kernels)."""
-    return sum(op in ("sin", "cos", "atan2", "atan2_wrapped") for op, _, _ in tape.nodes)
+def outlines(tape) -> bool:
+    """Whether a module for ``tape`` calls the vector functions outlined: more than :data:`OUTLINE_ABOVE`
+    of its nodes (the gradient tape's, for both the value and the derivatives) are computed by them."""
+    return sum(op in ("sin", "cos", "atan2", "atan2_wrapped") for op, _, _ in tape.nodes) > OUTLINE_ABOVE
 
 
 def _sin_cos(vb: VectorBuilder, x, quarter_turns: int, name: str):

@@ -1,7 +1,7 @@
 """Kernel assembly: the exported, batched C-ABI functions of one surface's LLVM module.
 
-Signatures are declared in :mod:`implc.abi`. Every batched kernel walks ``n`` items (``n`` a multiple of :data:`WIDTH`) in vectors of WIDTH lanes, reading
-points and boxes as row-major (n, 3) float64 arrays:
+Signatures are declared in :mod:`implc.abi`. Every batched kernel walks ``n`` items (``n`` a multiple of
+:data:`WIDTH`) in vectors of WIDTH lanes, reading points and boxes as row-major (n, 3) float64 arrays:
 
 - ``implc_point(pts, out, n)``: F at each point.
 - ``implc_gradient(pts, out_value, out_grad, n)``: F and its analytic gradient (n, 3).
@@ -206,7 +206,7 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     fn, b = define(module, abi.GRADIENT_LIVE)
     pts, out_value, out_grad, n, live = fn.args
     plan = plan_regions(value_tape)
-    outline = elementary.count_in(gradient_tape) > elementary.OUTLINE_ABOVE
+    outline = elementary.outlines(gradient_tape)
     with for_range(b, b.sdiv(n, ir.Constant(I64, width))) as i:
         vb = VectorBuilder(b, width, outline_elementary=outline)
         if plan.fold is not None:
@@ -234,7 +234,7 @@ def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "
         if plan.fold is not None:  # over the live terms only, and each child gets its own mask
             return emit_pruned_mean_value(vb, value_tape, plan, lo, hi, live_in)
         return (*emit_mean_value(vb, value_tape, gradient_tape, lo, hi), broadcast(vb.b, live_in, vb.width))
-    outline = elementary.count_in(gradient_tape) > elementary.OUTLINE_ABOVE
+    outline = elementary.outlines(gradient_tape)
     _interval_kernel(module, abi.INTERVAL_MVF, width, directed, outline, enclose)
     _octant_kernel(module, abi.OCTANT_MVF, width, directed, outline, enclose)
     return str(module)
