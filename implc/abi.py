@@ -21,6 +21,7 @@ _LLVM_KINDS = {
     "i64": ir.IntType(64),
     "f64*": ir.PointerType(ir.DoubleType()),
     "f32*": ir.PointerType(ir.FloatType()),
+    "i8*": ir.PointerType(ir.IntType(8)),
     "i32*": ir.PointerType(ir.IntType(32)),
     "i64*": ir.PointerType(ir.IntType(64)),
     "fn*": ir.PointerType(ir.IntType(8)),  # the address of another entry point
@@ -80,6 +81,19 @@ OCTREE_TRAVERSE = _entry("implc_octree_traverse", "nodes:i32* depth:i64 level:i6
 SPLAT = _entry("implc_splat", "px:i64* py:i64* sizes:i64* depth:f64* n:i64 size:i64 zbuf:f64* winner:i64*")
 RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, OCTREE_INSERT, OCTREE_TRAVERSE, SPLAT)
 
+# -- the tape engine (implc.codegen.tape_engine_module): one interpreter for every program -----------------
+# (implc.tape_program; ``slots``: TAPE_SLOT_DOUBLES per instruction of the full program, ``choices``: 8 bytes
+# per instruction and per level, n a multiple of 8)
+TAPE_INTERVAL = _entry("implc_tape_interval", "program:i32* length:i64 constants:f64* slots:f64* choices:i8* "
+                                              "lo:f64* hi:f64* out_lo:f64* out_hi:f64* n:i64")
+TAPE_GRADIENT = _entry("implc_tape_gradient", "program:i32* length:i64 constants:f64* slots:f64* "
+                                              "pts:f64* out_value:f64* out_grad:f64* n:i64")
+TAPE_SUBDIVIDE = _entry("implc_tape_subdivide",
+                        "program:i32* length:i64 constants:f64* prune:i64 geom:f64* state:i64* frames:i32* "
+                        "tapes:i32* choices:i8* slots:f64* marks:i8* remap:i32* out:i32* out_normals:f32* "
+                        "capacity:i64 stats:i64* cancel:i32*", "i64")
+TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE)
+
 # -- layouts shared by native code and Python ------------------------------------------------------
 MAX_DEPTH = 21
 """The deepest grid (2^21 cells per axis: cell indices fit in uint32 with room for a child level)."""
@@ -94,6 +108,24 @@ one level past the deepest grid for leaf refinement)."""
 
 SUBDIVIDE_STATE_WORDS = 2
 """``implc_subdivide``'s resumable state (int64): stack size, grid depth."""
+
+TAPE_SLOT_DOUBLES = 32
+"""Scratch doubles per slot of a tape program: an interval is two vectors of eight, a dual number four."""
+TAPE_LEVELS = MAX_DEPTH + 2
+"""Levels the tape subdivider keeps a program, choices and a frame for (0 to MAX_DEPTH + 1)."""
+TAPE_FRAME_WORDS = 5
+"""``implc_tape_subdivide``'s frame per level (int32): the octant's cell (i, j, k), the children still
+to visit (bit c: child c), the children whose program is shorter than the octant's (a choice decided)."""
+TAPE_PHASE, TAPE_LEVEL, TAPE_DEPTH, TAPE_TASK_LEVEL, TAPE_PENDING = 0, 1, 2, 3, 4
+"""``implc_tape_subdivide``'s state (int64): phase (0 new task, 1 running, 2 done), the level of the
+frame in hand, the grid depth, the task's level, whether the frame in hand still needs its children."""
+TAPE_PROGRAMS = 5
+"""Start of the program address per level (TAPE_LEVELS words), then of its length (TAPE_LEVELS words)."""
+TAPE_STATE_WORDS = TAPE_PROGRAMS + 2 * TAPE_LEVELS
+TAPE_STATS_WORDS = 3 * TAPE_LEVELS
+"""The tape subdivider's statistics (int64): boxes enclosed, then octants kept per level (as
+``implc_subdivide``'s, TAPE_LEVELS words), instructions run per level (the octant's level), octants
+expanded per level."""
 
 # implc_octree_insert's state (int64 words)
 NODE_COUNT, DEPTH, STARTED, PREV = 0, 1, 2, 3

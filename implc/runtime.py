@@ -3,7 +3,8 @@
 A :class:`Runtime` owns the JIT-compiled runtime module (:mod:`implc.codegen.runtime_module`) and its
 entry points, bound from :mod:`implc.abi`. The module is the same for every surface, so a process needs
 one: :meth:`Runtime.shared` builds it on first use (from the disk cache after the first time) and hands
-the same one to every caller, which keeps its code alive for the life of the process.
+the same one to every caller, which keeps its code alive for the life of the process. The tape engine
+(:class:`TapeEngine`, one interpreter for every program) is compiled on first use by a surface that needs it.
 """
 
 from __future__ import annotations
@@ -12,7 +13,21 @@ import threading
 
 from . import abi
 from .codegen.runtime_module import build_runtime
+from .codegen.tape_engine_module import build_tape_engine
 from .jit import NativeModule
+
+
+class TapeEngine:
+    """The tape-engine module's entry points for one rounding mode: ``interval``, ``gradient`` and
+    ``subdivide`` (signatures in :mod:`implc.abi`; programs from :mod:`implc.tape_program`)."""
+
+    def __init__(self, directed: bool):
+        self.directed = directed
+        self.native = NativeModule(lambda: build_tape_engine(directed),
+                                   source_key=f"implc-tape-engine-{'directed' if directed else 'widened'}")
+        self.interval = self.native.bind(abi.TAPE_INTERVAL)
+        self.gradient = self.native.bind(abi.TAPE_GRADIENT)
+        self.subdivide = self.native.bind(abi.TAPE_SUBDIVIDE)
 
 
 class Runtime:
@@ -29,6 +44,15 @@ class Runtime:
         self.octree_insert = self.native.bind(abi.OCTREE_INSERT)
         self.octree_traverse = self.native.bind(abi.OCTREE_TRAVERSE)
         self.splat = self.native.bind(abi.SPLAT)
+        self._tape_engines: dict[bool, TapeEngine] = {}
+
+    def tape_engine(self, directed: bool) -> TapeEngine:
+        """The tape engine for one rounding mode, compiled on first use (from the disk cache after the
+        first time)."""
+        with self._lock:
+            if directed not in self._tape_engines:
+                self._tape_engines[directed] = TapeEngine(directed)
+            return self._tape_engines[directed]
 
     @classmethod
     def shared(cls) -> Runtime:

@@ -49,12 +49,21 @@ class SubdivisionStats:
     worker_busy: list = field(default_factory=list)
     worker_normals: list = field(default_factory=list)
     worker_tasks: list = field(default_factory=list)
+    program_length: int = 0
+    live_ops_per_level: list = field(default_factory=list)
+    octants_per_level: list = field(default_factory=list)
 
     @property
     def parallel_yield(self) -> float:
         """The paper's yield t1 / (n · tn), with t1 estimated as the summed busy time of all workers."""
         wall = self.seconds.get("subdivide", 0.0)
         return sum(self.worker_busy) / (self.workers * wall) if wall > 0 else 1.0
+
+    @property
+    def mean_live_ops(self) -> list:
+        """Tape engine: the mean length of the program each level's octants ran (MPR's "live ops per
+        octant"), None for levels that ran none; empty for compiled kernels."""
+        return [ops / n if n else None for ops, n in zip(self.live_ops_per_level, self.octants_per_level)]
 
     def summary(self) -> str:
         return (f"{self.interval_evaluations} interval evaluations, {self.tasks} tasks at level {self.task_level}, "
@@ -94,29 +103,43 @@ class _TaskResult:
         self.normals = np.empty((size, 3), dtype=np.float32)
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
         self.coords_ptr, self.masks_ptr = self.coords.ctypes.data, self.masks.ctypes.data
+        self.normals_ptr = self.normals.ctypes.data
 
     def make_room(self, free):
         """At least ``free`` unused rows past ``count`` (doubling, keeping the rows written so far)."""
         if self.count + free > len(self.coords):
-            coords, masks = self.coords[: self.count], self.masks[: self.count]
+            coords, masks, normals = self.coords[: self.count], self.masks[: self.count], self.normals[: self.count]
             self._allocate(max(self.count + free, 2 * len(self.coords)))
             self.coords[: self.count] = coords
             self.masks[: self.count] = masks
+            self.normals[: self.count] = normals
         return len(self.coords) - self.count
 
 
 class _Worker:
-    """Per-thread native buffers and counters."""
+    """Per-thread native buffers and counters (for the tape engine, with ``program_length``: its frames,
+    a program and choices per level, and the interpreter's scratch)."""
 
-    def __init__(self, depth):
+    def __init__(self, depth, program_length: int | None = None):
         self.stack = np.zeros(4 * STACK_ENTRIES, dtype=np.int32)
         self.masks = np.full(STACK_ENTRIES, -1, dtype=np.int64)  # live-term mask of each stack entry
         self.state = np.zeros(abi.SUBDIVIDE_STATE_WORDS, dtype=np.int64)
-        self.stats = np.zeros(MAX_DEPTH + 2, dtype=np.int64)
+        self.stats = np.zeros(abi.TAPE_STATS_WORDS, dtype=np.int64)
         self.depth = depth
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
         self.stack_ptr, self.state_ptr = self.stack.ctypes.data, self.state.ctypes.data
         self.masks_ptr, self.stats_ptr = self.masks.ctypes.data, self.stats.ctypes.data
+        if program_length is not None:
+            n = program_length
+            self.tape_state = np.zeros(abi.TAPE_STATE_WORDS, dtype=np.int64)
+            self.frames = np.zeros(abi.TAPE_LEVELS * abi.TAPE_FRAME_WORDS, dtype=np.int32)
+            self.tapes = np.empty(abi.TAPE_LEVELS * n * 4, dtype=np.int32)  # untouched levels cost no memory
+            self.choices = np.empty(abi.TAPE_LEVELS * n * 8, dtype=np.uint8)
+            self.slots = np.empty(n * abi.TAPE_SLOT_DOUBLES)
+            self.marks = np.empty(2 * n, dtype=np.uint8)
+            self.remap = np.empty(n, dtype=np.int32)
+            self.tape_buffers = tuple(a.ctypes.data for a in (self.tape_state, self.frames, self.tapes, self.choices,
+                                                              self.slots, self.marks, self.remap))
         self.busy = 0.0
         self.normals = 0.0
         self.tasks = 0
@@ -135,22 +158,40 @@ class Subdivider:
         self.geom = geometry(surface.bounds, depth)
         leaf = self.geom[6 + 3 * depth: 9 + 3 * depth]
         self.leaf_geom = np.concatenate([self.geom[:3], leaf])
-        self.box = surface.kernel_address(abi.OCTANT)
         self.prune = int(bool(prune))
         self.refine = int(bool(refine_leaves))
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
-        self.fine_box = surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else self.box
-        self.gradient = surface.kernel_address(abi.GRADIENT_LIVE)
-        self.point = surface.kernel_address(abi.POINT)
+        if surface.program is None or mean_value_levels > 0 or refine_leaves:  # compiled kernels
+            self.box = surface.kernel_address(abi.OCTANT)
+            self.fine_box = surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else self.box
+            self.gradient = surface.kernel_address(abi.GRADIENT_LIVE)
+            self.point = surface.kernel_address(abi.POINT)
         self.cancel = np.zeros(1, dtype=np.int32)
         self.geom_ptr, self.leaf_geom_ptr = self.geom.ctypes.data, self.leaf_geom.ctypes.data
         self.cancel_ptr = self.cancel.ctypes.data
         self.stats = SubdivisionStats(depth=depth, workers=workers, kept_per_level=[1] + [0] * depth)
+        # the tape engine runs the surface where it is the surface's engine and no compiled-only option is asked
+        self.program = surface.program if mean_value_levels == 0 and not refine_leaves else None
+        self._plan_normals = None
+        if self.program is not None:
+            self.tape_engine = surface.tape_engine
+            self.program_args = (self.program.instructions.ctypes.data, len(self.program),
+                                 self.program.constants.ctypes.data, self.prune)
+            self.stats.program_length = len(self.program)
+            self.stats.live_ops_per_level = [0] * (depth + 1)
+            self.stats.octants_per_level = [0] * (depth + 1)
 
     # -- native steps ------------------------------------------------------------------------------
+    def _new_worker(self, depth) -> _Worker:
+        return _Worker(depth, None if self.program is None else len(self.program))
+
     def _run_task(self, w: _Worker, cell, level: int, depth: int, result: _TaskResult) -> None:
-        """Append all kept cells at ``depth`` below ``cell`` (at ``level``) to ``result``, in Morton order."""
+        """Append all kept cells at ``depth`` below ``cell`` (at ``level``) to ``result``, in Morton order
+        (the tape engine: with their normals)."""
+        if self.program is not None:
+            self._run_tape_task(w, cell, level, depth, result)
+            return
         w.stack[:4] = (*cell, level)
         w.masks[0] = -1  # every term live at a task's root
         w.state[:] = (1, depth)
@@ -162,6 +203,21 @@ class Subdivider:
                                        room, w.stats_ptr, self.cancel_ptr)
             result.count += n
             if w.state[0] == 0 or self.cancel[0]:
+                break
+
+    def _run_tape_task(self, w: _Worker, cell, level: int, depth: int, result: _TaskResult) -> None:
+        frame = level * abi.TAPE_FRAME_WORDS
+        w.frames[frame: frame + 3] = cell
+        w.tape_state[abi.TAPE_PHASE] = 0
+        w.tape_state[abi.TAPE_DEPTH] = depth
+        w.tape_state[abi.TAPE_TASK_LEVEL] = level
+        while True:
+            room = result.make_room(OUTPUT_CHUNK)
+            n = self.tape_engine.subdivide(*self.program_args, self.geom_ptr, *w.tape_buffers,
+                                           result.coords_ptr + 12 * result.count,
+                                           result.normals_ptr + 12 * result.count, room, w.stats_ptr, self.cancel_ptr)
+            result.count += n
+            if w.tape_state[abi.TAPE_PHASE] == 2 or self.cancel[0]:
                 break
 
     def _normals(self, coords: np.ndarray, out: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
@@ -177,11 +233,13 @@ class Subdivider:
         """Tasks: the cells at a coarse level that may meet the surface (and that level)."""
         # enough tasks to balance the workers (~25 per worker), few enough that per-task overhead stays small
         level = min(self.depth, 2 if self.workers <= 2 else 3 if self.workers <= 16 else 4)
-        w = _Worker(level)
+        w = self._new_worker(level)
         t0 = time.perf_counter()
         result = _TaskResult()
         self._run_task(w, (0, 0, 0), 0, level, result)
         cells = result.coords[: result.count].copy()
+        if self.program is not None:  # the tape engine wrote their normals too
+            self._plan_normals = result.normals[: result.count].copy()
         self.stats.seconds["plan"] = time.perf_counter() - t0
         self._absorb(w)
         self.stats.task_level = level
@@ -192,6 +250,10 @@ class Subdivider:
         self.stats.interval_evaluations += int(w.stats[0])
         for level in range(1, self.depth + 1):
             self.stats.kept_per_level[level] += int(w.stats[level + 1])
+        if self.program is not None:
+            for level in range(self.depth + 1):
+                self.stats.live_ops_per_level[level] += int(w.stats[abi.TAPE_LEVELS + level])
+                self.stats.octants_per_level[level] += int(w.stats[2 * abi.TAPE_LEVELS + level])
         w.stats[:] = 0
 
     def run(self, emit, progress=None, plan=None) -> SubdivisionStats:
@@ -202,7 +264,10 @@ class Subdivider:
             if self.max_voxels is not None and len(cells) > self.max_voxels:
                 raise MemoryError(f"more than max_voxels={self.max_voxels} voxels at depth {self.depth}")
             t0 = time.perf_counter()
-            normals = self._normals(cells, np.empty((len(cells), 3), dtype=np.float32))
+            if self._plan_normals is not None and len(self._plan_normals) == len(cells):
+                normals = self._plan_normals
+            else:
+                normals = self._normals(cells, np.empty((len(cells), 3), dtype=np.float32))
             t1 = time.perf_counter()
             emit(cells, normals)
             self.stats.seconds["subdivide"] = time.perf_counter() - t0
@@ -222,7 +287,7 @@ class Subdivider:
         next_task, next_emit, committing, produced = [0], [0], [False], [0]
         storage_seconds = [0.0]
         in_flight = threading.Semaphore(4 * self.workers)  # bounds finished-but-unstored results
-        workers = [_Worker(self.depth) for _ in range(self.workers)]
+        workers = [self._new_worker(self.depth) for _ in range(self.workers)]
         pool: list[_TaskResult] = []
 
         def commit_ready():
@@ -266,8 +331,9 @@ class Subdivider:
                     t0 = time.perf_counter()
                     self._run_task(w, cells[t], level, self.depth, result)
                     t1 = time.perf_counter()
-                    self._normals(result.coords[: result.count], result.normals[: result.count],
-                                  result.masks[: result.count])
+                    if self.program is None:  # the tape engine wrote them with the voxels
+                        self._normals(result.coords[: result.count], result.normals[: result.count],
+                                      result.masks[: result.count])
                     t2 = time.perf_counter()
                     w.busy += t2 - t0
                     w.normals += t2 - t1

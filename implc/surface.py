@@ -22,6 +22,7 @@ from .ir import Tape
 from .jit import NativeModule, host_has_avx512
 from .lower import lower
 from .runtime import Runtime
+from .tape_program import TapeProgram, encode, unsupported_ops
 from .vm import VmModel
 
 DEFAULT_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
@@ -66,29 +67,86 @@ def _rows(name: str, array) -> np.ndarray:
     return a
 
 
-class Surface:
-    """A compiled implicit surface F(x, y, z) = 0 (F < 0 inside) over a bounding box."""
+ENGINES = ("auto", "jit", "tape")
+TAPE_ABOVE = 1000
+"""With ``engine="auto"``, a tape of more nodes than this runs on the tape engine (nothing to compile)."""
 
-    def __init__(self, expr: sympy.Expr, bounds, tape: Tape, vector_width: int = WIDTH, directed: bool = False):
+
+def choose_engine(tape: Tape, engine: str, vector_width: int = WIDTH) -> str:
+    """"jit" or "tape" for ``engine`` ("auto": the tape engine where it can run the tape and the tape has a
+    Min/Max below the top-level chain, which only the engine prunes, or is large). The engine's vectors
+    are eight wide: another ``vector_width`` means the compiled kernels."""
+    if engine == "tape":
+        if unsupported_ops(tape):
+            raise CompileError(f"engine='tape' cannot run {', '.join(sorted(unsupported_ops(tape)))} "
+                               "(use engine='jit' or 'auto')")
+        if vector_width != WIDTH:
+            raise CompileError(f"engine='tape' runs {WIDTH} lanes; vector_width={vector_width} needs engine='jit'")
+    if engine != "auto":
+        return engine
+    if unsupported_ops(tape) or vector_width != WIDTH:
+        return "jit"
+    out = tape.outputs[0]
+    top = tape.nodes[out][0]
+    chain = {out}
+    stack = [out]
+    while stack:  # the top-level Min/Max chain, which the compiled kernels prune themselves
+        for a in tape.nodes[stack.pop()][1]:
+            if top in ("min", "max") and tape.nodes[a][0] == top and a not in chain:
+                chain.add(a)
+                stack.append(a)
+    nested = any(op in ("min", "max") and i not in chain for i, (op, _, _) in enumerate(tape.nodes))
+    return "tape" if nested or len(tape) > TAPE_ABOVE else "jit"
+
+
+class Surface:
+    """A compiled implicit surface F(x, y, z) = 0 (F < 0 inside) over a bounding box.
+
+    ``engine``: "jit" (kernels compiled for this surface by LLVM, on first use) or "tape" (the shared tape
+    engine runs the surface's :class:`~implc.tape_program.TapeProgram`, pruning every decided Min/Max per
+    octant; compiled kernels are still built on first use by what needs them, e.g. the mean-value form).
+    """
+
+    def __init__(self, expr: sympy.Expr, bounds, tape: Tape, vector_width: int = WIDTH, directed: bool = False,
+                 engine: str = "jit"):
         self.expr = expr
         self.bounds = bounds
         self.tape = tape
         self.width = vector_width
         self.directed = directed  # interval arithmetic rounded by AVX-512 instructions rather than widened
-        self.gradient_tape = with_gradient(tape)
-        self._key = (f"w{self.width}{'d' if directed else ''}" + self.tape.fingerprint()
-                     + self.gradient_tape.fingerprint())
-        self._native = NativeModule(self._build, source_key=self._key)
+        self.engine = engine
+        self.program: TapeProgram | None = encode(tape) if engine == "tape" else None
+        self._gradient_tape: Tape | None = None
+        self._native: NativeModule | None = None  # compiled on first use
         self._mean_value_native: NativeModule | None = None  # compiled on first use
         self._bound: dict[str, object] = {}
-        self._point = self.kernel(abi.POINT)
-        self._gradient = self.kernel(abi.GRADIENT)
-        self._interval = self.kernel(abi.INTERVAL)
+        if engine == "tape":
+            self._engine = self.runtime.tape_engine(directed)  # shared: built once, then from the cache
+        else:
+            self._module_of(abi.POINT)  # this surface's kernels: compiled now, or loaded from the cache
+
+    @property
+    def gradient_tape(self) -> Tape:
+        """The value tape with the gradient's nodes (:func:`implc.gradient.with_gradient`), built on first use."""
+        if self._gradient_tape is None:
+            self._gradient_tape = with_gradient(self.tape)
+        return self._gradient_tape
+
+    @property
+    def _key(self) -> str:
+        return (f"w{self.width}{'d' if self.directed else ''}" + self.tape.fingerprint()
+                + self.gradient_tape.fingerprint())
+
+    @property
+    def tape_engine(self):
+        """The shared :class:`~implc.runtime.TapeEngine` that runs this surface (engine "tape")."""
+        return self._engine
 
     @property
     def from_cache(self) -> bool:
-        """Whether this surface's kernels were loaded from the disk cache (no code generation, no LLVM)."""
-        return self._native.from_cache
+        """Whether this surface's native code was loaded from the disk cache (no code generation, no LLVM):
+        its compiled kernels, or for the tape engine the shared engine (nothing of the surface's own)."""
+        return self._engine.native.from_cache if self.engine == "tape" else self._native.from_cache
 
     @property
     def runtime(self) -> Runtime:
@@ -98,6 +156,8 @@ class Surface:
 
     def _module_of(self, entry: abi.Entry) -> NativeModule:
         if entry in abi.SURFACE_ENTRIES:
+            if self._native is None:
+                self._native = NativeModule(self._build, source_key=self._key)
             return self._native
         if entry not in abi.MEAN_VALUE_ENTRIES:
             raise LookupError(f"{entry.name} is not a surface kernel")
@@ -160,18 +220,37 @@ class Surface:
                 o[main:] = t[: n - main]
         return outs
 
+    def _tape_kernel(self, function, choices: bool = False):
+        """A tape-engine entry point with this surface's program and fresh scratch bound in front."""
+        program = self.program
+
+        def call(*args):
+            slots = np.empty(len(program) * abi.TAPE_SLOT_DOUBLES)
+            scratch = (np.empty(len(program) * 8, dtype=np.uint8).ctypes.data,) if choices else ()
+            function(program.instructions.ctypes.data, len(program), program.constants.ctypes.data,
+                     slots.ctypes.data, *scratch, *args)
+        return call
+
+    def _value_and_gradient(self, points):
+        if self.engine == "tape":
+            kernel = self._tape_kernel(self.tape_engine.gradient)
+        else:
+            kernel = self.kernel(abi.GRADIENT)
+        return self._run(kernel, [_rows("points", points)], [(), (3,)])
+
     def eval(self, points) -> np.ndarray:
         """F at each row of an (N, 3) array of points."""
-        (values,) = self._run(self._point, [_rows("points", points)], [()])
+        if self.engine == "tape":
+            return self._value_and_gradient(points)[0]
+        (values,) = self._run(self.kernel(abi.POINT), [_rows("points", points)], [()])
         return values
 
     def gradient(self, points) -> np.ndarray:
         """The analytic gradient of F at each point: (N, 3)."""
-        _, grad = self._run(self._gradient, [_rows("points", points)], [(), (3,)])
-        return grad
+        return self._value_and_gradient(points)[1]
 
     def value_and_gradient(self, points) -> tuple[np.ndarray, np.ndarray]:
-        return tuple(self._run(self._gradient, [_rows("points", points)], [(), (3,)]))
+        return tuple(self._value_and_gradient(points))
 
     def interval(self, lo, hi, mean_value: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """(f_lo, f_hi): an enclosure of F over each box [lo[i], hi[i]] ((N, 3) corners each).
@@ -186,12 +265,14 @@ class Surface:
         if not np.all(lo <= hi):
             bad = int(np.argmin(np.all(lo <= hi, axis=1)))
             raise ValueError(f"box {bad} has lo > hi (or NaN): {lo[bad]} .. {hi[bad]}")
-        kernel = self.kernel(abi.INTERVAL_MVF) if mean_value else self._interval
-        f_lo, f_hi = self._run(kernel, [lo, hi], [(), ()], extra=(None, None))
-        return f_lo, f_hi
+        if mean_value:
+            return tuple(self._run(self.kernel(abi.INTERVAL_MVF), [lo, hi], [(), ()], extra=(None, None)))
+        if self.engine == "tape":
+            return tuple(self._run(self._tape_kernel(self.tape_engine.interval, choices=True), [lo, hi], [(), ()]))
+        return tuple(self._run(self.kernel(abi.INTERVAL), [lo, hi], [(), ()], extra=(None, None)))
 
 
-def compile(expr, bounds=None, *, vector_width: int = WIDTH, rounding: str = "auto") -> Surface:
+def compile(expr, bounds=None, *, vector_width: int = WIDTH, rounding: str = "auto", engine: str = "auto") -> Surface:
     """Compile the surface ``expr = 0`` over ``bounds`` (default: a model's own, else [-1, 1]³).
 
     ``expr``: a SymPy expression in x, y, z, r, theta, phi, or a model read by :func:`implc.load_vm`.
@@ -200,11 +281,14 @@ def compile(expr, bounds=None, *, vector_width: int = WIDTH, rounding: str = "au
     code, to measure what vectors bring). ``rounding``: how interval bounds are rounded outward:
     "directed" (each add, sub, mul and sqrt rounded toward the bound by the instruction; needs AVX-512),
     "widen" (round to nearest, then move outward by a relative ulp or more: any CPU) or "auto" (directed
-    where the host has AVX-512). Both are sound; directed is faster and a few ulps tighter.
+    where the host has AVX-512). Both are sound; directed is faster and a few ulps tighter. ``engine``:
+    "jit" (LLVM compiles this surface's kernels), "tape" (the shared tape engine interprets it, pruning
+    every Min/Max an octant decides; nothing to compile) or "auto" (the tape engine for tapes with Min/Max
+    below the top level or more than :data:`TAPE_ABOVE` nodes, where it can run every op).
     """
     if isinstance(expr, VmModel):
-        checked, directed = _check_options(expr.bounds if bounds is None else bounds, vector_width, rounding)
-        return Surface(expr, checked, expr.tape, vector_width, directed)
+        checked, directed = _check_options(expr.bounds if bounds is None else bounds, vector_width, rounding, engine)
+        return Surface(expr, checked, expr.tape, vector_width, directed, choose_engine(expr.tape, engine, vector_width))
     if not isinstance(expr, sympy.Basic):
         raise TypeError(f"implc.compile expects a SymPy expression or a .vm model, got {type(expr).__name__}")
     if isinstance(expr, sympy.Equality):
@@ -212,19 +296,21 @@ def compile(expr, bounds=None, *, vector_width: int = WIDTH, rounding: str = "au
     if isinstance(expr, (sympy.core.relational.Relational, sympy.logic.boolalg.BooleanFunction,
                          sympy.logic.boolalg.BooleanAtom)):
         raise CompileError(f"expected a real-valued expression F (the surface is F = 0), got {expr}")
-    checked, directed = _check_options(DEFAULT_BOUNDS if bounds is None else bounds, vector_width, rounding)
+    checked, directed = _check_options(DEFAULT_BOUNDS if bounds is None else bounds, vector_width, rounding, engine)
     try:
         tape = lower(expr)
     except RecursionError:
         raise CompileError("the expression is nested too deeply for the front end") from None
-    return Surface(expr, checked, tape, vector_width, directed)
+    return Surface(expr, checked, tape, vector_width, directed, choose_engine(tape, engine, vector_width))
 
 
-def _check_options(bounds, vector_width, rounding) -> tuple[tuple, bool]:
+def _check_options(bounds, vector_width, rounding, engine) -> tuple[tuple, bool]:
     """(checked bounds, directed rounding?): the options validated before any work is done."""
     checked = check_bounds(bounds)
     if vector_width not in WIDTHS:
         raise CompileError(f"vector_width must be one of {WIDTHS}, got {vector_width!r}")
+    if engine not in ENGINES:
+        raise CompileError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     if rounding not in ROUNDINGS:
         raise CompileError(f"rounding must be one of {', '.join(ROUNDINGS)}, got {rounding!r}")
     if rounding == "directed" and not host_has_avx512():

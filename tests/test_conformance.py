@@ -51,6 +51,7 @@ from implc.gradient import DERIVATIVE_RULES
 from implc.jit import host_has_avx512
 from implc.reference import INTERVAL_RULES
 from implc.symbols import phi, r, theta, x, y, z
+from implc.tape_program import unsupported_ops
 
 from .truth import TrueValues, adversarial_boxes, assert_encloses
 
@@ -239,12 +240,20 @@ def compiled():
     """Surfaces compiled on first use: (case, rounding, width) -> Surface."""
     cache = {}
 
-    def get(name, rounding="widen", width=8):
-        key = (name, rounding, width)
+    def get(name, rounding="widen", width=8, engine="jit"):
+        key = (name, rounding, width, engine)
         if key not in cache:
-            cache[key] = implc.compile(OP_CASES[name], rounding=rounding, vector_width=width)
+            cache[key] = implc.compile(OP_CASES[name], rounding=rounding, vector_width=width, engine=engine)
         return cache[key]
     return get
+
+
+def runs_on_tape_engine(name) -> bool:
+    """Whether the tape engine runs op case ``name`` (it runs a subset of the ops: the .vm models')."""
+    return not unsupported_ops(implc.compile(OP_CASES[name], engine="jit").tape)
+
+
+TAPE_CASES = [name for name in sorted(OP_CASES) if runs_on_tape_engine(name)]
 
 
 def test_every_op_has_every_rule():
@@ -266,6 +275,8 @@ def test_interval_evaluators_conform(name, width, compiled):
     budget = case_budget(s.tape, INTERVAL_BUDGET) * AMPLIFICATION.get(name, 1)
     r_lo, r_hi = reference.eval_interval(s.tape, lo, hi)
     evaluators = INTERVAL_EVALUATORS if width == 8 else {"kernel": INTERVAL_EVALUATORS["kernel"]}
+    if width == 8 and name in TAPE_CASES:  # the tape engine's interpreter, rule for rule the same
+        evaluators = {**evaluators, "tape engine": lambda _, lo, hi: compiled(name, engine="tape").interval(lo, hi)}
     for label, evaluate in evaluators.items():
         f_lo, f_hi = evaluate(s, lo, hi)
         assert_conforms(f_lo, r_lo, budget, scale, f"{name} {label} width {width}: lower bounds")
@@ -305,6 +316,10 @@ def test_point_and_gradient_evaluators_conform(name, width, compiled):
     live_budget = case_budget(s.gradient_tape, VECTOR_POINT_BUDGET) * AMPLIFICATION.get(name, 1)
     assert_conforms(value, ref_value, live_budget, scale, f"{name} gradient over live terms' value width {width}")
     assert_conforms(grad, ref_grad, live_budget, scale, f"{name} gradient over live terms width {width}")
+    if width == 8 and name in TAPE_CASES:  # dual numbers in the tape engine (sin and cos in vector registers)
+        value, grad = compiled(name, engine="tape").value_and_gradient(pts)
+        assert_conforms(value, ref_value, live_budget, scale, f"{name} tape engine's value")
+        assert_conforms(grad, ref_grad, live_budget, scale, f"{name} tape engine's gradient")
 
 
 @pytest.mark.parametrize("name", sorted(OP_CASES))
@@ -386,6 +401,13 @@ def test_interval_encloses_true_values(name, surfaces):
     rng = np.random.default_rng(seed(name))
     lo, hi = adversarial_boxes(rng, 60)
     assert_encloses(surfaces[name], OP_CASES[name], lo, hi, rng)
+
+
+@pytest.mark.parametrize("name", TAPE_CASES)
+def test_tape_engine_encloses_true_values(name, compiled):
+    rng = np.random.default_rng(seed(name) + 3)
+    lo, hi = adversarial_boxes(rng, 60)
+    assert_encloses(compiled(name, "auto", engine="tape"), OP_CASES[name], lo, hi, rng)
 
 
 @pytest.mark.parametrize("name", sorted(OP_CASES))

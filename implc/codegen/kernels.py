@@ -56,7 +56,7 @@ def _vector_ptr(builder, base, offset, lanes):
     return builder.bitcast(ptr, ir.PointerType(ir.VectorType(DOUBLE, lanes)))
 
 
-def _load_xyz(builder, base, block, width):
+def load_xyz(builder, base, block, width):
     """Three vectors (x, y, z) of ``width`` lanes from as many consecutive rows of an (n, 3) array."""
     offset = builder.mul(block, ir.Constant(I64, 3 * width))
     rows = builder.load(_vector_ptr(builder, base, offset, 3 * width), align=8)
@@ -66,7 +66,7 @@ def _load_xyz(builder, base, block, width):
             for axis in range(3)]
 
 
-def _store_xyz(builder, base, block, vectors, width):
+def store_xyz(builder, base, block, vectors, width):
     """Interleave three vectors of ``width`` lanes back into as many rows of an (n, 3) array."""
     i32 = ir.IntType(32)
     pair = builder.shuffle_vector(vectors[0], vectors[1], ir.Constant(ir.VectorType(i32, 2 * width),
@@ -126,7 +126,7 @@ def _interval_kernel(module, entry, width, directed, outline, enclose):
     lo, hi, out_lo, out_hi, _, live_in, live_out = fn.args
     with for_range(b, blocks) as i:
         vb = VectorBuilder(b, width, directed, outline)
-        f_lo, f_hi, masks = enclose(vb, _load_xyz(b, lo, i, width), _load_xyz(b, hi, i, width),
+        f_lo, f_hi, masks = enclose(vb, load_xyz(b, lo, i, width), load_xyz(b, hi, i, width),
                                     _parent_mask(b, live_in, i, width))
         _store(b, out_lo, i, f_lo, width)
         _store(b, out_hi, i, f_hi, width)
@@ -191,16 +191,16 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     fn, b, blocks = _kernel(module, abi.POINT, width)
     pts, out, _ = fn.args
     with for_range(b, blocks) as i:
-        (value,) = emit_point(VectorBuilder(b, width), value_tape, _load_xyz(b, pts, i, width))
+        (value,) = emit_point(VectorBuilder(b, width), value_tape, load_xyz(b, pts, i, width))
         _store(b, out, i, value, width)
     b.ret_void()
 
     fn, b, blocks = _kernel(module, abi.GRADIENT, width)
     pts, out_value, out_grad, _ = fn.args
     with for_range(b, blocks) as i:
-        value, *grad = emit_point(VectorBuilder(b, width), gradient_tape, _load_xyz(b, pts, i, width))
+        value, *grad = emit_point(VectorBuilder(b, width), gradient_tape, load_xyz(b, pts, i, width))
         _store(b, out_value, i, value, width)
-        _store_xyz(b, out_grad, i, grad, width)
+        store_xyz(b, out_grad, i, grad, width)
     b.ret_void()
 
     fn, b = define(module, abi.GRADIENT_LIVE)
@@ -210,11 +210,11 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     with for_range(b, b.sdiv(n, ir.Constant(I64, width))) as i:
         vb = VectorBuilder(b, width, outline_elementary=outline)
         if plan.fold is not None:
-            value, grad = emit_pruned_gradient(vb, value_tape, plan, _load_xyz(b, pts, i, width), live)
+            value, grad = emit_pruned_gradient(vb, value_tape, plan, load_xyz(b, pts, i, width), live)
         else:  # nothing to prune; normals need no more than the vector functions' 1e-15
-            value, *grad = emit_point(vb, gradient_tape, _load_xyz(b, pts, i, width), vector_elementary=True)
+            value, *grad = emit_point(vb, gradient_tape, load_xyz(b, pts, i, width), vector_elementary=True)
         _store(b, out_value, i, value, width)
-        _store_xyz(b, out_grad, i, grad, width)
+        store_xyz(b, out_grad, i, grad, width)
     b.ret_void()
 
     enclose = _natural(value_tape, plan)

@@ -22,6 +22,17 @@ def emit_normals(module: ir.Module):
     grad_ptr, point_ptr, geom, coords, masks, n, out = fn.args
     grad_fn = b.bitcast(grad_ptr, ir.PointerType(abi.GRADIENT_LIVE.llvm_type()))
     point_fn = b.bitcast(point_ptr, ir.PointerType(abi.POINT.llvm_type()))
+    emit_normals_body(b, geom, coords, masks, n, out,
+                      lambda pts, values, grad, live: b.call(grad_fn, [pts, values, grad, const(I64, 8), live]),
+                      lambda probe, probe_values: b.call(point_fn, [probe, probe_values, const(I64, 48)]))
+    b.ret_void()
+
+
+def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at, values_at):
+    """The normals of ``n`` voxels at ``coords`` into ``out``, emitted at ``b``: ``gradient_at(pts, values,
+    grad, live)`` emits F and its gradient at eight points (24 interleaved doubles; ``live`` the union of
+    their cells' masks, all ones where ``masks`` is NULL), ``values_at(probe, probe_values)`` F at 48."""
+    module = b.module
     origin = [load_at(b, geom, a) for a in range(3)]
     h = [load_at(b, geom, 3 + a) for a in range(3)]
     hmax = b.call(intrinsic(module, "llvm.maxnum.f64", 2), [b.call(intrinsic(module, "llvm.maxnum.f64", 2), h[:2]), h[2]])
@@ -76,7 +87,7 @@ def emit_normals(module: ir.Module):
                         store_at(b, centre, pts, 3 * j + a)
                     union = b.or_(union, load_at(b, masks, b.select(has_masks, idx, const(I64, 0))))
                 live.set(b.select(has_masks, union, const(I64, -1)))
-        b.call(grad_fn, [pts, values, grad, const(I64, 8), live.get()])
+        gradient_at(pts, values, grad, live.get())
         # the common case in vector registers: every gradient usable, a full block of 8
         v8 = ir.VectorType(DOUBLE, 8)
         rows = b.load(b.bitcast(grad, ir.PointerType(ir.VectorType(DOUBLE, 24))), align=8)
@@ -120,7 +131,7 @@ def emit_normals(module: ir.Module):
                                     if k == a:
                                         v = b.fadd(v, b.fmul(h[a], const(DOUBLE, 0.5 * sign)))
                                     store_at(b, v, probe, ((2 * a + s) * 8 + j) * 3 + k)
-                    b.call(point_fn, [probe, probe_values, const(I64, 48)])
+                    values_at(probe, probe_values)
                 for j in range(8):
                     g = [Local(b, DOUBLE, load_at(b, grad, 3 * j + a)) for a in range(3)]
                     centre = [load_at(b, pts, 3 * j + a) for a in range(3)]
@@ -141,6 +152,5 @@ def emit_normals(module: ir.Module):
                         for a in range(3):
                             unit = b.fptrunc(b.fdiv(g[a].get(), length), FLOAT)
                             store_at(b, unit, out, b.add(b.mul(index, const(I64, 3)), const(I64, a)))
-    b.ret_void()
 
 

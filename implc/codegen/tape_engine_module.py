@@ -1,0 +1,74 @@
+"""The tape-engine module: one native interpreter for every :class:`~implc.tape_program.TapeProgram`.
+
+Exports (signatures in :mod:`implc.abi`): ``implc_tape_interval`` (enclosures over boxes, rows of an
+(n, 3) array; an undefined result is the whole line), ``implc_tape_gradient`` (F and its gradient at
+points) and ``implc_tape_subdivide`` (:mod:`.tape_subdivision`). The same for every surface, so it is
+compiled once per rounding mode and cached (:class:`implc.runtime.Runtime`); a surface run by the engine
+compiles nothing of its own.
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from .. import abi
+from .control import I64, define, for_range, local_array
+from .interval_rules import whole_line_if_undefined
+from .kernels import load_xyz, store_xyz
+from .tape_eval import LANES, V8, emit_tape_dual, emit_tape_interval
+from .tape_simplify import emit_tape_simplify
+from .tape_subdivision import emit_tape_normals, emit_tape_subdivide
+from .vector import DOUBLE, VectorBuilder
+
+_P = ir.PointerType
+
+
+def _soa(b, base, block, target):
+    """Rows ``8·block ..`` of an (n, 3) array as three vectors of eight, stored at ``target``."""
+    vtarget = b.bitcast(target, _P(V8))
+    for a, axis in enumerate(load_xyz(b, base, block, LANES)):
+        b.store(axis, b.gep(vtarget, [ir.Constant(I64, a)]), align=8)
+
+
+def _store(b, base, block, vector):
+    b.store(vector, b.bitcast(b.gep(base, [b.mul(block, ir.Constant(I64, LANES))]), _P(V8)), align=8)
+
+
+def build_tape_engine(directed: bool) -> str:
+    """The LLVM IR text of the tape-engine module (``directed``: see
+    :class:`~implc.codegen.vector.VectorBuilder`)."""
+    module = ir.Module(name="implc_tape_engine")
+    interval = emit_tape_interval(module, directed)
+    dual = emit_tape_dual(module)
+    simplify = emit_tape_simplify(module)
+    normals = emit_tape_normals(module, dual)
+    emit_tape_subdivide(module, interval, simplify, normals)
+
+    fn, b = define(module, abi.TAPE_INTERVAL)
+    program, length, constants, slots, choices, lo, hi, out_lo, out_hi, n = fn.args
+    box = local_array(b, DOUBLE, 6 * LANES, "box")
+    result = local_array(b, DOUBLE, 2 * LANES, "result")
+    with for_range(b, b.sdiv(n, ir.Constant(I64, LANES))) as block:
+        _soa(b, lo, block, box)
+        _soa(b, hi, block, b.gep(box, [ir.Constant(I64, 3 * LANES)]))
+        b.call(interval, [program, length, constants, slots, choices, box, result])
+        vresult = b.bitcast(result, _P(V8))
+        f_lo, f_hi = whole_line_if_undefined(VectorBuilder(b, LANES), b.load(vresult, align=8),
+                                             b.load(b.gep(vresult, [ir.Constant(I64, 1)]), align=8))
+        _store(b, out_lo, block, f_lo)
+        _store(b, out_hi, block, f_hi)
+    b.ret_void()
+
+    fn, b = define(module, abi.TAPE_GRADIENT)
+    program, length, constants, slots, pts, out_value, out_grad, n = fn.args
+    points = local_array(b, DOUBLE, 3 * LANES, "points")
+    result = local_array(b, DOUBLE, 4 * LANES, "result")
+    with for_range(b, b.sdiv(n, ir.Constant(I64, LANES))) as block:
+        _soa(b, pts, block, points)
+        b.call(dual, [program, length, constants, slots, points, result])
+        vresult = b.bitcast(result, _P(V8))
+        _store(b, out_value, block, b.load(vresult, align=8))
+        store_xyz(b, out_grad, block, [b.load(b.gep(vresult, [ir.Constant(I64, 1 + a)]), align=8) for a in range(3)],
+                  LANES)
+    b.ret_void()
+    return str(module)

@@ -1,0 +1,222 @@
+"""The tape engine's evaluators: one native interpreter for every :class:`~implc.tape_program.TapeProgram`.
+
+Two internal functions of the tape-engine module, each a loop over the program's instructions with a
+switch on the opcode, eight lanes (the eight children of an octant, or eight points) per instruction:
+
+- ``tape_interval(program, length, constants, slots, choices, box, result) -> i8``: the enclosure of F
+  over eight boxes, by the same interval rules as the compiled kernels
+  (:class:`~implc.codegen.interval_rules.IntervalEmitter`, rule for rule), into ``result`` (lo, hi).
+  For each Min/Max instruction at position p it writes eight choice bytes at ``choices[8p..]`` (bit 0:
+  operand a may be the result over that box, bit 1: b may; NaN decides nothing) and returns the lanes in
+  which some choice was decided (bit c: box c).
+- ``tape_dual(program, length, constants, slots, points, result)``: F and its gradient at eight points,
+  forward mode (value and three partials per slot), into ``result`` (value, dx, dy, dz): for normals.
+
+``slots``: scratch of :data:`implc.abi.TAPE_SLOT_DOUBLES` doubles per slot of the full program; ``box``: six vectors of
+eight doubles (lo x, y, z, hi x, y, z); ``points``: three.
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from ..tape_program import OPCODES
+from . import elementary
+from .control import I32, I64, Local, for_range
+from .interval_rules import IntervalEmitter
+from .vector import DOUBLE, VectorBuilder, broadcast
+
+LANES = 8
+I8 = ir.IntType(8)
+V8 = ir.VectorType(DOUBLE, LANES)
+_P = ir.PointerType
+
+
+def _instruction_loop(b: ir.IRBuilder, program, length, cases):
+    """``for each instruction: switch (opcode) { case op: cases[op](out, a, b) }``; every case's emitter
+    runs with the builder in its own block."""
+    with for_range(b, length) as i:
+        row = b.bitcast(b.gep(program, [b.mul(i, ir.Constant(I64, 4))], inbounds=True), _P(ir.VectorType(I32, 4)))
+        fields = b.load(row, align=4)
+        code, out, a, c = [b.zext(b.extract_element(fields, ir.Constant(I32, k)), I64) for k in range(4)]
+        done = b.append_basic_block("op.done")
+        switch = b.switch(b.trunc(code, I32), done)
+        for name, emit in cases.items():
+            block = b.append_basic_block(f"op.{name}")
+            switch.add_case(ir.Constant(I32, OPCODES[name]), block)
+            b.position_at_end(block)
+            emit(i, out, a, c)
+            b.branch(done)
+        b.position_at_end(done)
+
+
+def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
+    """Define ``tape_interval`` (see the module docstring) in ``module``."""
+    fn = ir.Function(module, ir.FunctionType(I8, [_P(I32), I64, _P(DOUBLE), _P(DOUBLE), _P(I8), _P(DOUBLE),
+                                                  _P(DOUBLE)]), name="implc.tape.interval")
+    fn.linkage = "internal"
+    program, length, constants, slots, choices, box, result = fn.args
+    b = ir.IRBuilder(fn.append_basic_block("entry"))
+    vb = VectorBuilder(b, LANES, directed)
+    em = IntervalEmitter(vb)
+    vslots, vbox = b.bitcast(slots, _P(V8)), b.bitcast(box, _P(V8))
+    decided = Local(b, I8, 0, "decided")
+
+    def load(slot):
+        base = b.mul(slot, ir.Constant(I64, 2))
+        return (b.load(b.gep(vslots, [base], inbounds=True), align=8),
+                b.load(b.gep(vslots, [b.add(base, ir.Constant(I64, 1))], inbounds=True), align=8))
+
+    def store(slot, pair):
+        base = b.mul(slot, ir.Constant(I64, 2))
+        b.store(pair[0], b.gep(vslots, [base], inbounds=True), align=8)
+        b.store(pair[1], b.gep(vslots, [b.add(base, ir.Constant(I64, 1))], inbounds=True), align=8)
+
+    def var(i, out, a, c):
+        store(out, (b.load(b.gep(vbox, [a], inbounds=True), align=8),
+                    b.load(b.gep(vbox, [b.add(a, ir.Constant(I64, 3))], inbounds=True), align=8)))
+
+    def const(i, out, a, c):
+        row = b.mul(a, ir.Constant(I64, 3))
+        lo = b.load(b.gep(constants, [b.add(row, ir.Constant(I64, 1))], inbounds=True))
+        hi = b.load(b.gep(constants, [b.add(row, ir.Constant(I64, 2))], inbounds=True))
+        store(out, (broadcast(b, lo, LANES), broadcast(b, hi, LANES)))
+
+    def unary(rule, attr=None):
+        return lambda i, out, a, c: store(out, rule([load(a)], attr))
+
+    def binary(rule, attr=None):
+        return lambda i, out, a, c: store(out, rule([load(a), load(c)], attr))
+
+    def choice(op):
+        def emit(i, out, a, c):
+            x, y = load(a), load(c)
+            store(out, (em.i_min if op == "min" else em.i_max)([x, y], None))
+            if op == "min":  # x is the minimum wherever x <= y throughout: x.hi <= y.lo
+                x_only, y_only = vb.cmp("<=", x[1], y[0]), vb.cmp("<=", y[1], x[0])
+            else:
+                x_only, y_only = vb.cmp(">=", x[0], y[1]), vb.cmp(">=", y[0], x[1])
+            y_only = b.and_(y_only, b.not_(x_only))
+            vi8 = ir.VectorType(I8, LANES)
+            bits = b.select(x_only, ir.Constant(vi8, [1] * LANES),
+                            b.select(y_only, ir.Constant(vi8, [2] * LANES), ir.Constant(vi8, [3] * LANES)))
+            b.store(bits, b.bitcast(b.gep(choices, [b.mul(i, ir.Constant(I64, LANES))], inbounds=True), _P(vi8)),
+                    align=1)
+            decided.set(b.or_(decided.get(), b.bitcast(b.or_(x_only, y_only), I8)))
+        return emit
+
+    cases = {"var": var, "const": const,
+             "neg": unary(em.i_neg), "abs": unary(em.i_abs), "sqrt": unary(em.i_sqrt), "exp": unary(em.i_exp),
+             "log": unary(em.i_log), "sin": unary(em.i_sin), "cos": unary(em.i_cos),
+             "square": unary(em.i_powi, 2), "cube": unary(em.i_powi, 3), "fourth": unary(em.i_powi, 4),
+             "add": binary(em.i_add, False), "add_nonneg": binary(em.i_add, True), "sub": binary(em.i_sub),
+             "mul": binary(em.i_mul), "div": binary(em.i_div), "min": choice("min"), "max": choice("max")}
+    assert set(cases) == set(OPCODES), "every opcode has an interval case"
+    _instruction_loop(b, program, length, cases)
+    last = b.gep(program, [b.add(b.mul(b.sub(length, ir.Constant(I64, 1)), ir.Constant(I64, 4)), ir.Constant(I64, 1))])
+    lo, hi = load(b.zext(b.load(last), I64))
+    vresult = b.bitcast(result, _P(V8))
+    b.store(lo, vresult, align=8)
+    b.store(hi, b.gep(vresult, [ir.Constant(I64, 1)]), align=8)
+    b.ret(decided.get())
+    return fn
+
+
+def emit_tape_dual(module: ir.Module) -> ir.Function:
+    """Define ``tape_dual`` (see the module docstring) in ``module``."""
+    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I32), I64, _P(DOUBLE), _P(DOUBLE), _P(DOUBLE),
+                                                              _P(DOUBLE)]), name="implc.tape.dual")
+    fn.linkage = "internal"
+    program, length, constants, slots, points, result = fn.args
+    b = ir.IRBuilder(fn.append_basic_block("entry"))
+    vb = VectorBuilder(b, LANES)
+    vslots, vpoints = b.bitcast(slots, _P(V8)), b.bitcast(points, _P(V8))
+    zero, one = vb.splat(0.0), vb.splat(1.0)
+
+    def load(slot):
+        base = b.mul(slot, ir.Constant(I64, 4))
+        return [b.load(b.gep(vslots, [b.add(base, ir.Constant(I64, k))], inbounds=True), align=8) for k in range(4)]
+
+    def store(slot, dual):
+        base = b.mul(slot, ir.Constant(I64, 4))
+        for k, value in enumerate(dual):
+            b.store(value, b.gep(vslots, [b.add(base, ir.Constant(I64, k))], inbounds=True), align=8)
+
+    def chain(value, scale, x):
+        """The dual number of f(x) with f(x) = value and f'(x) = scale."""
+        return [value] + [vb.mul(scale, d) for d in x[1:]]
+
+    def var(i, out, a, c):
+        store(out, [b.load(b.gep(vpoints, [a], inbounds=True), align=8),
+                    *[vb.select(broadcast(b, b.icmp_unsigned("==", a, ir.Constant(I64, k)), LANES), one, zero)
+                      for k in range(3)]])
+
+    def const(i, out, a, c):
+        nearest = b.load(b.gep(constants, [b.mul(a, ir.Constant(I64, 3))], inbounds=True))
+        store(out, [broadcast(b, nearest, LANES), zero, zero, zero])
+
+    def unary(rule):
+        def emit(i, out, a, c):
+            store(out, rule(load(a)))
+        return emit
+
+    def binary(rule):
+        def emit(i, out, a, c):
+            store(out, rule(load(a), load(c)))
+        return emit
+
+    def sqrt(x):
+        s = vb.sqrt(x[0])
+        return chain(s, vb.div(vb.splat(0.5), s), x)
+
+    def exp(x):
+        e = vb.libm("exp", x[0])
+        return chain(e, e, x)
+
+    def power(n):
+        def rule(x):
+            square = vb.mul(x[0], x[0])
+            value = {2: square, 3: vb.mul(square, x[0]), 4: vb.mul(square, square)}[n]
+            below = {2: x[0], 3: square, 4: vb.mul(square, x[0])}[n]
+            return chain(value, vb.mul(vb.splat(float(n)), below), x)
+        return rule
+
+    def pick(op):
+        def rule(x, y):
+            # ties as the gradient tape breaks them (implc.gradient): min takes a, max takes b
+            first = vb.cmp("<=", x[0], y[0]) if op == "min" else vb.cmp(">", x[0], y[0])
+            either_nan = vb.or_(vb.isnan(x[0]), vb.isnan(y[0]))
+            value = vb.minimum(x[0], y[0]) if op == "min" else vb.maximum(x[0], y[0])
+            return [value] + [vb.select(either_nan, vb.splat(float("nan")), vb.select(first, dx, dy))
+                              for dx, dy in zip(x[1:], y[1:])]
+        return rule
+
+    def mul(x, y):
+        return [vb.mul(x[0], y[0])] + [vb.add(vb.mul(x[0], dy), vb.mul(y[0], dx)) for dx, dy in zip(x[1:], y[1:])]
+
+    def div(x, y):
+        q = vb.div(x[0], y[0])
+        return [q] + [vb.div(vb.sub(dx, vb.mul(q, dy)), y[0]) for dx, dy in zip(x[1:], y[1:])]
+
+    cases = {"var": var, "const": const,
+             "neg": unary(lambda x: [vb.neg(v) for v in x]),
+             "abs": unary(lambda x: chain(vb.fabs(x[0]), vb.copysign(one, x[0]), x)),
+             "sqrt": unary(sqrt), "exp": unary(exp),
+             "log": unary(lambda x: chain(vb.libm("log", x[0]), vb.div(one, x[0]), x)),
+             "sin": unary(lambda x: chain(elementary.sin(vb, x[0]), elementary.cos(vb, x[0]), x)),
+             "cos": unary(lambda x: chain(elementary.cos(vb, x[0]), vb.neg(elementary.sin(vb, x[0])), x)),
+             "square": unary(power(2)), "cube": unary(power(3)), "fourth": unary(power(4)),
+             "add": binary(lambda x, y: [vb.add(p, q) for p, q in zip(x, y)]),
+             "add_nonneg": binary(lambda x, y: [vb.add(p, q) for p, q in zip(x, y)]),
+             "sub": binary(lambda x, y: [vb.sub(p, q) for p, q in zip(x, y)]),
+             "mul": binary(mul), "div": binary(div), "min": binary(pick("min")), "max": binary(pick("max"))}
+    assert set(cases) == set(OPCODES), "every opcode has a dual-number case"
+    _instruction_loop(b, program, length, cases)
+    last = b.gep(program, [b.add(b.mul(b.sub(length, ir.Constant(I64, 1)), ir.Constant(I64, 4)), ir.Constant(I64, 1))])
+    dual = load(b.zext(b.load(last), I64))
+    vresult = b.bitcast(result, _P(V8))
+    for k, value in enumerate(dual):
+        b.store(value, b.gep(vresult, [ir.Constant(I64, k)]), align=8)
+    b.ret_void()
+    return fn
+

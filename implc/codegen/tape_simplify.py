@@ -1,0 +1,83 @@
+"""The tape engine's per-region simplification: the program one box's descendants run.
+
+``tape_simplify(program, length, choices, lane, out, need, mark, remap) -> length'`` (internal): given
+the choices ``tape_interval`` wrote for box ``lane``, every Min/Max whose choice was decided becomes an
+alias of its winning operand, and every instruction that only fed the losing one is dropped.
+
+Two passes, both linear in the program: backward from the last instruction, marking what the result
+needs (``need``, one byte per slot) and what each instruction becomes (``mark``: dropped, kept, or an
+alias of its a or b operand); forward, writing the kept instructions with their operands renamed through
+the aliases (``remap``, one int32 per slot). Kept instructions keep their slots, so constants and the
+interval rules see exactly what they saw in the full program; the result is bit for bit the full
+program's wherever the choices hold (a decided Min/Max returns its winning operand's enclosure exactly).
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from ..tape_program import FIRST_BINARY, FIRST_UNARY, OPCODES
+from .control import I32, I64, Local, const, for_range, if_, load_at, store_at
+from .tape_eval import LANES, I8
+
+DROP, KEEP, ALIAS_A, ALIAS_B = 0, 1, 2, 3
+_P = ir.PointerType
+
+
+def emit_tape_simplify(module: ir.Module) -> ir.Function:
+    """Define ``tape_simplify`` (see the module docstring) in ``module``."""
+    fn = ir.Function(module, ir.FunctionType(I64, [_P(I32), I64, _P(I8), I64, _P(I32), _P(I8), _P(I8), _P(I32)]),
+                     name="implc.tape.simplify")
+    fn.linkage = "internal"
+    program, length, choices, lane, out, need, mark, remap = fn.args
+    b = ir.IRBuilder(fn.append_basic_block("entry"))
+
+    def field(i, k):
+        return b.zext(load_at(b, program, b.add(b.mul(i, const(I64, 4)), const(I64, k))), I64)
+
+    with for_range(b, length) as i:  # nothing is needed yet
+        store_at(b, const(I8, 0), need, field(i, 1))
+    last = b.sub(length, const(I64, 1))
+    store_at(b, const(I8, 1), need, field(last, 1))
+
+    with for_range(b, length) as k:  # backward: i = length - 1 - k
+        i = b.sub(last, k)
+        code, out_slot, a, c = (field(i, f) for f in range(4))
+        store_at(b, const(I8, DROP), mark, i)
+        with if_(b, b.icmp_unsigned("!=", load_at(b, need, out_slot), const(I8, 0))):
+            is_choice = b.or_(b.icmp_unsigned("==", code, const(I64, OPCODES["min"])),
+                              b.icmp_unsigned("==", code, const(I64, OPCODES["max"])))
+            choice = b.select(is_choice, load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane)), const(I8, 3))
+            with b.if_else(b.icmp_unsigned("==", choice, const(I8, 3))) as (both, one):
+                with both:
+                    store_at(b, const(I8, KEEP), mark, i)
+                    with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_UNARY))):
+                        store_at(b, const(I8, 1), need, a)
+                    with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))):
+                        store_at(b, const(I8, 1), need, c)
+                with one:
+                    first = b.icmp_unsigned("==", choice, const(I8, 1))
+                    store_at(b, b.select(first, const(I8, ALIAS_A), const(I8, ALIAS_B)), mark, i)
+                    store_at(b, const(I8, 1), need, b.select(first, a, c))
+
+    count = Local(b, I64, 0, "count")
+    with for_range(b, length) as i:  # forward: write what is kept, operands renamed through the aliases
+        m = load_at(b, mark, i)
+        code, out_slot, a, c = (field(i, f) for f in range(4))
+        with if_(b, b.icmp_unsigned("==", m, const(I8, KEEP))):
+            n = count.get()
+            row = b.mul(n, const(I64, 4))
+            nullary = b.icmp_unsigned("<", code, const(I64, FIRST_UNARY))
+            binary = b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))
+            store_at(b, b.trunc(code, I32), out, row)
+            store_at(b, b.trunc(out_slot, I32), out, b.add(row, const(I64, 1)))
+            store_at(b, b.select(nullary, b.trunc(a, I32), load_at(b, remap, a)), out, b.add(row, const(I64, 2)))
+            store_at(b, b.select(binary, load_at(b, remap, c), b.trunc(c, I32)), out, b.add(row, const(I64, 3)))
+            store_at(b, b.trunc(out_slot, I32), remap, out_slot)
+            count.set(b.add(n, const(I64, 1)))
+        with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_A))):
+            store_at(b, load_at(b, remap, a), remap, out_slot)
+        with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_B))):
+            store_at(b, load_at(b, remap, c), remap, out_slot)
+    b.ret(count.get())
+    return fn

@@ -1,0 +1,211 @@
+"""``implc_tape_subdivide``: Fig. 1 for the tape engine, each octant running its own simplified program.
+
+A depth-first walk with one frame per level (:data:`implc.abi.TAPE_FRAME_WORDS`): expanding a frame
+encloses its octant's eight children with ``tape_interval`` over the octant's program, recording the
+Min/Max choices each child's enclosure decided; stepping into a child that may meet the surface gives
+it its own program, ``tape_simplify``'d by those choices (or its parent's, where none was decided or
+pruning is off), so that below an octant every decided branch costs nothing. Children are visited in
+Morton order; a task starts from the full program simplified down the path from the root to its
+octant. The children of an octant one level above the leaves are the voxels, written with their
+unit normals at once (``tape_dual`` over their parent's program, through the normals block of
+:mod:`implc.codegen.normals`). Resumable: when the output is full or the cancel flag is raised it returns
+with its frames and state intact (layouts in :mod:`implc.abi`).
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from .. import abi
+from .control import I32, I64, Local, at, const, define, for_range, if_, load_at, local_array, store_at, while_true
+from .kernels import load_xyz, store_xyz
+from .normals import emit_normals_body
+from .tape_eval import I8, LANES, V8
+from .vector import DOUBLE, broadcast
+
+FLOAT = ir.FloatType()
+_P = ir.PointerType
+
+
+def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
+    """``tape_normals(program, length, constants, slots, leaf_geom, coords, n, out)`` (internal): unit
+    normals of ``n`` voxels, the gradient from ``dual`` over ``program``."""
+    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I32), I64, _P(DOUBLE), _P(DOUBLE), _P(DOUBLE),
+                                                              _P(I32), I64, _P(FLOAT)]), name="implc.tape.normals")
+    fn.linkage = "internal"
+    program, length, constants, slots, leaf_geom, coords, n, out = fn.args
+    b = ir.IRBuilder(fn.append_basic_block("entry"))
+    points = local_array(b, DOUBLE, 3 * LANES, "points")
+    result = local_array(b, DOUBLE, 4 * LANES, "result")
+    vpoints, vresult = b.bitcast(points, _P(V8)), b.bitcast(result, _P(V8))
+
+    def dual_at(interleaved):
+        """F and its gradient at the eight points of ``interleaved`` (x, y, z per point) into result."""
+        for a, axis in enumerate(load_xyz(b, interleaved, const(I64, 0), LANES)):
+            b.store(axis, b.gep(vpoints, [const(I64, a)]), align=8)
+        b.call(dual, [program, length, constants, slots, points, result])
+
+    def gradient_at(pts, values, grad, live):
+        dual_at(pts)
+        b.store(b.load(vresult, align=8), b.bitcast(values, _P(V8)), align=8)
+        store_xyz(b, grad, const(I64, 0), [b.load(b.gep(vresult, [const(I64, 1 + a)]), align=8) for a in range(3)],
+                  LANES)
+
+    def values_at(probe, probe_values):
+        for k in range(6):
+            dual_at(b.gep(probe, [const(I64, 3 * LANES * k)]))
+            b.store(b.load(vresult, align=8), b.bitcast(b.gep(probe_values, [const(I64, LANES * k)]), _P(V8)),
+                    align=8)
+
+    emit_normals_body(b, leaf_geom, coords, ir.Constant(_P(I64), None), n, out, gradient_at, values_at)
+    b.ret_void()
+    return fn
+
+
+def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.Function, normals: ir.Function):
+    fn, b = define(module, abi.TAPE_SUBDIVIDE)
+    (program, length, constants, prune, geom, state, frames, tapes, choices, slots, marks, remap, out,
+     out_normals, capacity, stats, cancel) = fn.args
+    box = local_array(b, DOUBLE, 6 * LANES, "box")
+    result = local_array(b, DOUBLE, 2 * LANES, "result")
+    leaf_geom = local_array(b, DOUBLE, 6, "leaf_geom")
+    depth = load_at(b, state, abi.TAPE_DEPTH)
+    task_level = load_at(b, state, abi.TAPE_TASK_LEVEL)
+    for a in range(3):
+        store_at(b, load_at(b, geom, a), leaf_geom, a)
+        store_at(b, load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))), leaf_geom, 3 + a)
+    need, mark = marks, b.gep(marks, [length])
+    count = Local(b, I64, 0, "count")
+    ctpop = ir.Function(module, ir.FunctionType(I32, [I32]), name="llvm.ctpop.i32")
+    cttz = ir.Function(module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.cttz.i32")
+
+    def program_of(level):
+        return b.inttoptr(load_at(b, state, b.add(level, const(I64, abi.TAPE_PROGRAMS))), _P(I32))
+
+    def length_of(level):
+        return load_at(b, state, b.add(level, const(I64, abi.TAPE_PROGRAMS + abi.TAPE_LEVELS)))
+
+    def set_program(level, ptr, n):
+        store_at(b, b.ptrtoint(ptr, I64), state, b.add(level, const(I64, abi.TAPE_PROGRAMS)))
+        store_at(b, n, state, b.add(level, const(I64, abi.TAPE_PROGRAMS + abi.TAPE_LEVELS)))
+
+    def frame(level, k):
+        return at(b, frames, b.add(b.mul(level, const(I64, abi.TAPE_FRAME_WORDS)), const(I64, k)))
+
+    def choices_of(level):
+        return b.gep(choices, [b.mul(b.mul(level, length), const(I64, LANES))])
+
+    def enclose_children(level, cell):
+        """Enclose the eight children of the octant ``cell`` (three i32) at ``level`` with that level's
+        program, recording its choices; returns the lanes with a decided choice (i8)."""
+        child = b.add(level, const(I64, 1))
+        vbox = b.bitcast(box, _P(V8))
+        ivec = ir.VectorType(I32, LANES)
+        for a in range(3):  # the children's boxes exactly as the compiled octant kernels make them
+            origin, pad = broadcast(b, load_at(b, geom, a), LANES), broadcast(b, load_at(b, geom, 3 + a), LANES)
+            h = broadcast(b, load_at(b, geom, b.add(b.mul(child, const(I64, 3)), const(I64, 6 + a))), LANES)
+            twice = broadcast(b, b.shl(cell[a], const(I32, 1)), LANES)
+            index = b.add(twice, ir.Constant(ivec, [(c >> a) & 1 for c in range(LANES)]))
+            i_lo, i_hi = b.uitofp(index, V8), b.uitofp(b.add(index, ir.Constant(ivec, [1] * LANES)), V8)
+            b.store(b.fsub(b.fadd(origin, b.fmul(i_lo, h)), pad), b.gep(vbox, [const(I64, a)]), align=8)
+            b.store(b.fadd(b.fadd(origin, b.fmul(i_hi, h)), pad), b.gep(vbox, [const(I64, 3 + a)]), align=8)
+        return b.call(interval, [program_of(level), length_of(level), constants, slots, choices_of(level), box, result])
+
+    def program_for_child(level, c, decided):
+        """The program of child ``c`` (i32) of the octant at ``level``: simplified by its choices where one
+        was decided (``decided``: i1) and pruning is on, else the octant's own."""
+        child = b.add(level, const(I64, 1))
+        with b.if_else(b.and_(b.icmp_signed("!=", prune, const(I64, 0)), decided)) as (simplified, shared):
+            with simplified:
+                target = b.gep(tapes, [b.mul(b.mul(child, length), const(I64, 4))])
+                n = b.call(simplify, [program_of(level), length_of(level), choices_of(level), b.zext(c, I64), target,
+                                      need, mark, remap])
+                set_program(child, target, n)
+            with shared:
+                set_program(child, program_of(level), length_of(level))
+
+    with if_(b, b.icmp_signed("==", load_at(b, state, abi.TAPE_PHASE), const(I64, 0))):
+        # a new task: its program is the full one simplified down the path from the root to its octant
+        set_program(const(I64, 0), program, length)
+        task_cell = [b.load(frame(task_level, a)) for a in range(3)]
+        with for_range(b, task_level) as level:
+            above = b.trunc(b.sub(task_level, level), I32)  # the ancestor at ``level``: the cell >> above
+            ancestor = [b.lshr(task_cell[a], above) for a in range(3)]
+            decided = enclose_children(level, ancestor)
+            below = b.sub(above, const(I32, 1))
+            c = const(I32, 0)
+            for a in range(3):
+                c = b.or_(c, b.shl(b.and_(b.lshr(task_cell[a], below), const(I32, 1)), const(I32, a)))
+            program_for_child(level, c, b.trunc(b.lshr(b.zext(decided, I32), c), ir.IntType(1)))
+        store_at(b, task_level, state, abi.TAPE_LEVEL)
+        store_at(b, const(I64, 1), state, abi.TAPE_PENDING)
+        store_at(b, const(I64, 1), state, abi.TAPE_PHASE)
+
+    def expand(level):
+        """Enclose the children of the octant in frame ``level``; keep those that may meet the surface
+        (the leaves: write them with their normals)."""
+        child = b.add(level, const(I64, 1))
+        own, own_length = program_of(level), length_of(level)
+        decided = enclose_children(level, [b.load(frame(level, a)) for a in range(3)])
+        vresult = b.bitcast(result, _P(V8))
+        f_lo, f_hi = b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
+        zero = ir.Constant(V8, [0.0] * LANES)
+        contains = b.or_(b.and_(b.fcmp_ordered("<=", f_lo, zero), b.fcmp_ordered(">=", f_hi, zero)),
+                         b.or_(b.fcmp_unordered("uno", f_lo, f_lo), b.fcmp_unordered("uno", f_hi, f_hi)))
+        kept = b.zext(b.bitcast(contains, I8), I32)
+        slot = at(b, stats, 0)
+        b.store(b.add(b.load(slot), const(I64, LANES)), slot)
+        for index, amount in ((b.add(child, const(I64, 1)), b.zext(b.call(ctpop, [kept]), I64)),
+                              (b.add(level, const(I64, abi.TAPE_LEVELS)), own_length),
+                              (b.add(level, const(I64, 2 * abi.TAPE_LEVELS)), const(I64, 1))):
+            slot = at(b, stats, index)
+            b.store(b.add(b.load(slot), amount), slot)
+        with b.if_else(b.icmp_signed("==", child, depth)) as (leaves, inner):
+            with leaves:  # the kept children are voxels: written in Morton order (branch-free), with normals
+                first = count.get()
+                n = first
+                for c in range(LANES):
+                    for a in range(3):
+                        bit = (c >> a) & 1
+                        coord = b.add(b.shl(b.load(frame(level, a)), const(I32, 1)), const(I32, bit))
+                        store_at(b, coord, out, b.add(b.mul(n, const(I64, 3)), const(I64, a)))
+                    n = b.add(n, b.zext(b.trunc(b.lshr(kept, const(I32, c)), ir.IntType(1)), I64))
+                offset = b.mul(first, const(I64, 3))
+                b.call(normals, [own, own_length, constants, slots, leaf_geom, b.gep(out, [offset]), b.sub(n, first),
+                                 b.gep(out_normals, [offset])])
+                count.set(n)
+                b.store(const(I32, 0), frame(level, 3))
+            with inner:
+                b.store(kept, frame(level, 3))
+                b.store(b.and_(b.zext(decided, I32), kept), frame(level, 4))
+
+    with while_true(b) as loop:
+        loop.break_if(b.icmp_signed("==", load_at(b, state, abi.TAPE_PHASE), const(I64, 2)))
+        loop.break_if(b.icmp_signed("!=", b.load_atomic(cancel, "monotonic", 4), const(I32, 0)))
+        level = load_at(b, state, abi.TAPE_LEVEL)
+        pending = b.icmp_signed("!=", load_at(b, state, abi.TAPE_PENDING), const(I64, 0))
+        leaf_parent = b.icmp_signed("==", b.add(level, const(I64, 1)), depth)
+        no_room = b.icmp_signed(">", b.add(count.get(), const(I64, LANES)), capacity)
+        loop.break_if(b.and_(pending, b.and_(leaf_parent, no_room)))
+        with b.if_else(pending) as (expanding, stepping):
+            with expanding:
+                expand(level)
+                store_at(b, const(I64, 0), state, abi.TAPE_PENDING)
+            with stepping:
+                remaining = b.load(frame(level, 3))
+                with b.if_else(b.icmp_unsigned("==", remaining, const(I32, 0))) as (up, down):
+                    with up:  # every child visited: back to the parent, or the task is done
+                        done = b.icmp_signed("==", level, task_level)
+                        store_at(b, b.select(done, const(I64, 2), const(I64, 1)), state, abi.TAPE_PHASE)
+                        store_at(b, b.select(done, level, b.sub(level, const(I64, 1))), state, abi.TAPE_LEVEL)
+                    with down:  # into the next kept child, in Morton order, with its own program
+                        c = b.call(cttz, [remaining, const(ir.IntType(1), 1)])
+                        b.store(b.and_(remaining, b.sub(remaining, const(I32, 1))), frame(level, 3))
+                        child = b.add(level, const(I64, 1))
+                        for a in range(3):
+                            bit = b.and_(b.lshr(c, const(I32, a)), const(I32, 1))
+                            b.store(b.add(b.shl(b.load(frame(level, a)), const(I32, 1)), bit), frame(child, a))
+                        program_for_child(level, c, b.trunc(b.lshr(b.load(frame(level, 4)), c), ir.IntType(1)))
+                        store_at(b, child, state, abi.TAPE_LEVEL)
+                        store_at(b, const(I64, 1), state, abi.TAPE_PENDING)
+    b.ret(count.get())

@@ -1,0 +1,192 @@
+"""The tape engine: per-octant simplification of every Min/Max, against compiled kernels and sampling.
+
+Truths: numpy evaluation of the SymPy expression (``sympy.lambdify``, not implc's compiler) at every grid
+corner; the compiled (JIT) kernels as a second backend, which share the interval rules and must give the
+same voxels; the unpruned engine, which must give exactly the pruned engine's voxels.
+"""
+
+import numpy as np
+import pytest
+import sympy
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from sympy import Abs, Max, Min, Rational, sqrt
+
+import implc
+from implc import CompileError, x, y, z
+from implc import subdivide as subdivide_module
+from implc.lower import lower
+from implc.surface import choose_engine
+from implc.tape_program import OPCODES, encode
+
+from .test_vm import CSG, interpret, sign_change_cells as vm_sign_change_cells
+
+
+def sampled_sign_changes(expr, bounds, depth):
+    """Cells whose corner values, by numpy (lambdify), change sign, touch 0 or are undefined."""
+    n = 1 << depth
+    axes = [np.linspace(lo, hi, n + 1) for lo, hi in bounds]
+    gx, gy, gz = np.meshgrid(*axes, indexing="ij")
+    with np.errstate(all="ignore"):
+        f = np.broadcast_to(sympy.lambdify((x, y, z), expr, "numpy")(gx, gy, gz), gx.shape)
+    lo, hi = np.full((n,) * 3, np.inf), np.full((n,) * 3, -np.inf)
+    undefined = np.zeros((n,) * 3, bool)
+    for dx in (0, 1):
+        for dy in (0, 1):
+            for dz in (0, 1):
+                c = f[dx:dx + n, dy:dy + n, dz:dz + n]
+                lo, hi = np.minimum(lo, c), np.maximum(hi, c)
+                undefined |= np.isnan(c)
+    return ((lo <= 0) & (hi >= 0)) | undefined
+
+
+def _primitive(kind, cx, cy, cz, size):
+    c = [Rational(v, 10) for v in (cx, cy, cz)]
+    s = Rational(size, 10)
+    if kind == "sphere":
+        return sqrt((x - c[0])**2 + (y - c[1])**2 + (z - c[2])**2) - s
+    if kind == "box":
+        return Max(Abs(x - c[0]), Abs(y - c[1]), Abs(z - c[2])) - s
+    return (x - c[0]) * Rational(cx + 1, 7) + (y - c[1]) - (z - c[2]) * Rational(cy + 2, 9)  # a plane
+
+
+primitives = st.builds(_primitive, st.sampled_from(["sphere", "box", "plane"]), st.integers(-7, 7),
+                       st.integers(-7, 7), st.integers(-7, 7), st.integers(1, 6))
+csg = st.recursive(primitives, lambda inner: st.one_of(
+    st.builds(Min, inner, inner), st.builds(Max, inner, inner), st.builds(lambda a: -a, inner)), max_leaves=8)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(csg)
+def test_random_csg_voxels_agree_across_engines_and_pruning(expr):
+    bounds = ((-1, 1),) * 3
+    tape_surface = implc.compile(expr, bounds, engine="tape")
+    jit_surface = implc.compile(expr, bounds, engine="jit")
+    pruned = implc.voxelize(tape_surface, 6, storage="coords")
+    unpruned = implc.voxelize(tape_surface, 6, storage="coords", prune=False)
+    compiled = implc.voxelize(jit_surface, 6, storage="coords")
+    np.testing.assert_array_equal(pruned.coords, unpruned.coords)
+    np.testing.assert_array_equal(pruned.coords, compiled.coords)
+    # normals: the same dual numbers over a shorter program (bit for bit), and the compiled gradient
+    np.testing.assert_array_equal(pruned.normals, unpruned.normals)
+    np.testing.assert_allclose(pruned.normals, compiled.normals, atol=2e-7)  # float32 rounding of each
+    expected = sampled_sign_changes(expr, bounds, 6)
+    missed = np.argwhere(expected & ~pruned.to_dense())
+    assert len(missed) == 0, f"{expr}: {len(missed)} missed cells, e.g. {missed[:5].tolist()}"
+
+
+def nested_scene():
+    """Two far-apart CSG objects, each a nest of Min/Max: below most octants one of them is decided away."""
+    left = Max(sqrt((x + Rational(1, 2))**2 + y**2 + z**2) - Rational(3, 10),
+               -Min(Abs(x + Rational(1, 2)) - Rational(1, 10), Abs(y) - Rational(1, 10)))
+    right = Min(Max(Abs(x - Rational(1, 2)), Abs(y), Abs(z)) - Rational(1, 4),
+                sqrt((x - Rational(1, 2))**2 + (y - Rational(3, 10))**2 + z**2) - Rational(1, 5))
+    return Min(left, right)
+
+
+def test_pruning_shortens_the_program_below_decided_octants():
+    s = implc.compile(nested_scene(), engine="tape")
+    assert s.engine == "tape" and s.program.choices >= 6
+    v = implc.voxelize(s, 7)
+    full = len(s.program)
+    live = v.stats.mean_live_ops
+    assert v.stats.program_length == full
+    assert live[0] == full  # the root runs everything
+    assert live[6] < full / 2, live  # near the surface, one object and few of its branches are left
+    unpruned = implc.voxelize(s, 7, prune=False)
+    assert unpruned.stats.mean_live_ops[6] == full
+    np.testing.assert_array_equal(v.coords, unpruned.coords)
+    assert unpruned.stats.interval_evaluations == v.stats.interval_evaluations
+
+
+def test_a_task_resumes_when_its_output_is_full(monkeypatch):
+    s = implc.compile(nested_scene(), engine="tape")
+    expected = implc.voxelize(s, 7, workers=2)
+    monkeypatch.setattr(subdivide_module, "OUTPUT_CHUNK", 16)
+    chunked = implc.voxelize(s, 7, workers=2)
+    np.testing.assert_array_equal(chunked.coords, expected.coords)
+    np.testing.assert_array_equal(chunked.normals, expected.normals)
+    assert chunked.stats.kept_per_level == expected.stats.kept_per_level
+
+
+def test_worker_counts_agree():
+    s = implc.compile(nested_scene(), engine="tape")
+    one, three = implc.voxelize(s, 7, workers=1), implc.voxelize(s, 7, workers=3)
+    np.testing.assert_array_equal(one.coords, three.coords)
+    np.testing.assert_array_equal(one.normals, three.normals)
+    assert one.stats.live_ops_per_level == three.stats.live_ops_per_level
+
+
+def test_normals_are_unit_and_follow_the_gradient():
+    """Against differences of F by numpy (lambdify), at centres where F is smooth (its forward and
+    backward differences agree: a centre on a Min/Max crease may take either side's gradient)."""
+    expr = nested_scene()
+    s = implc.compile(expr, engine="tape")
+    v = implc.voxelize(s, 6, storage="coords")
+    centres = v.centers()
+    f = sympy.lambdify((x, y, z), expr, "numpy")
+    step = 1e-6
+    forward = np.stack([(f(*(centres + step * e).T) - f(*centres.T)) / step for e in np.eye(3)], axis=1)
+    backward = np.stack([(f(*centres.T) - f(*(centres - step * e).T)) / step for e in np.eye(3)], axis=1)
+    np.testing.assert_allclose(np.linalg.norm(v.normals, axis=1), 1, atol=1e-6)
+    smooth = (np.abs(forward - backward).max(axis=1) < 1e-4) & (np.linalg.norm(forward, axis=1) > 1e-3)
+    assert smooth.mean() > 0.5
+    unit = forward[smooth] / np.linalg.norm(forward[smooth], axis=1, keepdims=True)
+    np.testing.assert_allclose(v.normals[smooth], unit, atol=1e-4)
+
+
+def test_compiled_only_options_run_on_compiled_kernels():
+    """The mean-value form and leaf refinement need compiled kernels: a tape surface builds them and
+    misses nothing."""
+    expr = nested_scene()
+    s = implc.compile(expr, engine="tape")
+    expected = sampled_sign_changes(expr, s.bounds, 6)
+    for options in ({"mean_value_levels": 1}, {"refine_leaves": True}):
+        got = implc.voxelize(s, 6, storage="coords", **options).to_dense()
+        assert not (expected & ~got).any(), options
+        assert got.sum() <= implc.voxelize(s, 6, storage="coords").to_dense().sum()
+
+
+def test_the_engine_is_chosen_by_the_tape():
+    assert implc.compile(nested_scene()).engine == "tape"  # Min/Max below the top level
+
+    def auto(expr, width=8):
+        return choose_engine(lower(expr), "auto", width)
+    assert auto(Min(x, y, z - 1)) == "jit"  # a top-level chain: the compiled kernels prune it themselves
+    assert auto(sympy.sin(x) * y - z) == "jit"
+    assert auto(sympy.atan(nested_scene())) == "jit"  # an op the engine lacks
+    assert auto(nested_scene(), width=4) == "jit"  # the engine runs eight lanes
+    assert auto(sum(((x - Rational(k, 50))**2 * (y - Rational(k, 70)) for k in range(300)), sympy.Integer(0))) == "tape"
+
+
+@pytest.mark.parametrize("kwargs, words", [
+    ({"engine": "gpu"}, "engine must be one of auto, jit, tape"),
+    ({"engine": "tape", "expr": sympy.atan(x)}, "engine='tape' cannot run atan"),
+    ({"engine": "tape", "vector_width": 4}, "vector_width=4 needs engine='jit'"),
+])
+def test_bad_engine_requests_are_named(kwargs, words):
+    expr = kwargs.pop("expr", x - y)
+    with pytest.raises(CompileError, match=words):
+        implc.compile(expr, **kwargs)
+
+
+def test_programs_are_encoded_by_arity_with_the_output_last():
+    s = implc.compile(Max(x * 3, Min(y, z**2)) - 1, engine="jit")
+    program = encode(s.tape)
+    codes = program.instructions[:, 0]
+    assert set(codes) <= set(OPCODES.values())
+    assert program.instructions[-1, 1] == len(program) - 1
+    assert (program.instructions[:, 1] == np.arange(len(program))).all()  # one slot per instruction
+    assert program.choices == 2
+
+
+def test_a_vm_model_runs_on_the_engine_without_missing_a_cell():
+    from implc.vm import parse_vm
+    model = parse_vm(CSG, name="csg")
+    s = implc.compile(model)
+    assert s.engine == "tape"
+    got = implc.voxelize(s, 6, storage="coords").to_dense()
+    expected = vm_sign_change_cells(CSG, model.bounds, 6)
+    assert expected.sum() > 100 and not (expected & ~got).any()
+    pts = np.random.default_rng(3).uniform(-1.2, 1.2, (64, 3))
+    np.testing.assert_allclose(s.eval(pts), interpret(CSG, *pts.T), rtol=1e-12, atol=1e-12)
