@@ -19,7 +19,8 @@ from implc.lower import lower
 from implc.surface import choose_engine
 from implc.tape_program import OPCODES, encode
 
-from .test_vm import CSG, interpret, sign_change_cells as vm_sign_change_cells
+from .test_vm import CSG, interpret
+from .test_vm import sign_change_cells as vm_sign_change_cells
 
 
 def sampled_sign_changes(expr, bounds, depth):

@@ -18,7 +18,7 @@ from llvmlite import ir
 
 from ..tape_program import FIRST_BINARY, FIRST_UNARY, OPCODES
 from .control import I32, I64, Local, const, for_range, if_, load_at, store_at
-from .tape_eval import LANES, I8
+from .tape_eval import I8, LANES
 
 DROP, KEEP, ALIAS_A, ALIAS_B = 0, 1, 2, 3
 _P = ir.PointerType
