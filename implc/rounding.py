@@ -30,6 +30,12 @@ ATAN2_ERROR = 2.0**-45
 SIN_ERROR = 2.0**-45
 """Absolute widening of the vector sin and cos (:mod:`implc.codegen.elementary`), proven within 5e-16."""
 
+EXP_ERROR = 2.0**-45
+"""Relative widening of the vector exp (:mod:`implc.codegen.elementary`), proven within 6.2e-15."""
+
+LOG_ERROR = 2.0**-45
+"""Relative widening of the vector log (:mod:`implc.codegen.elementary`), proven within 2.9e-15."""
+
 TINY = 2.0**-1074
 """The smallest subnormal: the absolute part of every move, so that results near zero widen too."""
 

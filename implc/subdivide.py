@@ -24,6 +24,7 @@ import numpy as np
 from . import abi
 from .abi import GEOMETRY_DOUBLES, MAX_DEPTH, STACK_ENTRIES
 from .runtime import Runtime
+from .tape_program import slot_scratch
 
 OUTPUT_CHUNK = 1 << 16
 """Free rows a task's result has before each native call (it returns when they are full, and the
@@ -135,7 +136,7 @@ class _Worker:
             self.frames = np.zeros(abi.TAPE_LEVELS * abi.TAPE_FRAME_WORDS, dtype=np.int32)
             self.tapes = np.empty(abi.TAPE_LEVELS * n * 4, dtype=np.int32)  # untouched levels cost no memory
             self.choices = np.empty(abi.TAPE_LEVELS * n * 8, dtype=np.uint8)
-            self.slots = np.empty(n * abi.TAPE_SLOT_DOUBLES)
+            self.slots = slot_scratch(n)
             self.marks = np.empty(2 * n, dtype=np.uint8)
             self.remap = np.empty(n, dtype=np.int32)
             self.tape_buffers = tuple(a.ctypes.data for a in (self.tape_state, self.frames, self.tapes, self.choices,

@@ -22,7 +22,7 @@ from .ir import Tape
 from .jit import NativeModule, host_has_avx512
 from .lower import lower
 from .runtime import Runtime
-from .tape_program import TapeProgram, encode, unsupported_ops
+from .tape_program import TapeProgram, encode, slot_scratch, unsupported_ops
 from .vm import VmModel
 
 DEFAULT_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
@@ -225,7 +225,7 @@ class Surface:
         program = self.program
 
         def call(*args):
-            slots = np.empty(len(program) * abi.TAPE_SLOT_DOUBLES)
+            slots = slot_scratch(len(program))
             scratch = (np.empty(len(program) * 8, dtype=np.uint8).ctypes.data,) if choices else ()
             function(program.instructions.ctypes.data, len(program), program.constants.ctypes.data,
                      slots.ctypes.data, *scratch, *args)

@@ -132,3 +132,63 @@ def test_outlined_vector_functions_compute_what_expanded_ones_do(monkeypatch):
         results.append((value.copy(), grad.copy()))
     np.testing.assert_array_equal(results[0][0], results[1][0])
     np.testing.assert_array_equal(results[0][1], results[1][1])
+
+
+PROVEN_EXP = 6.2e-15  # relative, the bounds derived in implc/codegen/elementary.py
+PROVEN_LOG = 2.9e-15
+
+
+def test_ln2_pieces_and_constants_are_as_stated():
+    mpmath.mp.prec = 200
+    ln2 = mpmath.log(2)
+    hi = elementary.LN2_1
+    assert mpmath.mpf(hi) * 2**32 == int(mpmath.mpf(hi) * 2**32), "32 significant bits"
+    assert abs(mpmath.mpf(hi) - ln2) < 2.0**-32
+    assert elementary.LN2_2 == float(ln2 - mpmath.mpf(hi))
+    assert abs(ln2 - mpmath.mpf(hi) - mpmath.mpf(elementary.LN2_2)) < mpmath.mpf(2) ** -86
+    assert elementary.SQRT2 == float(mpmath.sqrt(2)) and elementary.INV_LN2 == float(1 / ln2)
+
+
+@pytest.mark.parametrize("width", [8, 1])
+def test_exp_relative_error_is_within_the_proven_bound(width):
+    rng = np.random.default_rng(11 + width)
+    x = np.concatenate([rng.uniform(-1, 1, 1500) * 10.0 ** rng.integers(-15, 3, 1500),
+                        rng.uniform(-elementary.EXP_MAX, elementary.EXP_MAX, 1000),
+                        np.arange(-1021, 1022) * np.log(2) + 0.5 * np.log(2),  # where k switches
+                        [elementary.EXP_MAX, -elementary.EXP_MAX, 0.0, -0.0]])
+    x = x[: len(x) - len(x) % 8]
+    got = _run("exp", width, x)
+    mpmath.mp.prec = 200
+    worst = max(abs(mpmath.mpf(g) / mpmath.exp(mpmath.mpf(a)) - 1) for a, g in zip(x, got))
+    assert worst <= PROVEN_EXP
+    assert PROVEN_EXP < rounding.EXP_ERROR / 4
+
+
+@pytest.mark.parametrize("width", [8, 1])
+def test_log_relative_error_is_within_the_proven_bound(width):
+    rng = np.random.default_rng(17 + width)
+    x = np.concatenate([10.0 ** rng.uniform(-307, 308, 1500), rng.uniform(0.5, 2, 1000),
+                        1 + rng.uniform(-1e-6, 1e-6, 200),  # near 1, where log is near 0
+                        np.sqrt(2) * 2.0 ** np.arange(-60, 60), np.nextafter(np.sqrt(2), 0) * 2.0 ** np.arange(-60, 60),
+                        [2.0**-1022, np.finfo(float).max, 1.0, 2.0, 0.5]])
+    x = x[: len(x) - len(x) % 8]
+    got = _run("log", width, x)
+    mpmath.mp.prec = 200
+    worst = max(abs(mpmath.mpf(g) - mpmath.log(mpmath.mpf(a))) / max(abs(mpmath.log(mpmath.mpf(a))), mpmath.mpf(2)**-1074)
+                for a, g in zip(x, got) if a != 1.0)
+    assert worst <= PROVEN_LOG
+    assert got[np.flatnonzero(x == 1.0)][0] == 0.0
+    assert PROVEN_LOG < rounding.LOG_ERROR / 4
+
+
+@pytest.mark.parametrize("name, x", [
+    ("exp", [np.inf, -np.inf, np.nan, 709.5, -745.0, -720.0, 1e300, 1.0]),
+    ("log", [0.0, -0.0, -1.0, np.inf, np.nan, 1e-310, 5e-324, 3.0]),
+])
+def test_exp_log_beyond_their_range_take_the_c_library_value(name, x):
+    x = np.array(x)
+    got = _run(name, 8, x)
+    with np.errstate(all="ignore"):
+        expected = getattr(np, name)(x)
+    np.testing.assert_array_equal(got[:7], expected[:7])
+    assert abs(got[7] / expected[7] - 1) <= PROVEN_EXP

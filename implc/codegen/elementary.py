@@ -1,9 +1,13 @@
-"""Elementary functions computed in vector registers, each with a proven bound on its absolute error.
+"""Elementary functions computed in vector registers, each with a proven bound on its error.
 
 The C library computes one lane per call; these compute all lanes at once with plain round-to-nearest
-arithmetic. Interval rules widen their results by an absolute margin far above the proven bound
-(:data:`implc.rounding.ATAN2_ERROR`, :data:`implc.rounding.SIN_ERROR`). Lanes outside a function's
-proof (infinities, NaN, zeros for atan2, huge arguments for sin and cos) take the C library's value.
+arithmetic. Interval rules widen their results by a margin far above the proven bound (absolute:
+:data:`implc.rounding.ATAN2_ERROR`, :data:`implc.rounding.SIN_ERROR`; relative:
+:data:`implc.rounding.EXP_ERROR`, :data:`implc.rounding.LOG_ERROR`). Lanes outside a function's proof
+(infinities, NaN, zeros for atan2, huge arguments for sin and cos, results or arguments beyond the normal
+doubles for exp and log) take the C library's value.
+
+Below, u = 2⁻⁵³ (half an ulp: the relative error of one rounding).
 
 ``atan2(y, x)`` (the proof of its bound):
 
@@ -38,6 +42,37 @@ tests measure the error against 200-bit values.
    error once.
 
 Total: below 5e-16; :data:`implc.rounding.SIN_ERROR` is 2⁻⁴⁵ ≈ 2.8e-14.
+
+``exp(x)`` for |x| <= :data:`EXP_MAX` (the proof of its relative bound):
+
+1. ``k = rint(x · (1/ln 2))``, so |k| <= 1021 and |x/ln 2 − k| <= 1/2 + 1e-12; ``r = (x − k·L1) − k·L2``
+   with L1 = ln 2 to 32 bits and L2 the rest rounded (|ln 2 − L1 − L2| < 2⁻⁸⁶): k·L1 is exact (10 + 32
+   bits), x − k·L1 is exact (Sterbenz), k·L2 and the last subtraction round: |r| < 0.3466 and
+   |r − (x − k·ln 2)| <= 0.35u + 2⁻⁷⁵, which moves exp(r) by a relative 0.36u.
+2. exp(r) by its Taylor polynomial through r¹³/13!, coefficients rounded to doubles (relative u each),
+   by Horner's rule: truncation <= 0.35¹⁴/14! · e^0.35 < 7e-18; Horner's error <= γ₂₆ · Σ|cᵢ||r|ⁱ <=
+   27.1u · e^0.35 (Higham, Thm 5.3), the coefficients' <= u · e^0.35: together <= 38.5u absolute, over
+   exp(r) >= e^-0.35: a relative 54.7u.
+3. ``exp(x) = exp(r) · 2ᵏ``, 2ᵏ built from its exponent bits (k >= −1021: the product is a normal
+   double): exact.
+
+Total: relative error below 55.1u ≈ 6.2e-15; :data:`implc.rounding.EXP_ERROR` is 2⁻⁴⁵ ≈ 2.8e-14.
+
+``log(x)`` for normal positive finite x (the proof of its relative bound):
+
+1. ``x = 2ᵉ · m`` with m in [√2/2, √2] (exponent and mantissa bits, m halved and e raised above √2):
+   exact. ``s = (m − 1) / (m + 1)``: m − 1 exact (Sterbenz), the sum and the quotient round: s carries a
+   relative 2.0u, |s| <= (√2 − 1)/(√2 + 1) < 0.1716.
+2. log m = 2s · T(s²), T = Σ s²ⁿ/(2n + 1) through n = 10: truncation below s²²/23 / (1 − s²) < 7e-19 of
+   T >= 1; T's terms are all positive, so Horner's error with rounded coefficients is <= (γ₂₀ + u) T
+   <= 21.1u T, and s² (relative 5u) moves T by a relative s²/3 · 5u < 0.05u: log m carries a relative
+   <= 2.0u + 21.2u + u (the product) < 24.3u, and |log m| <= 0.3466.
+3. ``e·L1 + (e·L2 + log m)``: e·L1 is exact (|e| <= 1024), e·L2 is off by < 2⁻⁶⁷ (its rounding and the
+   split of ln 2), the two sums round by u of their results. For e = 0 the result is log m: 24.3u. For
+   e ≠ 0, |log x| >= ln 2 − 0.3466 >= 0.3466, so log m's absolute error is at most 24.3u of the result,
+   the inner sum's rounding at most 1.001u of it, the outer sum's u.
+
+Total: relative error below 26.4u ≈ 2.9e-15; :data:`implc.rounding.LOG_ERROR` is 2⁻⁴⁵ ≈ 2.8e-14.
 """
 
 from __future__ import annotations
@@ -56,6 +91,19 @@ HALF_PI = 1.5707963267948966
 PI = 3.141592653589793
 TAYLOR_TERMS = 8
 """u, u³/3, …, u¹⁵/15."""
+
+LN2_1 = 0.6931471806019545
+"""ln 2 rounded to 32 significant bits (tests check it)."""
+LN2_2 = -4.2009150726810846e-11
+"""ln 2 − LN2_1, rounded to a double (tests check it)."""
+INV_LN2 = 1.4426950408889634
+SQRT2 = 1.4142135623730951
+EXP_MAX = 708.0
+"""Largest |x| whose exp is computed in vector registers (then the result is a normal double)."""
+EXP_TERMS = 13
+"""exp(r) through r¹³/13!."""
+LOG_TERMS = 10
+"""log m = 2s · Σ s²ⁿ/(2n + 1) through n = 10."""
 
 TRIG_MAX = 1e5
 """Largest |x| whose sin and cos are computed in vector registers (then |k| < 2¹⁷)."""
@@ -123,15 +171,57 @@ def _cos(vb: VectorBuilder, x):
     return _sin_cos(vb, x, 1, "cos")
 
 
+def _exp(vb: VectorBuilder, x):
+    """exp(x) lane by lane, within a relative :data:`implc.rounding.EXP_ERROR` of the true value."""
+    b = vb.b
+    i64 = ir.VectorType(ir.IntType(64), vb.width)
+    regular = vb.cmp("<=", vb.fabs(x), vb.splat(EXP_MAX))  # false for NaN
+    reduced = vb.select(regular, x, vb.splat(0.0))  # other lanes are recomputed below
+    k = vb.rint(vb.mul(reduced, vb.splat(INV_LN2)))
+    r = vb.sub(vb.sub(reduced, vb.mul(k, vb.splat(LN2_1))), vb.mul(k, vb.splat(LN2_2)))
+    poly = vb.splat(1.0 / math.factorial(EXP_TERMS))
+    for n in range(EXP_TERMS - 1, -1, -1):
+        poly = vb.add(vb.splat(1.0 / math.factorial(n)), vb.mul(r, poly))
+    biased = b.add(b.fptosi(k, i64), broadcast(b, ir.Constant(ir.IntType(64), 1023), vb.width))
+    scale = b.bitcast(b.shl(biased, broadcast(b, ir.Constant(ir.IntType(64), 52), vb.width)), vb.vtype)
+    return _c_library_where_irregular(vb, vb.mul(poly, scale), regular, "exp", x)
+
+
+def _log(vb: VectorBuilder, x):
+    """log(x) lane by lane, within a relative :data:`implc.rounding.LOG_ERROR` of the true value."""
+    b = vb.b
+    i64 = ir.VectorType(ir.IntType(64), vb.width)
+
+    def ints(v):
+        return broadcast(b, ir.Constant(ir.IntType(64), v), vb.width)
+    regular = vb.and_(vb.cmp(">=", x, vb.splat(2.0**-1022)), vb.cmp("<", x, vb.splat(math.inf)))  # NaN: false
+    bits = b.bitcast(vb.select(regular, x, vb.splat(1.0)), i64)
+    exponent = b.sub(b.lshr(bits, ints(52)), ints(1023))
+    m = b.bitcast(b.or_(b.and_(bits, ints((1 << 52) - 1)), ints(1023 << 52)), vb.vtype)  # in [1, 2)
+    big = vb.cmp(">", m, vb.splat(SQRT2))
+    m = vb.select(big, vb.mul(m, vb.splat(0.5)), m)
+    e = b.sitofp(b.add(exponent, b.zext(big, i64)), vb.vtype)
+    s = vb.div(vb.sub(m, vb.splat(1.0)), vb.add(m, vb.splat(1.0)))
+    s2 = vb.mul(s, s)
+    series = vb.splat(1.0 / (2 * LOG_TERMS + 1))
+    for n in range(LOG_TERMS - 1, -1, -1):
+        series = vb.add(vb.splat(1.0 / (2 * n + 1)), vb.mul(s2, series))
+    log_m = vb.mul(vb.add(s, s), series)
+    value = vb.add(vb.mul(e, vb.splat(LN2_1)), vb.add(vb.mul(e, vb.splat(LN2_2)), log_m))
+    return _c_library_where_irregular(vb, value, regular, "log", x)
+
+
 atan2 = outlined("atan2", 2, _atan2)
 sin = outlined("sin", 1, _sin)
 cos = outlined("cos", 1, _cos)
+exp = outlined("exp", 1, _exp)
+log = outlined("log", 1, _log)
 
 
 def outlines(tape) -> bool:
     """Whether a module for ``tape`` calls the vector functions outlined: more than :data:`OUTLINE_ABOVE`
     of its nodes (the gradient tape's, for both the value and the derivatives) are computed by them."""
-    return sum(op in ("sin", "cos", "atan2", "atan2_wrapped") for op, _, _ in tape.nodes) > OUTLINE_ABOVE
+    return sum(op in ("sin", "cos", "atan2", "atan2_wrapped", "exp", "log") for op, _, _ in tape.nodes) > OUTLINE_ABOVE
 
 
 def _sin_cos(vb: VectorBuilder, x, quarter_turns: int, name: str):

@@ -153,12 +153,12 @@ class IntervalEmitter:
         lo, hi = self.monotone(self.libm("cbrt"), a[0])
         return self.nan_where(self.lt0(a[0][0]), (v.maximum(lo, v.splat(0.0)), hi))
 
-    def i_exp(self, a, attr):
-        lo, hi = self.monotone(self.libm("exp"), a[0])
+    def i_exp(self, a, attr):  # in vector registers (the C library beyond the normal doubles)
+        lo, hi = self.monotone(lambda v: elementary.exp(self.v, v), a[0], R.EXP_ERROR)
         return self.v.maximum(lo, self.v.splat(0.0)), hi
 
     def i_log(self, a, attr):
-        return self.nan_where(self.lt0(a[0][0]), self.monotone(self.libm("log"), a[0]))
+        return self.nan_where(self.lt0(a[0][0]), self.monotone(lambda v: elementary.log(self.v, v), a[0], R.LOG_ERROR))
 
     def contains_peak(self, lo, hi, offset, period=2 * math.pi):
         v = self.v

@@ -40,7 +40,7 @@ def _point(vb: VectorBuilder, op: str, a: list, attr, vector_elementary: bool):
         return vb.sqrt(a[0])
     if op == "cbrt":
         return vb.select(vb.cmp("<", a[0], vb.splat(0.0)), vb.splat(float("nan")), vb.libm("cbrt", a[0]))
-    if vector_elementary and op in ("sin", "cos"):
+    if vector_elementary and op in ("sin", "cos", "exp", "log"):
         return getattr(elementary, op)(vb, a[0])
     if op in _LIBM_UNARY:
         return vb.libm(_LIBM_UNARY[op], a[0])
@@ -65,8 +65,8 @@ def _point(vb: VectorBuilder, op: str, a: list, attr, vector_elementary: bool):
 def emit_point(vb: VectorBuilder, tape, coords, vector_elementary: bool = False) -> list:
     """Emit the tape at points ``coords = (x, y, z)`` (vectors); returns the output vectors.
 
-    ``vector_elementary``: sin, cos and atan2 from :mod:`implc.codegen.elementary` (all lanes at once,
-    within about 1e-15 absolute) instead of the C library (within an ulp or two, one lane per call)."""
+    ``vector_elementary``: sin, cos, exp, log and atan2 from :mod:`implc.codegen.elementary` (all lanes at
+    once, within the bounds proven there) instead of the C library (within an ulp or two, one lane per call)."""
     vals: list = []
     for op, args, attr in tape.nodes:
         if op == "const":

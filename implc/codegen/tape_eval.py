@@ -170,7 +170,7 @@ def emit_tape_dual(module: ir.Module) -> ir.Function:
         return chain(s, vb.div(vb.splat(0.5), s), x)
 
     def exp(x):
-        e = vb.libm("exp", x[0])
+        e = elementary.exp(vb, x[0])
         return chain(e, e, x)
 
     def power(n):
@@ -202,7 +202,7 @@ def emit_tape_dual(module: ir.Module) -> ir.Function:
              "neg": unary(lambda x: [vb.neg(v) for v in x]),
              "abs": unary(lambda x: chain(vb.fabs(x[0]), vb.copysign(one, x[0]), x)),
              "sqrt": unary(sqrt), "exp": unary(exp),
-             "log": unary(lambda x: chain(vb.libm("log", x[0]), vb.div(one, x[0]), x)),
+             "log": unary(lambda x: chain(elementary.log(vb, x[0]), vb.div(one, x[0]), x)),
              "sin": unary(lambda x: chain(elementary.sin(vb, x[0]), elementary.cos(vb, x[0]), x)),
              "cos": unary(lambda x: chain(elementary.cos(vb, x[0]), vb.neg(elementary.sin(vb, x[0])), x)),
              "square": unary(power(2)), "cube": unary(power(3)), "fourth": unary(power(4)),

@@ -6,9 +6,10 @@ Min/Max choices each child's enclosure decided; stepping into a child that may m
 it its own program, ``tape_simplify``'d by those choices (or its parent's, where none was decided or
 pruning is off), so that below an octant every decided branch costs nothing. Children are visited in
 Morton order; a task starts from the full program simplified down the path from the root to its
-octant. The children of an octant one level above the leaves are the voxels, written with their
-unit normals at once (``tape_dual`` over their parent's program, through the normals block of
-:mod:`implc.codegen.normals`). Resumable: when the output is full or the cancel flag is raised it returns
+octant. The children of an octant one level above the leaves are the voxels; their unit normals come
+eight at a time from ``tape_dual`` over the program two levels above the leaves (valid for every voxel
+below that octant, and barely longer than their parents'), through the normals block of
+:mod:`implc.codegen.normals`, before the voxels leave the call. Resumable: when the output is full or the cancel flag is raised it returns
 with its frames and state intact (layouts in :mod:`implc.abi`).
 """
 
@@ -76,6 +77,10 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
         store_at(b, load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))), leaf_geom, 3 + a)
     need, mark = marks, b.gep(marks, [length])
     count = Local(b, I64, 0, "count")
+    normals_done = Local(b, I64, 0, "normals_done")  # voxels before this one have their normals
+    # normals come from the program two levels above the leaves (valid for all its voxels, eight at a time)
+    normals_level = b.select(b.icmp_signed(">", b.sub(depth, const(I64, 2)), task_level), b.sub(depth, const(I64, 2)),
+                             task_level)
     ctpop = ir.Function(module, ir.FunctionType(I32, [I32]), name="llvm.ctpop.i32")
     cttz = ir.Function(module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.cttz.i32")
 
@@ -141,6 +146,19 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
         store_at(b, const(I64, 1), state, abi.TAPE_PENDING)
         store_at(b, const(I64, 1), state, abi.TAPE_PHASE)
 
+    def flush_normals(whole_blocks=False):
+        """Normals of the voxels written since the last flush (``whole_blocks``: of a multiple of eight of
+        them), from the program of their ancestor at ``normals_level``."""
+        first = normals_done.get()
+        pending = b.sub(count.get(), first)
+        if whole_blocks:
+            pending = b.and_(pending, const(I64, -LANES))
+        with if_(b, b.icmp_signed(">", pending, const(I64, 0))):
+            offset = b.mul(first, const(I64, 3))
+            b.call(normals, [program_of(normals_level), length_of(normals_level), constants, slots, leaf_geom,
+                             b.gep(out, [offset]), pending, b.gep(out_normals, [offset])])
+            normals_done.set(b.add(first, pending))
+
     def expand(level):
         """Enclose the children of the octant in frame ``level``; keep those that may meet the surface
         (the leaves: write them with their normals)."""
@@ -161,19 +179,16 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
             slot = at(b, stats, index)
             b.store(b.add(b.load(slot), amount), slot)
         with b.if_else(b.icmp_signed("==", child, depth)) as (leaves, inner):
-            with leaves:  # the kept children are voxels: written in Morton order (branch-free), with normals
-                first = count.get()
-                n = first
+            with leaves:  # the kept children are voxels: written in Morton order (branch-free)
+                n = count.get()
                 for c in range(LANES):
                     for a in range(3):
                         bit = (c >> a) & 1
                         coord = b.add(b.shl(b.load(frame(level, a)), const(I32, 1)), const(I32, bit))
                         store_at(b, coord, out, b.add(b.mul(n, const(I64, 3)), const(I64, a)))
                     n = b.add(n, b.zext(b.trunc(b.lshr(kept, const(I32, c)), ir.IntType(1)), I64))
-                offset = b.mul(first, const(I64, 3))
-                b.call(normals, [own, own_length, constants, slots, leaf_geom, b.gep(out, [offset]), b.sub(n, first),
-                                 b.gep(out_normals, [offset])])
                 count.set(n)
+                flush_normals(whole_blocks=True)
                 b.store(const(I32, 0), frame(level, 3))
             with inner:
                 b.store(kept, frame(level, 3))
@@ -195,6 +210,8 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
                 remaining = b.load(frame(level, 3))
                 with b.if_else(b.icmp_unsigned("==", remaining, const(I32, 0))) as (up, down):
                     with up:  # every child visited: back to the parent, or the task is done
+                        with if_(b, b.icmp_signed("==", level, normals_level)):
+                            flush_normals()
                         done = b.icmp_signed("==", level, task_level)
                         store_at(b, b.select(done, const(I64, 2), const(I64, 1)), state, abi.TAPE_PHASE)
                         store_at(b, b.select(done, level, b.sub(level, const(I64, 1))), state, abi.TAPE_LEVEL)
@@ -208,4 +225,5 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
                         program_for_child(level, c, b.trunc(b.lshr(b.load(frame(level, 4)), c), ir.IntType(1)))
                         store_at(b, child, state, abi.TAPE_LEVEL)
                         store_at(b, const(I64, 1), state, abi.TAPE_PENDING)
+    flush_normals()  # leaving (done, output full or cancelled): every voxel written has its normal
     b.ret(count.get())
