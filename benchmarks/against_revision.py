@@ -5,6 +5,9 @@ that the machine's drift hits both alike; the table shows medians and their rati
 before the issue "tighter and faster" against now::
 
     python benchmarks/against_revision.py ee2b892 --depth 9 --repeats 5
+
+A case is a scene name, "union of 50 spheres" or the path of a ``.vm`` model (read with ``implc.load_vm``
+where the revision has it, else converted to SymPy with ``evaluate=False``, keeping the DAG).
 """
 
 from __future__ import annotations
@@ -30,6 +33,41 @@ if case == "union of 50 spheres":
     centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
     expr = shapes.union(*[shapes.sphere(sympy.Rational(rng.randint(6, 14), 100), centre()) for _ in range(50)])
     s = implc.compile(expr, ((-1, 1),) * 3)
+elif case.endswith(".vm"):  # a peer model: load_vm where the revision has it, else SymPy with the DAG kept
+    text = open(case).read()
+    if hasattr(implc, "load_vm"):
+        model = implc.load_vm(case)
+        expr, bounds = model, model.bounds
+    else:
+        import re
+        v, S = {}, sympy.S
+        unary = {"neg": lambda a: sympy.Mul(-1, a, evaluate=False), "square": lambda a: sympy.Pow(a, 2, evaluate=False),
+                 "sqrt": lambda a: sympy.Pow(a, S.Half, evaluate=False), "exp": lambda a: sympy.exp(a, evaluate=False),
+                 "ln": lambda a: sympy.log(a, evaluate=False), "sin": lambda a: sympy.sin(a, evaluate=False),
+                 "cos": lambda a: sympy.cos(a, evaluate=False), "abs": lambda a: sympy.Abs(a, evaluate=False)}
+        binary = {"add": lambda a, b: sympy.Add(a, b, evaluate=False), "mul": lambda a, b: sympy.Mul(a, b, evaluate=False),
+                  "sub": lambda a, b: sympy.Add(a, sympy.Mul(-1, b, evaluate=False), evaluate=False),
+                  "div": lambda a, b: sympy.Mul(a, sympy.Pow(b, -1, evaluate=False), evaluate=False),
+                  "min": lambda a, b: sympy.Min(a, b, evaluate=False), "max": lambda a, b: sympy.Max(a, b, evaluate=False)}
+        for line in text.splitlines():
+            w = line.split("#")[0].split()
+            if not w:
+                continue
+            name, op, args = w[0], w[1], w[2:]
+            if op.startswith("var-"):
+                v[name] = getattr(implc, op[4:])
+            elif op == "const":
+                v[name] = sympy.Float(args[0])
+            else:
+                v[name] = (unary[op] if op in unary else binary[op])(*[v[a] for a in args])
+            last = v[name]
+        found = re.search(r"--scale\s+([0-9.]+)", text)
+        half = 1 / float(found.group(1)) if found else 1.0
+        expr, bounds = last, ((-half, half),) * 3
+    if "var-z" not in text:  # a 2-D model (prospero): extruded
+        f = expr(implc.x, implc.y, implc.z) if hasattr(expr, "tape") else expr
+        expr = sympy.Max(f, sympy.Abs(implc.z) - sympy.Rational(1, 10))
+    s = implc.compile(expr, bounds)
 else:
     sc = scene.load(case)
     s = implc.compile(sc.surface, sc.bounds)

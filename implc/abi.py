@@ -82,16 +82,15 @@ SPLAT = _entry("implc_splat", "px:i64* py:i64* sizes:i64* depth:f64* n:i64 size:
 RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, OCTREE_INSERT, OCTREE_TRAVERSE, SPLAT)
 
 # -- the tape engine (implc.codegen.tape_engine_module): one interpreter for every program -----------------
-# (implc.tape_program; ``slots``: TAPE_SLOT_DOUBLES per instruction of the full program, ``choices``: 8 bytes
-# per instruction and per level, n a multiple of 8)
-TAPE_INTERVAL = _entry("implc_tape_interval", "program:i32* length:i64 constants:f64* slots:f64* choices:i8* "
+# (``program``: a program header, implc.tape_program; ``slots``: TAPE_SLOT_DOUBLES per slot of the full
+# program, 64-byte aligned; ``choices``: 8 bytes per instruction (and per level); n a multiple of 8)
+TAPE_INTERVAL = _entry("implc_tape_interval", "program:i64* slots:f64* choices:i8* "
                                               "lo:f64* hi:f64* out_lo:f64* out_hi:f64* n:i64")
-TAPE_GRADIENT = _entry("implc_tape_gradient", "program:i32* length:i64 constants:f64* slots:f64* "
-                                              "pts:f64* out_value:f64* out_grad:f64* n:i64")
+TAPE_GRADIENT = _entry("implc_tape_gradient", "program:i64* slots:f64* pts:f64* out_value:f64* out_grad:f64* n:i64")
 TAPE_SUBDIVIDE = _entry("implc_tape_subdivide",
-                        "program:i32* length:i64 constants:f64* prune:i64 geom:f64* state:i64* frames:i32* "
-                        "tapes:i32* choices:i8* slots:f64* marks:i8* remap:i32* out:i32* out_normals:f32* "
-                        "capacity:i64 stats:i64* cancel:i32*", "i64")
+                        "program:i64* prune:i64 geom:f64* state:i64* frames:i32* tapes:i32* choices:i8* "
+                        "slots:f64* marks:i8* remap:i32* out:i32* out_normals:f32* capacity:i64 stats:i64* "
+                        "cancel:i32*", "i64")
 TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE)
 
 # -- layouts shared by native code and Python ------------------------------------------------------
@@ -109,8 +108,17 @@ one level past the deepest grid for leaf refinement)."""
 SUBDIVIDE_STATE_WORDS = 2
 """``implc_subdivide``'s resumable state (int64): stack size, grid depth."""
 
-TAPE_SLOT_DOUBLES = 32
-"""Scratch doubles per slot of a tape program: an interval is two vectors of eight, a dual number four."""
+TAPE_SLOT_DOUBLES = 48
+"""Scratch doubles per slot of a tape program: its interval (two vectors of eight) in the first third of
+the slots, its dual number (four vectors) in the rest."""
+PROGRAM_INSTRUCTIONS, PROGRAM_LENGTH, PROGRAM_OUTPUT = 0, 1, 2
+PROGRAM_CONSTANTS, PROGRAM_CONSTANT_SLOTS, PROGRAM_CONSTANT_COUNT = 3, 4, 5
+PROGRAM_VARIABLES = 6
+"""A program header (int64, :class:`implc.tape_program.TapeProgram`): the address of the instructions,
+their count, the output slot; the constant table's address, its slots' address, its row count; the slots
+of x, y, z (three words, -1 where unused); then the slot count."""
+PROGRAM_SLOT_COUNT = 9
+PROGRAM_WORDS = 10
 TAPE_LEVELS = MAX_DEPTH + 2
 """Levels the tape subdivider keeps a program, choices and a frame for (0 to MAX_DEPTH + 1)."""
 TAPE_FRAME_WORDS = 5
@@ -120,8 +128,9 @@ TAPE_PHASE, TAPE_LEVEL, TAPE_DEPTH, TAPE_TASK_LEVEL, TAPE_PENDING = 0, 1, 2, 3, 
 """``implc_tape_subdivide``'s state (int64): phase (0 new task, 1 running, 2 done), the level of the
 frame in hand, the grid depth, the task's level, whether the frame in hand still needs its children."""
 TAPE_PROGRAMS = 5
-"""Start of the program address per level (TAPE_LEVELS words), then of its length (TAPE_LEVELS words)."""
-TAPE_STATE_WORDS = TAPE_PROGRAMS + 2 * TAPE_LEVELS
+"""Start of the instructions' address per level (TAPE_LEVELS words), then of their count, then of the
+output slot (TAPE_LEVELS words each)."""
+TAPE_STATE_WORDS = TAPE_PROGRAMS + 3 * TAPE_LEVELS
 TAPE_STATS_WORDS = 3 * TAPE_LEVELS
 """The tape subdivider's statistics (int64): boxes enclosed, then octants kept per level (as
 ``implc_subdivide``'s, TAPE_LEVELS words), instructions run per level (the octant's level), octants

@@ -245,9 +245,21 @@ class _Lowerer:
         for cls, op in _UNARY.items():
             if isinstance(e, cls):
                 return t.unary(op, self.lower(e.args[0]))
+        inlined = getattr(e.func, "implc_tape", None)
+        if inlined is not None:  # a model's function (implc.vm.VmModel.__call__): its tape, at its arguments
+            return self._inline(inlined, [self.lower(a) for a in e.args])
         if isinstance(e, sympy.Function):
             raise CompileError(f"unsupported function {e}")
         raise CompileError(f"unsupported expression {e} ({type(e).__name__})")
+
+    def _inline(self, tape: Tape, coords: list[int]) -> int:
+        """``tape``'s output with its x, y, z replaced by the nodes ``coords``, one pass over its nodes."""
+        if len(coords) != 3:
+            raise CompileError(f"a model takes (x, y, z), got {len(coords)} arguments")
+        nodes: list[int] = []
+        for op, args, attr in tape.nodes:
+            nodes.append(coords[attr] if op == "var" else self.tape.node(op, tuple(nodes[a] for a in args), attr))
+        return nodes[tape.outputs[0]]
 
     def _lower_mul(self, e: sympy.Mul) -> int:
         t = self.tape

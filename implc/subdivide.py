@@ -118,10 +118,10 @@ class _TaskResult:
 
 
 class _Worker:
-    """Per-thread native buffers and counters (for the tape engine, with ``program_length``: its frames,
-    a program and choices per level, and the interpreter's scratch)."""
+    """Per-thread native buffers and counters (for the tape engine, with its ``program``: its frames, a
+    program and choices per level, and the interpreter's scratch)."""
 
-    def __init__(self, depth, program_length: int | None = None):
+    def __init__(self, depth, program=None):
         self.stack = np.zeros(4 * STACK_ENTRIES, dtype=np.int32)
         self.masks = np.full(STACK_ENTRIES, -1, dtype=np.int64)  # live-term mask of each stack entry
         self.state = np.zeros(abi.SUBDIVIDE_STATE_WORDS, dtype=np.int64)
@@ -130,15 +130,15 @@ class _Worker:
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
         self.stack_ptr, self.state_ptr = self.stack.ctypes.data, self.state.ctypes.data
         self.masks_ptr, self.stats_ptr = self.masks.ctypes.data, self.stats.ctypes.data
-        if program_length is not None:
-            n = program_length
+        if program is not None:
+            n, slots = max(len(program), 1), program.slot_count
             self.tape_state = np.zeros(abi.TAPE_STATE_WORDS, dtype=np.int64)
             self.frames = np.zeros(abi.TAPE_LEVELS * abi.TAPE_FRAME_WORDS, dtype=np.int32)
             self.tapes = np.empty(abi.TAPE_LEVELS * n * 4, dtype=np.int32)  # untouched levels cost no memory
             self.choices = np.empty(abi.TAPE_LEVELS * n * 8, dtype=np.uint8)
-            self.slots = slot_scratch(n)
-            self.marks = np.empty(2 * n, dtype=np.uint8)
-            self.remap = np.empty(n, dtype=np.int32)
+            self.slots = slot_scratch(slots)
+            self.marks = np.empty(slots + n, dtype=np.uint8)
+            self.remap = np.empty(slots, dtype=np.int32)
             self.tape_buffers = tuple(a.ctypes.data for a in (self.tape_state, self.frames, self.tapes, self.choices,
                                                               self.slots, self.marks, self.remap))
         self.busy = 0.0
@@ -177,15 +177,14 @@ class Subdivider:
         self._plan_normals = None
         if self.program is not None:
             self.tape_engine = surface.tape_engine
-            self.program_args = (self.program.instructions.ctypes.data, len(self.program),
-                                 self.program.constants.ctypes.data, self.prune)
+            self.program_args = (self.program.header.ctypes.data, self.prune)
             self.stats.program_length = len(self.program)
             self.stats.live_ops_per_level = [0] * (depth + 1)
             self.stats.octants_per_level = [0] * (depth + 1)
 
     # -- native steps ------------------------------------------------------------------------------
     def _new_worker(self, depth) -> _Worker:
-        return _Worker(depth, None if self.program is None else len(self.program))
+        return _Worker(depth, None if self.program is None else self.program)
 
     def _run_task(self, w: _Worker, cell, level: int, depth: int, result: _TaskResult) -> None:
         """Append all kept cells at ``depth`` below ``cell`` (at ``level``) to ``result``, in Morton order

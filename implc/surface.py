@@ -225,10 +225,9 @@ class Surface:
         program = self.program
 
         def call(*args):
-            slots = slot_scratch(len(program))
+            slots = slot_scratch(program.slot_count)
             scratch = (np.empty(len(program) * 8, dtype=np.uint8).ctypes.data,) if choices else ()
-            function(program.instructions.ctypes.data, len(program), program.constants.ctypes.data,
-                     slots.ctypes.data, *scratch, *args)
+            function(program.header.ctypes.data, slots.ctypes.data, *scratch, *args)
         return call
 
     def _value_and_gradient(self, points):

@@ -6,17 +6,19 @@ program with every Min/Max that the octant's enclosure decided replaced by its w
 everything that only fed the losing one dropped (:mod:`implc.codegen.tape_simplify`), as fidget, libfive
 and MPR do. This module owns the encoding both sides agree on:
 
-- an instruction is four int32: ``opcode, out, a, b``. ``out`` is the slot the result goes to (each
-  instruction of the full program has its own slot, its index; a simplified program keeps the slots of the
-  instructions it keeps), ``a`` and ``b`` the operand slots (``var``: the axis; ``const``: the row of the
-  constant table).
-- the constant table: one row ``(nearest, lo, hi)`` per constant (lo <= value <= hi, certified as in
-  :data:`implc.ir.OPS`).
-- the last instruction computes F (a simplified program keeps this true: everything it keeps is an
-  ancestor of its last instruction).
+- every node of the tape has a slot (its index). Constants and the coordinates x, y, z are not
+  instructions: their slots are filled before a program runs (constants once, coordinates per batch of
+  boxes or points), so a program is only the work.
+- an instruction is four int32: ``opcode, out, a, b``: the result goes to slot ``out``, the operands
+  come from slots ``a`` and ``b`` (unary: b unused). The result of the program is slot ``output`` (a
+  simplified program has its own: a decided Min/Max at the top makes its winner the output).
+- the header (:data:`implc.abi.PROGRAM_WORDS` int64) is what native code receives: addresses and
+  counts of the instructions, the constant table (rows ``nearest, lo, hi`` with lo <= value <= hi,
+  certified as in :data:`implc.ir.OPS`) and its slots, the slots of x, y and z (-1: unused), the slot
+  count.
 
-Opcodes are numbered by arity: nullary first, then unary, then binary, so that native code tells how
-many operands an instruction reads from two comparisons.
+Opcodes are numbered by arity, unary first, so that native code tells from one comparison whether an
+instruction reads a second operand.
 """
 
 from __future__ import annotations
@@ -25,16 +27,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .abi import TAPE_SLOT_DOUBLES
+from . import abi
 from .ir import Tape
 
-NULLARY = ("var", "const")
 UNARY = ("neg", "abs", "sqrt", "exp", "log", "sin", "cos", "square", "cube", "fourth")
 BINARY = ("add", "add_nonneg", "sub", "mul", "div", "min", "max")
-OPCODES = {name: code for code, name in enumerate(NULLARY + UNARY + BINARY)}
+OPCODES = {name: code for code, name in enumerate(UNARY + BINARY)}
 """Opcode of each instruction kind."""
-FIRST_UNARY = len(NULLARY)
-FIRST_BINARY = len(NULLARY) + len(UNARY)
+FIRST_BINARY = len(UNARY)
 CHOICE_OPS = ("min", "max")
 """The instructions whose choice an interval can decide (bit 0: operand a may be the result; bit 1: b)."""
 
@@ -44,12 +44,28 @@ SUPPORTED_OPS = frozenset(_DIRECT | {"var", "const", "add", "scale", "powi"})
 """Tape ops the engine runs (``powi`` for exponents 2 to 4); a tape with any other op is compiled."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TapeProgram:
-    """A tape encoded for the engine: ``instructions`` (n, 4) int32 and ``constants`` (m, 3) float64."""
+    """A tape encoded for the engine (see the module docstring)."""
 
-    instructions: np.ndarray
-    constants: np.ndarray
+    instructions: np.ndarray  # (n, 4) int32
+    constants: np.ndarray  # (m, 3) float64: nearest, lo, hi
+    constant_slots: np.ndarray  # (m,) int32
+    variable_slots: np.ndarray  # (3,) int32, -1 where the coordinate is unused
+    output: int
+    slot_count: int
+
+    def __post_init__(self):
+        header = np.zeros(abi.PROGRAM_WORDS, dtype=np.int64)
+        header[abi.PROGRAM_INSTRUCTIONS] = self.instructions.ctypes.data
+        header[abi.PROGRAM_LENGTH] = len(self.instructions)
+        header[abi.PROGRAM_OUTPUT] = self.output
+        header[abi.PROGRAM_CONSTANTS] = self.constants.ctypes.data
+        header[abi.PROGRAM_CONSTANT_SLOTS] = self.constant_slots.ctypes.data
+        header[abi.PROGRAM_CONSTANT_COUNT] = len(self.constants)
+        header[abi.PROGRAM_VARIABLES: abi.PROGRAM_VARIABLES + 3] = self.variable_slots
+        header[abi.PROGRAM_SLOT_COUNT] = self.slot_count
+        object.__setattr__(self, "header", header)  # holds addresses: the arrays live as long as self
 
     def __len__(self) -> int:
         return len(self.instructions)
@@ -62,9 +78,10 @@ class TapeProgram:
 
 
 def unsupported_ops(tape: Tape) -> set[str]:
-    """The ops of ``tape`` (reachable from its first output) that the engine cannot run."""
+    """The ops of ``tape`` (of all its nodes where it has one output, else of those its first output
+    needs) that the engine cannot run."""
     bad = set()
-    for op, _, attr in tape.subtape(tape.outputs[0]).nodes:
+    for op, _, attr in (tape.nodes if len(tape.outputs) == 1 else tape.subtape(tape.outputs[0]).nodes):
         if op not in SUPPORTED_OPS or (op == "powi" and attr not in _POWERS):
             bad.add(f"powi({attr})" if op == "powi" else op)
     return bad
@@ -78,20 +95,30 @@ def encode(tape: Tape) -> TapeProgram:
     sub = tape.subtape(tape.outputs[0])
     rows: list[tuple[int, int, int, int]] = []
     constants: list[tuple[float, float, float]] = []
-    slot_of: list[int] = []
+    constant_slots: list[int] = []
+    variables = [-1, -1, -1]
+    slot_count = 0
 
-    def emit(name, a=0, b=0) -> int:
-        rows.append((OPCODES[name], len(rows), a, b))
-        return len(rows) - 1
+    def new_slot() -> int:
+        nonlocal slot_count
+        slot_count += 1
+        return slot_count - 1
 
     def constant(nearest, lo, hi) -> int:
         constants.append((nearest, lo, hi))
-        return emit("const", len(constants) - 1)
+        constant_slots.append(new_slot())
+        return constant_slots[-1]
 
+    def emit(name, a, b=0) -> int:
+        slot = new_slot()
+        rows.append((OPCODES[name], slot, a, b))
+        return slot
+
+    slot_of: list[int] = []
     for op, args, attr in sub.nodes:
         s = [slot_of[a] for a in args]
         if op == "var":
-            slot = emit("var", attr)
+            slot = variables[attr] = new_slot()
         elif op == "const":
             slot = constant(*attr)
         elif op == "add":
@@ -104,16 +131,17 @@ def encode(tape: Tape) -> TapeProgram:
             slot = emit(op, *s)
         slot_of.append(slot)
     return TapeProgram(np.array(rows, dtype=np.int32).reshape(-1, 4),
-                       np.array(constants, dtype=np.float64).reshape(-1, 3))
+                       np.array(constants, dtype=np.float64).reshape(-1, 3),
+                       np.array(constant_slots, dtype=np.int32), np.array(variables, dtype=np.int32),
+                       slot_of[sub.outputs[0]], slot_count)
 
 
-
-def slot_scratch(length: int) -> np.ndarray:
-    """The interpreter's slots for a program of ``length`` instructions (:data:`implc.abi.TAPE_SLOT_DOUBLES`
-    doubles each), starting on a 64-byte boundary: each slot's vectors are whole cache lines, so that
-    loading what the previous instruction stored neither splits nor misses store forwarding (unaligned,
-    the engine ran three times slower)."""
-    count = length * TAPE_SLOT_DOUBLES
+def slot_scratch(slot_count: int) -> np.ndarray:
+    """The interpreter's slots for a program of ``slot_count`` slots (:data:`implc.abi.TAPE_SLOT_DOUBLES`
+    doubles each: the interval slots, then the dual-number slots), starting on a 64-byte boundary: each
+    slot's vectors are whole cache lines, so that loading what the previous instruction stored neither
+    splits nor misses store forwarding (unaligned, the engine ran three times slower)."""
+    count = slot_count * abi.TAPE_SLOT_DOUBLES
     raw = np.empty(count * 8 + 64, dtype=np.uint8)
     start = -raw.ctypes.data % 64
     return raw[start: start + count * 8].view(np.float64)

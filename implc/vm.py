@@ -17,6 +17,8 @@ from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 
+import sympy
+
 from .errors import CompileError
 from .ir import Tape, const_attr_from_fraction
 
@@ -43,6 +45,14 @@ class VmModel:
 
     def __str__(self) -> str:
         return f"{self.name}.vm ({self.instructions} instructions)"
+
+    def __call__(self, x, y, z) -> sympy.Expr:
+        """F of this model at (x, y, z) (SymPy expressions): an application of a SymPy function that
+        :func:`implc.compile` inlines, so that a model composes with SymPy (CSG, transforms, extrusion:
+        ``Max(model(x, y, z), Abs(z) - 1/10)``)."""
+        function = sympy.Function(f"{self.name}_{self.tape.fingerprint()[:8]}")
+        function.implc_tape = self.tape  # what implc.lower inlines (the name tells tapes apart)
+        return function(x, y, z)
 
 
 def load_vm(path) -> VmModel:

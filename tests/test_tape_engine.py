@@ -171,14 +171,19 @@ def test_bad_engine_requests_are_named(kwargs, words):
         implc.compile(expr, **kwargs)
 
 
-def test_programs_are_encoded_by_arity_with_the_output_last():
+def test_programs_hold_only_the_work():
+    """Constants and coordinates have slots but no instructions; every slot is written once; the output
+    is the last instruction's slot."""
     s = implc.compile(Max(x * 3, Min(y, z**2)) - 1, engine="jit")
     program = encode(s.tape)
-    codes = program.instructions[:, 0]
-    assert set(codes) <= set(OPCODES.values())
-    assert program.instructions[-1, 1] == len(program) - 1
-    assert (program.instructions[:, 1] == np.arange(len(program))).all()  # one slot per instruction
+    assert set(program.instructions[:, 0]) <= set(OPCODES.values())
+    assert len(program) == 5  # mul, square, min, max, add (3 and -1 are constants)
+    written = list(program.instructions[:, 1]) + list(program.constant_slots) + list(program.variable_slots)
+    assert sorted(written) == list(range(program.slot_count))
+    assert program.output == program.instructions[-1, 1]
+    assert sorted(program.constants[:, 0]) == [-1.0, 3.0]
     assert program.choices == 2
+    assert encode(implc.compile(x - 0, engine="jit").tape).instructions.shape == (0, 4)  # F = x: no work
 
 
 def test_a_vm_model_runs_on_the_engine_without_missing_a_cell():

@@ -12,10 +12,10 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I64, define, for_range, local_array
+from .control import I64, define, for_range, load_at, local_array
 from .interval_rules import whole_line_if_undefined
 from .kernels import load_xyz, store_xyz
-from .tape_eval import LANES, V8, emit_tape_dual, emit_tape_interval
+from .tape_eval import LANES, V8, emit_tape_dual, emit_tape_interval, emit_tape_prefill
 from .tape_simplify import emit_tape_simplify
 from .tape_subdivision import emit_tape_normals, emit_tape_subdivide
 from .vector import DOUBLE, VectorBuilder
@@ -38,20 +38,28 @@ def build_tape_engine(directed: bool) -> str:
     """The LLVM IR text of the tape-engine module (``directed``: see
     :class:`~implc.codegen.vector.VectorBuilder`)."""
     module = ir.Module(name="implc_tape_engine")
+    prefill = emit_tape_prefill(module)
     interval = emit_tape_interval(module, directed)
     dual = emit_tape_dual(module)
     simplify = emit_tape_simplify(module)
     normals = emit_tape_normals(module, dual)
-    emit_tape_subdivide(module, interval, simplify, normals)
+    emit_tape_subdivide(module, prefill, interval, simplify, normals)
+    null_remap = ir.Constant(_P(ir.IntType(32)), None)
+
+    def whole_program(b, header):
+        return (b.inttoptr(load_at(b, header, abi.PROGRAM_INSTRUCTIONS), _P(ir.IntType(32))),
+                load_at(b, header, abi.PROGRAM_LENGTH), load_at(b, header, abi.PROGRAM_OUTPUT))
 
     fn, b = define(module, abi.TAPE_INTERVAL)
-    program, length, constants, slots, choices, lo, hi, out_lo, out_hi, n = fn.args
+    header, slots, choices, lo, hi, out_lo, out_hi, n = fn.args
     box = local_array(b, DOUBLE, 6 * LANES, "box")
     result = local_array(b, DOUBLE, 2 * LANES, "result")
+    b.call(prefill, [header, slots, null_remap])
+    program = whole_program(b, header)
     with for_range(b, b.sdiv(n, ir.Constant(I64, LANES))) as block:
         _soa(b, lo, block, box)
         _soa(b, hi, block, b.gep(box, [ir.Constant(I64, 3 * LANES)]))
-        b.call(interval, [program, length, constants, slots, choices, box, result])
+        b.call(interval, [header, *program, slots, choices, box, result])
         vresult = b.bitcast(result, _P(V8))
         f_lo, f_hi = whole_line_if_undefined(VectorBuilder(b, LANES), b.load(vresult, align=8),
                                              b.load(b.gep(vresult, [ir.Constant(I64, 1)]), align=8))
@@ -60,12 +68,14 @@ def build_tape_engine(directed: bool) -> str:
     b.ret_void()
 
     fn, b = define(module, abi.TAPE_GRADIENT)
-    program, length, constants, slots, pts, out_value, out_grad, n = fn.args
+    header, slots, pts, out_value, out_grad, n = fn.args
     points = local_array(b, DOUBLE, 3 * LANES, "points")
     result = local_array(b, DOUBLE, 4 * LANES, "result")
+    b.call(prefill, [header, slots, null_remap])
+    program = whole_program(b, header)
     with for_range(b, b.sdiv(n, ir.Constant(I64, LANES))) as block:
         _soa(b, pts, block, points)
-        b.call(dual, [program, length, constants, slots, points, result])
+        b.call(dual, [header, *program, slots, points, result])
         vresult = b.bitcast(result, _P(V8))
         _store(b, out_value, block, b.load(vresult, align=8))
         store_xyz(b, out_grad, block, [b.load(b.gep(vresult, [ir.Constant(I64, 1 + a)]), align=8) for a in range(3)],

@@ -1,28 +1,33 @@
 """The tape engine's evaluators: one native interpreter for every :class:`~implc.tape_program.TapeProgram`.
 
-Two internal functions of the tape-engine module, each a loop over the program's instructions with a
+Internal functions of the tape-engine module; the interpreters loop over a program's instructions with a
 switch on the opcode, eight lanes (the eight children of an octant, or eight points) per instruction:
 
-- ``tape_interval(program, length, constants, slots, choices, box, result) -> i8``: the enclosure of F
-  over eight boxes, by the same interval rules as the compiled kernels
-  (:class:`~implc.codegen.interval_rules.IntervalEmitter`, rule for rule), into ``result`` (lo, hi).
-  For each Min/Max instruction at position p it writes eight choice bytes at ``choices[8p..]`` (bit 0:
-  operand a may be the result over that box, bit 1: b may; NaN decides nothing) and returns the lanes in
-  which some choice was decided (bit c: box c).
-- ``tape_dual(program, length, constants, slots, points, result)``: F and its gradient at eight points,
-  forward mode (value and three partials per slot), into ``result`` (value, dx, dy, dz): for normals.
+- ``tape_prefill(header, slots, remap)``: the constants into their interval and dual-number slots, and
+  (``remap`` not NULL) each constant's and coordinate's slot as its own name for ``tape_simplify``.
+- ``tape_interval(header, instructions, length, output, slots, choices, box, result) -> i8``: the
+  enclosure of F over eight boxes (six vectors of eight: lo x, y, z, hi x, y, z), by the same interval
+  rules as the compiled kernels (:class:`~implc.codegen.interval_rules.IntervalEmitter`, rule for rule),
+  into ``result`` (lo, hi). For each Min/Max instruction at position p it writes eight choice bytes at
+  ``choices[8p..]`` (bit 0: operand a may be the result over that box, bit 1: b may; NaN decides
+  nothing) and returns the lanes in which some choice was decided (bit c: box c).
+- ``tape_dual(header, instructions, length, output, slots, points, result)``: F and its gradient at eight
+  points (three vectors), forward mode (value and three partials per slot), into ``result`` (value, dx,
+  dy, dz): for normals.
 
-``slots``: scratch of :data:`implc.abi.TAPE_SLOT_DOUBLES` doubles per slot of the full program; ``box``: six vectors of
-eight doubles (lo x, y, z, hi x, y, z); ``points``: three.
+``header`` is the full program's (:data:`implc.abi.PROGRAM_WORDS`); ``instructions``, ``length`` and
+``output`` those of the program to run (the full one, or one simplified from it). ``slots``: the scratch
+of :func:`implc.tape_program.slot_scratch` (interval slots first, dual-number slots after them).
 """
 
 from __future__ import annotations
 
 from llvmlite import ir
 
+from .. import abi
 from ..tape_program import OPCODES
 from . import elementary
-from .control import I32, I64, Local, for_range
+from .control import I32, I64, Local, for_range, if_, load_at, store_at
 from .interval_rules import IntervalEmitter
 from .vector import DOUBLE, VectorBuilder, broadcast
 
@@ -50,12 +55,58 @@ def _instruction_loop(b: ir.IRBuilder, program, length, cases):
         b.position_at_end(done)
 
 
+def _header(b, header, word):
+    return load_at(b, header, word)
+
+
+def dual_slots(b: ir.IRBuilder, header, slots):
+    """Where the dual-number slots start: after the interval slots (16 doubles per slot)."""
+    return b.gep(slots, [b.mul(_header(b, header, abi.PROGRAM_SLOT_COUNT), ir.Constant(I64, 2 * LANES))])
+
+
+def emit_tape_prefill(module: ir.Module) -> ir.Function:
+    """Define ``tape_prefill`` (see the module docstring) in ``module``."""
+    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(DOUBLE), _P(I32)]), name="implc.tape.prefill")
+    fn.linkage = "internal"
+    header, slots, remap = fn.args
+    b = ir.IRBuilder(fn.append_basic_block("entry"))
+    constants = b.inttoptr(_header(b, header, abi.PROGRAM_CONSTANTS), _P(DOUBLE))
+    constant_slots = b.inttoptr(_header(b, header, abi.PROGRAM_CONSTANT_SLOTS), _P(I32))
+    vslots, vdual = b.bitcast(slots, _P(V8)), b.bitcast(dual_slots(b, header, slots), _P(V8))
+    has_remap = b.icmp_unsigned("!=", remap, ir.Constant(_P(I32), None))
+    zero = ir.Constant(V8, [0.0] * LANES)
+    with for_range(b, _header(b, header, abi.PROGRAM_CONSTANT_COUNT)) as k:
+        slot = b.sext(load_at(b, constant_slots, k), I64)
+        row = b.mul(k, ir.Constant(I64, 3))
+        nearest, lo, hi = (broadcast(b, load_at(b, constants, b.add(row, ir.Constant(I64, c))), LANES) for c in range(3))
+        b.store(lo, b.gep(vslots, [b.mul(slot, ir.Constant(I64, 2))]), align=8)
+        b.store(hi, b.gep(vslots, [b.add(b.mul(slot, ir.Constant(I64, 2)), ir.Constant(I64, 1))]), align=8)
+        for c, value in enumerate((nearest, zero, zero, zero)):
+            b.store(value, b.gep(vdual, [b.add(b.mul(slot, ir.Constant(I64, 4)), ir.Constant(I64, c))]), align=8)
+        with if_(b, has_remap):
+            store_at(b, b.trunc(slot, I32), remap, slot)
+    for a in range(3):
+        slot = _header(b, header, abi.PROGRAM_VARIABLES + a)
+        with if_(b, b.and_(has_remap, b.icmp_signed(">=", slot, ir.Constant(I64, 0)))):
+            store_at(b, b.trunc(slot, I32), remap, slot)
+    b.ret_void()
+    return fn
+
+
+def _variables(b, header, store):
+    """``store(axis, slot)`` for each coordinate the program uses."""
+    for a in range(3):
+        slot = _header(b, header, abi.PROGRAM_VARIABLES + a)
+        with if_(b, b.icmp_signed(">=", slot, ir.Constant(I64, 0))):
+            store(a, slot)
+
+
 def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
     """Define ``tape_interval`` (see the module docstring) in ``module``."""
-    fn = ir.Function(module, ir.FunctionType(I8, [_P(I32), I64, _P(DOUBLE), _P(DOUBLE), _P(I8), _P(DOUBLE),
+    fn = ir.Function(module, ir.FunctionType(I8, [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(I8), _P(DOUBLE),
                                                   _P(DOUBLE)]), name="implc.tape.interval")
     fn.linkage = "internal"
-    program, length, constants, slots, choices, box, result = fn.args
+    header, program, length, output, slots, choices, box, result = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
     vb = VectorBuilder(b, LANES, directed)
     em = IntervalEmitter(vb)
@@ -72,15 +123,8 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
         b.store(pair[0], b.gep(vslots, [base], inbounds=True), align=8)
         b.store(pair[1], b.gep(vslots, [b.add(base, ir.Constant(I64, 1))], inbounds=True), align=8)
 
-    def var(i, out, a, c):
-        store(out, (b.load(b.gep(vbox, [a], inbounds=True), align=8),
-                    b.load(b.gep(vbox, [b.add(a, ir.Constant(I64, 3))], inbounds=True), align=8)))
-
-    def const(i, out, a, c):
-        row = b.mul(a, ir.Constant(I64, 3))
-        lo = b.load(b.gep(constants, [b.add(row, ir.Constant(I64, 1))], inbounds=True))
-        hi = b.load(b.gep(constants, [b.add(row, ir.Constant(I64, 2))], inbounds=True))
-        store(out, (broadcast(b, lo, LANES), broadcast(b, hi, LANES)))
+    _variables(b, header, lambda a, slot: store(slot, (b.load(b.gep(vbox, [ir.Constant(I64, a)]), align=8),
+                                                        b.load(b.gep(vbox, [ir.Constant(I64, 3 + a)]), align=8))))
 
     def unary(rule, attr=None):
         return lambda i, out, a, c: store(out, rule([load(a)], attr))
@@ -105,16 +149,14 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
             decided.set(b.or_(decided.get(), b.bitcast(b.or_(x_only, y_only), I8)))
         return emit
 
-    cases = {"var": var, "const": const,
-             "neg": unary(em.i_neg), "abs": unary(em.i_abs), "sqrt": unary(em.i_sqrt), "exp": unary(em.i_exp),
+    cases = {"neg": unary(em.i_neg), "abs": unary(em.i_abs), "sqrt": unary(em.i_sqrt), "exp": unary(em.i_exp),
              "log": unary(em.i_log), "sin": unary(em.i_sin), "cos": unary(em.i_cos),
              "square": unary(em.i_powi, 2), "cube": unary(em.i_powi, 3), "fourth": unary(em.i_powi, 4),
              "add": binary(em.i_add, False), "add_nonneg": binary(em.i_add, True), "sub": binary(em.i_sub),
              "mul": binary(em.i_mul), "div": binary(em.i_div), "min": choice("min"), "max": choice("max")}
     assert set(cases) == set(OPCODES), "every opcode has an interval case"
     _instruction_loop(b, program, length, cases)
-    last = b.gep(program, [b.add(b.mul(b.sub(length, ir.Constant(I64, 1)), ir.Constant(I64, 4)), ir.Constant(I64, 1))])
-    lo, hi = load(b.zext(b.load(last), I64))
+    lo, hi = load(output)
     vresult = b.bitcast(result, _P(V8))
     b.store(lo, vresult, align=8)
     b.store(hi, b.gep(vresult, [ir.Constant(I64, 1)]), align=8)
@@ -124,13 +166,13 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
 
 def emit_tape_dual(module: ir.Module) -> ir.Function:
     """Define ``tape_dual`` (see the module docstring) in ``module``."""
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I32), I64, _P(DOUBLE), _P(DOUBLE), _P(DOUBLE),
+    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE),
                                                               _P(DOUBLE)]), name="implc.tape.dual")
     fn.linkage = "internal"
-    program, length, constants, slots, points, result = fn.args
+    header, program, length, output, slots, points, result = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
     vb = VectorBuilder(b, LANES)
-    vslots, vpoints = b.bitcast(slots, _P(V8)), b.bitcast(points, _P(V8))
+    vslots, vpoints = b.bitcast(dual_slots(b, header, slots), _P(V8)), b.bitcast(points, _P(V8))
     zero, one = vb.splat(0.0), vb.splat(1.0)
 
     def load(slot):
@@ -146,14 +188,8 @@ def emit_tape_dual(module: ir.Module) -> ir.Function:
         """The dual number of f(x) with f(x) = value and f'(x) = scale."""
         return [value] + [vb.mul(scale, d) for d in x[1:]]
 
-    def var(i, out, a, c):
-        store(out, [b.load(b.gep(vpoints, [a], inbounds=True), align=8),
-                    *[vb.select(broadcast(b, b.icmp_unsigned("==", a, ir.Constant(I64, k)), LANES), one, zero)
-                      for k in range(3)]])
-
-    def const(i, out, a, c):
-        nearest = b.load(b.gep(constants, [b.mul(a, ir.Constant(I64, 3))], inbounds=True))
-        store(out, [broadcast(b, nearest, LANES), zero, zero, zero])
+    _variables(b, header, lambda a, slot: store(slot, [b.load(b.gep(vpoints, [ir.Constant(I64, a)]), align=8)]
+                                                 + [one if k == a else zero for k in range(3)]))
 
     def unary(rule):
         def emit(i, out, a, c):
@@ -198,8 +234,7 @@ def emit_tape_dual(module: ir.Module) -> ir.Function:
         q = vb.div(x[0], y[0])
         return [q] + [vb.div(vb.sub(dx, vb.mul(q, dy)), y[0]) for dx, dy in zip(x[1:], y[1:])]
 
-    cases = {"var": var, "const": const,
-             "neg": unary(lambda x: [vb.neg(v) for v in x]),
+    cases = {"neg": unary(lambda x: [vb.neg(v) for v in x]),
              "abs": unary(lambda x: chain(vb.fabs(x[0]), vb.copysign(one, x[0]), x)),
              "sqrt": unary(sqrt), "exp": unary(exp),
              "log": unary(lambda x: chain(elementary.log(vb, x[0]), vb.div(one, x[0]), x)),
@@ -212,8 +247,7 @@ def emit_tape_dual(module: ir.Module) -> ir.Function:
              "mul": binary(mul), "div": binary(div), "min": binary(pick("min")), "max": binary(pick("max"))}
     assert set(cases) == set(OPCODES), "every opcode has a dual-number case"
     _instruction_loop(b, program, length, cases)
-    last = b.gep(program, [b.add(b.mul(b.sub(length, ir.Constant(I64, 1)), ir.Constant(I64, 4)), ir.Constant(I64, 1))])
-    dual = load(b.zext(b.load(last), I64))
+    dual = load(output)
     vresult = b.bitcast(result, _P(V8))
     for k, value in enumerate(dual):
         b.store(value, b.gep(vresult, [ir.Constant(I64, k)]), align=8)

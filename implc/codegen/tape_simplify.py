@@ -1,13 +1,15 @@
 """The tape engine's per-region simplification: the program one box's descendants run.
 
-``tape_simplify(program, length, choices, lane, out, need, mark, remap) -> length'`` (internal): given
-the choices ``tape_interval`` wrote for box ``lane``, every Min/Max whose choice was decided becomes an
-alias of its winning operand, and every instruction that only fed the losing one is dropped.
+``tape_simplify(program, length, output, choices, lane, out, need, mark, remap, out_output) -> length'``
+(internal): given the choices ``tape_interval`` wrote for box ``lane``, every Min/Max whose choice was
+decided becomes an alias of its winning operand, and every instruction that only fed the losing one is
+dropped; the new program's output slot goes to ``out_output``.
 
-Two passes, both linear in the program: backward from the last instruction, marking what the result
+Two passes, both linear in the program: backward from the output, marking what the result
 needs (``need``, one byte per slot) and what each instruction becomes (``mark``: dropped, kept, or an
 alias of its a or b operand); forward, writing the kept instructions with their operands renamed through
-the aliases (``remap``, one int32 per slot). Kept instructions keep their slots, so constants and the
+the aliases (``remap``, one int32 per slot; constants and coordinates, which no instruction writes, name
+themselves: :func:`~implc.codegen.tape_eval.emit_tape_prefill` sets them). Kept instructions keep their slots, so constants and the
 interval rules see exactly what they saw in the full program; the result is bit for bit the full
 program's wherever the choices hold (a decided Min/Max returns its winning operand's enclosure exactly).
 """
@@ -16,7 +18,7 @@ from __future__ import annotations
 
 from llvmlite import ir
 
-from ..tape_program import FIRST_BINARY, FIRST_UNARY, OPCODES
+from ..tape_program import FIRST_BINARY, OPCODES
 from .control import I32, I64, Local, const, for_range, if_, load_at, store_at
 from .tape_eval import I8, LANES
 
@@ -26,10 +28,10 @@ _P = ir.PointerType
 
 def emit_tape_simplify(module: ir.Module) -> ir.Function:
     """Define ``tape_simplify`` (see the module docstring) in ``module``."""
-    fn = ir.Function(module, ir.FunctionType(I64, [_P(I32), I64, _P(I8), I64, _P(I32), _P(I8), _P(I8), _P(I32)]),
-                     name="implc.tape.simplify")
+    fn = ir.Function(module, ir.FunctionType(I64, [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I8), _P(I8), _P(I32),
+                                                   _P(I64)]), name="implc.tape.simplify")
     fn.linkage = "internal"
-    program, length, choices, lane, out, need, mark, remap = fn.args
+    program, length, output, choices, lane, out, need, mark, remap, out_output = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
 
     def field(i, k):
@@ -37,8 +39,8 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
 
     with for_range(b, length) as i:  # nothing is needed yet
         store_at(b, const(I8, 0), need, field(i, 1))
+    store_at(b, const(I8, 1), need, output)
     last = b.sub(length, const(I64, 1))
-    store_at(b, const(I8, 1), need, field(last, 1))
 
     with for_range(b, length) as k:  # backward: i = length - 1 - k
         i = b.sub(last, k)
@@ -51,8 +53,7 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
             with b.if_else(b.icmp_unsigned("==", choice, const(I8, 3))) as (both, one):
                 with both:
                     store_at(b, const(I8, KEEP), mark, i)
-                    with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_UNARY))):
-                        store_at(b, const(I8, 1), need, a)
+                    store_at(b, const(I8, 1), need, a)
                     with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))):
                         store_at(b, const(I8, 1), need, c)
                 with one:
@@ -67,11 +68,10 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
         with if_(b, b.icmp_unsigned("==", m, const(I8, KEEP))):
             n = count.get()
             row = b.mul(n, const(I64, 4))
-            nullary = b.icmp_unsigned("<", code, const(I64, FIRST_UNARY))
             binary = b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))
             store_at(b, b.trunc(code, I32), out, row)
             store_at(b, b.trunc(out_slot, I32), out, b.add(row, const(I64, 1)))
-            store_at(b, b.select(nullary, b.trunc(a, I32), load_at(b, remap, a)), out, b.add(row, const(I64, 2)))
+            store_at(b, load_at(b, remap, a), out, b.add(row, const(I64, 2)))
             store_at(b, b.select(binary, load_at(b, remap, c), b.trunc(c, I32)), out, b.add(row, const(I64, 3)))
             store_at(b, b.trunc(out_slot, I32), remap, out_slot)
             count.set(b.add(n, const(I64, 1)))
@@ -79,5 +79,6 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
             store_at(b, load_at(b, remap, a), remap, out_slot)
         with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_B))):
             store_at(b, load_at(b, remap, c), remap, out_slot)
+    b.store(b.sext(load_at(b, remap, output), I64), out_output)
     b.ret(count.get())
     return fn

@@ -29,12 +29,12 @@ _P = ir.PointerType
 
 
 def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
-    """``tape_normals(program, length, constants, slots, leaf_geom, coords, n, out)`` (internal): unit
-    normals of ``n`` voxels, the gradient from ``dual`` over ``program``."""
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I32), I64, _P(DOUBLE), _P(DOUBLE), _P(DOUBLE),
+    """``tape_normals(header, program, length, output, slots, leaf_geom, coords, n, out)`` (internal): unit
+    normals of ``n`` voxels, the gradient from ``dual`` over the program given."""
+    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE),
                                                               _P(I32), I64, _P(FLOAT)]), name="implc.tape.normals")
     fn.linkage = "internal"
-    program, length, constants, slots, leaf_geom, coords, n, out = fn.args
+    header, program, length, output, slots, leaf_geom, coords, n, out = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
     points = local_array(b, DOUBLE, 3 * LANES, "points")
     result = local_array(b, DOUBLE, 4 * LANES, "result")
@@ -44,7 +44,7 @@ def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
         """F and its gradient at the eight points of ``interleaved`` (x, y, z per point) into result."""
         for a, axis in enumerate(load_xyz(b, interleaved, const(I64, 0), LANES)):
             b.store(axis, b.gep(vpoints, [const(I64, a)]), align=8)
-        b.call(dual, [program, length, constants, slots, points, result])
+        b.call(dual, [header, program, length, output, slots, points, result])
 
     def gradient_at(pts, values, grad, live):
         dual_at(pts)
@@ -63,10 +63,14 @@ def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
     return fn
 
 
-def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.Function, normals: ir.Function):
+def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Function, simplify: ir.Function,
+                        normals: ir.Function):
     fn, b = define(module, abi.TAPE_SUBDIVIDE)
-    (program, length, constants, prune, geom, state, frames, tapes, choices, slots, marks, remap, out,
-     out_normals, capacity, stats, cancel) = fn.args
+    (header, prune, geom, state, frames, tapes, choices, slots, marks, remap, out, out_normals, capacity, stats,
+     cancel) = fn.args
+    program = b.inttoptr(load_at(b, header, abi.PROGRAM_INSTRUCTIONS), _P(I32))
+    length = load_at(b, header, abi.PROGRAM_LENGTH)
+    output = load_at(b, header, abi.PROGRAM_OUTPUT)
     box = local_array(b, DOUBLE, 6 * LANES, "box")
     result = local_array(b, DOUBLE, 2 * LANES, "result")
     leaf_geom = local_array(b, DOUBLE, 6, "leaf_geom")
@@ -75,7 +79,7 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
     for a in range(3):
         store_at(b, load_at(b, geom, a), leaf_geom, a)
         store_at(b, load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))), leaf_geom, 3 + a)
-    need, mark = marks, b.gep(marks, [length])
+    need, mark = marks, b.gep(marks, [load_at(b, header, abi.PROGRAM_SLOT_COUNT)])
     count = Local(b, I64, 0, "count")
     normals_done = Local(b, I64, 0, "normals_done")  # voxels before this one have their normals
     # normals come from the program two levels above the leaves (valid for all its voxels, eight at a time)
@@ -90,9 +94,16 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
     def length_of(level):
         return load_at(b, state, b.add(level, const(I64, abi.TAPE_PROGRAMS + abi.TAPE_LEVELS)))
 
-    def set_program(level, ptr, n):
+    def output_of(level):
+        return load_at(b, state, b.add(level, const(I64, abi.TAPE_PROGRAMS + 2 * abi.TAPE_LEVELS)))
+
+    def output_at(level):
+        return at(b, state, b.add(level, const(I64, abi.TAPE_PROGRAMS + 2 * abi.TAPE_LEVELS)))
+
+    def set_program(level, ptr, n, result_slot):
         store_at(b, b.ptrtoint(ptr, I64), state, b.add(level, const(I64, abi.TAPE_PROGRAMS)))
         store_at(b, n, state, b.add(level, const(I64, abi.TAPE_PROGRAMS + abi.TAPE_LEVELS)))
+        b.store(result_slot, output_at(level))
 
     def frame(level, k):
         return at(b, frames, b.add(b.mul(level, const(I64, abi.TAPE_FRAME_WORDS)), const(I64, k)))
@@ -114,7 +125,8 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
             i_lo, i_hi = b.uitofp(index, V8), b.uitofp(b.add(index, ir.Constant(ivec, [1] * LANES)), V8)
             b.store(b.fsub(b.fadd(origin, b.fmul(i_lo, h)), pad), b.gep(vbox, [const(I64, a)]), align=8)
             b.store(b.fadd(b.fadd(origin, b.fmul(i_hi, h)), pad), b.gep(vbox, [const(I64, 3 + a)]), align=8)
-        return b.call(interval, [program_of(level), length_of(level), constants, slots, choices_of(level), box, result])
+        return b.call(interval, [header, program_of(level), length_of(level), output_of(level), slots,
+                                 choices_of(level), box, result])
 
     def program_for_child(level, c, decided):
         """The program of child ``c`` (i32) of the octant at ``level``: simplified by its choices where one
@@ -123,15 +135,16 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
         with b.if_else(b.and_(b.icmp_signed("!=", prune, const(I64, 0)), decided)) as (simplified, shared):
             with simplified:
                 target = b.gep(tapes, [b.mul(b.mul(child, length), const(I64, 4))])
-                n = b.call(simplify, [program_of(level), length_of(level), choices_of(level), b.zext(c, I64), target,
-                                      need, mark, remap])
-                set_program(child, target, n)
+                n = b.call(simplify, [program_of(level), length_of(level), output_of(level), choices_of(level),
+                                      b.zext(c, I64), target, need, mark, remap, output_at(child)])
+                set_program(child, target, n, b.load(output_at(child)))
             with shared:
-                set_program(child, program_of(level), length_of(level))
+                set_program(child, program_of(level), length_of(level), output_of(level))
 
     with if_(b, b.icmp_signed("==", load_at(b, state, abi.TAPE_PHASE), const(I64, 0))):
         # a new task: its program is the full one simplified down the path from the root to its octant
-        set_program(const(I64, 0), program, length)
+        b.call(prefill, [header, slots, remap])  # constants, and the names simplify renames through
+        set_program(const(I64, 0), program, length, output)
         task_cell = [b.load(frame(task_level, a)) for a in range(3)]
         with for_range(b, task_level) as level:
             above = b.trunc(b.sub(task_level, level), I32)  # the ancestor at ``level``: the cell >> above
@@ -155,7 +168,8 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
             pending = b.and_(pending, const(I64, -LANES))
         with if_(b, b.icmp_signed(">", pending, const(I64, 0))):
             offset = b.mul(first, const(I64, 3))
-            b.call(normals, [program_of(normals_level), length_of(normals_level), constants, slots, leaf_geom,
+            b.call(normals, [header, program_of(normals_level), length_of(normals_level), output_of(normals_level), slots,
+                             leaf_geom,
                              b.gep(out, [offset]), pending, b.gep(out_normals, [offset])])
             normals_done.set(b.add(first, pending))
 
@@ -163,7 +177,7 @@ def emit_tape_subdivide(module: ir.Module, interval: ir.Function, simplify: ir.F
         """Enclose the children of the octant in frame ``level``; keep those that may meet the surface
         (the leaves: write them with their normals)."""
         child = b.add(level, const(I64, 1))
-        own, own_length = program_of(level), length_of(level)
+        own_length = length_of(level)
         decided = enclose_children(level, [b.load(frame(level, a)) for a in range(3)])
         vresult = b.bitcast(result, _P(V8))
         f_lo, f_hi = b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
