@@ -119,6 +119,8 @@ their count, the output slot; the constant table's address, its slots' address, 
 of x, y, z (three words, -1 where unused); then the slot count."""
 PROGRAM_SLOT_COUNT = 9
 PROGRAM_WORDS = 10
+INSTRUCTION_WORDS = 5
+"""A tape instruction (int32): opcode, output slot, three operand slots (unused ones 0)."""
 TAPE_LEVELS = MAX_DEPTH + 2
 """Levels the tape subdivider keeps a program, choices and a frame for (0 to MAX_DEPTH + 1)."""
 TAPE_FRAME_WORDS = 5

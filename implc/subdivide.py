@@ -134,7 +134,7 @@ class _Worker:
             n, slots = max(len(program), 1), program.slot_count
             self.tape_state = np.zeros(abi.TAPE_STATE_WORDS, dtype=np.int64)
             self.frames = np.zeros(abi.TAPE_LEVELS * abi.TAPE_FRAME_WORDS, dtype=np.int32)
-            self.tapes = np.empty(abi.TAPE_LEVELS * n * 4, dtype=np.int32)  # untouched levels cost no memory
+            self.tapes = np.empty(abi.TAPE_LEVELS * n * abi.INSTRUCTION_WORDS, dtype=np.int32)  # untouched: free
             self.choices = np.empty(abi.TAPE_LEVELS * n * 8, dtype=np.uint8)
             self.slots = slot_scratch(slots)
             self.marks = np.empty(slots + n, dtype=np.uint8)

@@ -19,6 +19,7 @@ from .codegen.kernels import WIDTH, WIDTHS, build_mean_value_module, build_modul
 from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape
+from .regions import plan_regions
 from .jit import NativeModule, host_has_avx512
 from .lower import lower
 from .runtime import Runtime
@@ -74,8 +75,9 @@ TAPE_ABOVE = 1000
 
 def choose_engine(tape: Tape, engine: str, vector_width: int = WIDTH) -> str:
     """"jit" or "tape" for ``engine`` ("auto": the tape engine where it can run the tape and the tape has a
-    Min/Max below the top-level chain, which only the engine prunes, or is large). The engine's vectors
-    are eight wide: another ``vector_width`` means the compiled kernels."""
+    Min/Max or a select that only the engine prunes, i.e. neither in the top-level chain nor a blend term
+    of a top-level sum, or is large). The engine's vectors are eight wide: another ``vector_width`` means
+    the compiled kernels."""
     if engine == "tape":
         if unsupported_ops(tape):
             raise CompileError(f"engine='tape' cannot run {', '.join(sorted(unsupported_ops(tape)))} "
@@ -86,25 +88,21 @@ def choose_engine(tape: Tape, engine: str, vector_width: int = WIDTH) -> str:
         return engine
     if unsupported_ops(tape) or vector_width != WIDTH:
         return "jit"
-    out = tape.outputs[0]
-    top = tape.nodes[out][0]
-    chain = {out}
-    stack = [out]
-    while stack:  # the top-level Min/Max chain, which the compiled kernels prune themselves
-        for a in tape.nodes[stack.pop()][1]:
-            if top in ("min", "max") and tape.nodes[a][0] == top and a not in chain:
-                chain.add(a)
-                stack.append(a)
-    nested = any(op in ("min", "max") and i not in chain for i, (op, _, _) in enumerate(tape.nodes))
+    plan = plan_regions(tape)  # what the compiled kernels prune themselves: a top-level chain, blend terms
+    handled = set(plan.after) | {t.root for t in plan.terms if t.kind == "sum"}
+    nested = any(op in CHOICE_NODES and i not in handled for i, (op, _, _) in enumerate(tape.nodes))
     return "tape" if nested or len(tape) > TAPE_ABOVE else "jit"
+
+
+CHOICE_NODES = ("min", "max", "select_lt", "select_le")
 
 
 class Surface:
     """A compiled implicit surface F(x, y, z) = 0 (F < 0 inside) over a bounding box.
 
     ``engine``: "jit" (kernels compiled for this surface by LLVM, on first use) or "tape" (the shared tape
-    engine runs the surface's :class:`~implc.tape_program.TapeProgram`, pruning every decided Min/Max per
-    octant; compiled kernels are still built on first use by what needs them, e.g. the mean-value form).
+    engine runs the surface's :class:`~implc.tape_program.TapeProgram`, pruning every decided Min/Max
+    and select per octant; compiled kernels are still built on first use by what needs them, e.g. the mean-value form).
     """
 
     def __init__(self, expr: sympy.Expr, bounds, tape: Tape, vector_width: int = WIDTH, directed: bool = False,

@@ -9,16 +9,17 @@ and MPR do. This module owns the encoding both sides agree on:
 - every node of the tape has a slot (its index). Constants and the coordinates x, y, z are not
   instructions: their slots are filled before a program runs (constants once, coordinates per batch of
   boxes or points), so a program is only the work.
-- an instruction is four int32: ``opcode, out, a, b``: the result goes to slot ``out``, the operands
-  come from slots ``a`` and ``b`` (unary: b unused). The result of the program is slot ``output`` (a
+- an instruction is :data:`implc.abi.INSTRUCTION_WORDS` int32: ``opcode, out, a, b, c``: the result
+  goes to slot ``out``, the operands come from slots ``a``, ``b``, ``c`` (as many as the op takes; a
+  select reads its condition from a and its branches from b and c). The result of the program is slot ``output`` (a
   simplified program has its own: a decided Min/Max at the top makes its winner the output).
 - the header (:data:`implc.abi.PROGRAM_WORDS` int64) is what native code receives: addresses and
   counts of the instructions, the constant table (rows ``nearest, lo, hi`` with lo <= value <= hi,
   certified as in :data:`implc.ir.OPS`) and its slots, the slots of x, y and z (-1: unused), the slot
   count.
 
-Opcodes are numbered by arity, unary first, so that native code tells from one comparison whether an
-instruction reads a second operand.
+Opcodes are numbered by arity, unary first, so that native code tells from two comparisons how many
+operands an instruction reads.
 """
 
 from __future__ import annotations
@@ -32,23 +33,29 @@ from .ir import Tape
 
 UNARY = ("neg", "abs", "sqrt", "exp", "log", "sin", "cos", "square", "cube", "fourth")
 BINARY = ("add", "add_nonneg", "sub", "mul", "div", "min", "max")
-OPCODES = {name: code for code, name in enumerate(UNARY + BINARY)}
+TERNARY = ("select_lt", "select_le")
+OPCODES = {name: code for code, name in enumerate(UNARY + BINARY + TERNARY)}
 """Opcode of each instruction kind."""
 FIRST_BINARY = len(UNARY)
-CHOICE_OPS = ("min", "max")
-"""The instructions whose choice an interval can decide (bit 0: operand a may be the result; bit 1: b)."""
+FIRST_TERNARY = len(UNARY) + len(BINARY)
+CHOICE_OPS = ("min", "max", "select_lt", "select_le")
+"""The instructions whose choice an interval can decide, between two value operands (min, max: a and
+b; selects: b where the condition holds, c where it fails): bit 0 of a choice byte says the first may
+be the result over a box, bit 1 the second."""
 
 _POWERS = {2: "square", 3: "cube", 4: "fourth"}
-_DIRECT = {"neg", "abs", "sqrt", "exp", "log", "sin", "cos", "sub", "mul", "div", "min", "max"}
+_DIRECT = {"neg", "abs", "sqrt", "exp", "log", "sin", "cos", "sub", "mul", "div", "min", "max", "select_lt",
+           "select_le"}
 SUPPORTED_OPS = frozenset(_DIRECT | {"var", "const", "add", "scale", "powi"})
-"""Tape ops the engine runs (``powi`` for exponents 2 to 4); a tape with any other op is compiled."""
+"""Tape ops the engine runs (``powi`` for exponents 2 to 4, selects of value tapes: not the "jump" of a
+derivative); a tape with any other op is compiled."""
 
 
 @dataclass(frozen=True, eq=False)
 class TapeProgram:
     """A tape encoded for the engine (see the module docstring)."""
 
-    instructions: np.ndarray  # (n, 4) int32
+    instructions: np.ndarray  # (n, INSTRUCTION_WORDS) int32
     constants: np.ndarray  # (m, 3) float64: nearest, lo, hi
     constant_slots: np.ndarray  # (m,) int32
     variable_slots: np.ndarray  # (3,) int32, -1 where the coordinate is unused
@@ -82,7 +89,7 @@ def unsupported_ops(tape: Tape) -> set[str]:
     needs) that the engine cannot run."""
     bad = set()
     for op, _, attr in (tape.nodes if len(tape.outputs) == 1 else tape.subtape(tape.outputs[0]).nodes):
-        if op not in SUPPORTED_OPS or (op == "powi" and attr not in _POWERS):
+        if op not in SUPPORTED_OPS or (op == "powi" and attr not in _POWERS) or attr == "jump":
             bad.add(f"powi({attr})" if op == "powi" else op)
     return bad
 
@@ -93,7 +100,7 @@ def encode(tape: Tape) -> TapeProgram:
     if bad:
         raise ValueError(f"the tape engine cannot run {', '.join(sorted(bad))}")
     sub = tape.subtape(tape.outputs[0])
-    rows: list[tuple[int, int, int, int]] = []
+    rows: list[tuple[int, ...]] = []
     constants: list[tuple[float, float, float]] = []
     constant_slots: list[int] = []
     variables = [-1, -1, -1]
@@ -109,9 +116,9 @@ def encode(tape: Tape) -> TapeProgram:
         constant_slots.append(new_slot())
         return constant_slots[-1]
 
-    def emit(name, a, b=0) -> int:
+    def emit(name, a, b=0, c=0) -> int:
         slot = new_slot()
-        rows.append((OPCODES[name], slot, a, b))
+        rows.append((OPCODES[name], slot, a, b, c))
         return slot
 
     slot_of: list[int] = []
@@ -130,7 +137,7 @@ def encode(tape: Tape) -> TapeProgram:
         else:
             slot = emit(op, *s)
         slot_of.append(slot)
-    return TapeProgram(np.array(rows, dtype=np.int32).reshape(-1, 4),
+    return TapeProgram(np.array(rows, dtype=np.int32).reshape(-1, abi.INSTRUCTION_WORDS),
                        np.array(constants, dtype=np.float64).reshape(-1, 3),
                        np.array(constant_slots, dtype=np.int32), np.array(variables, dtype=np.int32),
                        slot_of[sub.outputs[0]], slot_count)

@@ -38,19 +38,20 @@ _P = ir.PointerType
 
 
 def _instruction_loop(b: ir.IRBuilder, program, length, cases):
-    """``for each instruction: switch (opcode) { case op: cases[op](out, a, b) }``; every case's emitter
-    runs with the builder in its own block."""
+    """``for each instruction: switch (opcode) { case op: cases[op](i, out, a, b, c) }``; every case's
+    emitter runs with the builder in its own block."""
     with for_range(b, length) as i:
-        row = b.bitcast(b.gep(program, [b.mul(i, ir.Constant(I64, 4))], inbounds=True), _P(ir.VectorType(I32, 4)))
-        fields = b.load(row, align=4)
+        row = b.gep(program, [b.mul(i, ir.Constant(I64, abi.INSTRUCTION_WORDS))], inbounds=True)
+        fields = b.load(b.bitcast(row, _P(ir.VectorType(I32, 4))), align=4)
         code, out, a, c = [b.zext(b.extract_element(fields, ir.Constant(I32, k)), I64) for k in range(4)]
+        d = b.zext(b.load(b.gep(row, [ir.Constant(I64, 4)])), I64)
         done = b.append_basic_block("op.done")
         switch = b.switch(b.trunc(code, I32), done)
         for name, emit in cases.items():
             block = b.append_basic_block(f"op.{name}")
             switch.add_case(ir.Constant(I32, OPCODES[name]), block)
             b.position_at_end(block)
-            emit(i, out, a, c)
+            emit(i, out, a, c, d)
             b.branch(done)
         b.position_at_end(done)
 
@@ -127,19 +128,27 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
                                                         b.load(b.gep(vbox, [ir.Constant(I64, 3 + a)]), align=8))))
 
     def unary(rule, attr=None):
-        return lambda i, out, a, c: store(out, rule([load(a)], attr))
+        return lambda i, out, a, c, d: store(out, rule([load(a)], attr))
 
     def binary(rule, attr=None):
-        return lambda i, out, a, c: store(out, rule([load(a), load(c)], attr))
+        return lambda i, out, a, c, d: store(out, rule([load(a), load(c)], attr))
 
     def choice(op):
-        def emit(i, out, a, c):
-            x, y = load(a), load(c)
-            store(out, (em.i_min if op == "min" else em.i_max)([x, y], None))
+        def emit(i, out, a, c, d):
+            zero = vb.splat(0.0)
+            if op in ("min", "max"):
+                x, y = load(a), load(c)
+                store(out, (em.i_min if op == "min" else em.i_max)([x, y], None))
             if op == "min":  # x is the minimum wherever x <= y throughout: x.hi <= y.lo
                 x_only, y_only = vb.cmp("<=", x[1], y[0]), vb.cmp("<=", y[1], x[0])
-            else:
+            elif op == "max":
                 x_only, y_only = vb.cmp(">=", x[0], y[1]), vb.cmp(">=", y[0], x[1])
+            else:  # a select: the branch its condition takes over the whole box (never where it may be NaN)
+                g = load(a)
+                store(out, getattr(em, f"i_{op}")([g, load(c), load(d)], None))
+                strict = op == "select_lt"
+                x_only = vb.cmp("<" if strict else "<=", g[1], zero)
+                y_only = vb.cmp(">=" if strict else ">", g[0], zero)
             y_only = b.and_(y_only, b.not_(x_only))
             vi8 = ir.VectorType(I8, LANES)
             bits = b.select(x_only, ir.Constant(vi8, [1] * LANES),
@@ -153,7 +162,8 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
              "log": unary(em.i_log), "sin": unary(em.i_sin), "cos": unary(em.i_cos),
              "square": unary(em.i_powi, 2), "cube": unary(em.i_powi, 3), "fourth": unary(em.i_powi, 4),
              "add": binary(em.i_add, False), "add_nonneg": binary(em.i_add, True), "sub": binary(em.i_sub),
-             "mul": binary(em.i_mul), "div": binary(em.i_div), "min": choice("min"), "max": choice("max")}
+             "mul": binary(em.i_mul), "div": binary(em.i_div), "min": choice("min"), "max": choice("max"),
+             "select_lt": choice("select_lt"), "select_le": choice("select_le")}
     assert set(cases) == set(OPCODES), "every opcode has an interval case"
     _instruction_loop(b, program, length, cases)
     lo, hi = load(output)
@@ -192,13 +202,21 @@ def emit_tape_dual(module: ir.Module) -> ir.Function:
                                                  + [one if k == a else zero for k in range(3)]))
 
     def unary(rule):
-        def emit(i, out, a, c):
+        def emit(i, out, a, c, d):
             store(out, rule(load(a)))
         return emit
 
     def binary(rule):
-        def emit(i, out, a, c):
+        def emit(i, out, a, c, d):
             store(out, rule(load(a), load(c)))
+        return emit
+
+    def select(op):
+        def emit(i, out, a, c, d):  # the branch the condition takes at the point; NaN where it is NaN
+            g, t, f = load(a), load(c), load(d)
+            taken = vb.cmp("<" if op == "select_lt" else "<=", g[0], zero)
+            undefined = vb.isnan(g[0])
+            store(out, [vb.select(undefined, vb.splat(float("nan")), vb.select(taken, p, q)) for p, q in zip(t, f)])
         return emit
 
     def sqrt(x):
@@ -244,7 +262,8 @@ def emit_tape_dual(module: ir.Module) -> ir.Function:
              "add": binary(lambda x, y: [vb.add(p, q) for p, q in zip(x, y)]),
              "add_nonneg": binary(lambda x, y: [vb.add(p, q) for p, q in zip(x, y)]),
              "sub": binary(lambda x, y: [vb.sub(p, q) for p, q in zip(x, y)]),
-             "mul": binary(mul), "div": binary(div), "min": binary(pick("min")), "max": binary(pick("max"))}
+             "mul": binary(mul), "div": binary(div), "min": binary(pick("min")), "max": binary(pick("max")),
+             "select_lt": select("select_lt"), "select_le": select("select_le")}
     assert set(cases) == set(OPCODES), "every opcode has a dual-number case"
     _instruction_loop(b, program, length, cases)
     dual = load(output)

@@ -2,12 +2,12 @@
 
 ``tape_simplify(program, length, output, choices, lane, out, need, mark, remap, out_output) -> length'``
 (internal): given the choices ``tape_interval`` wrote for box ``lane``, every Min/Max whose choice was
-decided becomes an alias of its winning operand, and every instruction that only fed the losing one is
+decided becomes an alias of its winning operand (a select: of the branch its condition takes), and every instruction that only fed the losing one is
 dropped; the new program's output slot goes to ``out_output``.
 
 Two passes, both linear in the program: backward from the output, marking what the result
 needs (``need``, one byte per slot) and what each instruction becomes (``mark``: dropped, kept, or an
-alias of its a or b operand); forward, writing the kept instructions with their operands renamed through
+alias of its first or second value operand); forward, writing the kept instructions with their operands renamed through
 the aliases (``remap``, one int32 per slot; constants and coordinates, which no instruction writes, name
 themselves: :func:`~implc.codegen.tape_eval.emit_tape_prefill` sets them). Kept instructions keep their slots, so constants and the
 interval rules see exactly what they saw in the full program; the result is bit for bit the full
@@ -18,11 +18,12 @@ from __future__ import annotations
 
 from llvmlite import ir
 
-from ..tape_program import FIRST_BINARY, OPCODES
+from .. import abi
+from ..tape_program import FIRST_BINARY, FIRST_TERNARY, OPCODES
 from .control import I32, I64, Local, const, for_range, if_, load_at, store_at
 from .tape_eval import I8, LANES
 
-DROP, KEEP, ALIAS_A, ALIAS_B = 0, 1, 2, 3
+DROP, KEEP, ALIAS_FIRST, ALIAS_SECOND = 0, 1, 2, 3
 _P = ir.PointerType
 
 
@@ -35,7 +36,7 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
     b = ir.IRBuilder(fn.append_basic_block("entry"))
 
     def field(i, k):
-        return b.zext(load_at(b, program, b.add(b.mul(i, const(I64, 4)), const(I64, k))), I64)
+        return b.zext(load_at(b, program, b.add(b.mul(i, const(I64, abi.INSTRUCTION_WORDS)), const(I64, k))), I64)
 
     with for_range(b, length) as i:  # nothing is needed yet
         store_at(b, const(I8, 0), need, field(i, 1))
@@ -44,11 +45,13 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
 
     with for_range(b, length) as k:  # backward: i = length - 1 - k
         i = b.sub(last, k)
-        code, out_slot, a, c = (field(i, f) for f in range(4))
+        code, out_slot, a, c, d = (field(i, f) for f in range(5))
+        ternary = b.icmp_unsigned(">=", code, const(I64, FIRST_TERNARY))
+        first, second = b.select(ternary, c, a), b.select(ternary, d, c)  # the value operands a choice picks from
         store_at(b, const(I8, DROP), mark, i)
         with if_(b, b.icmp_unsigned("!=", load_at(b, need, out_slot), const(I8, 0))):
-            is_choice = b.or_(b.icmp_unsigned("==", code, const(I64, OPCODES["min"])),
-                              b.icmp_unsigned("==", code, const(I64, OPCODES["max"])))
+            is_choice = b.or_(ternary, b.or_(b.icmp_unsigned("==", code, const(I64, OPCODES["min"])),
+                                             b.icmp_unsigned("==", code, const(I64, OPCODES["max"]))))
             choice = b.select(is_choice, load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane)), const(I8, 3))
             with b.if_else(b.icmp_unsigned("==", choice, const(I8, 3))) as (both, one):
                 with both:
@@ -56,29 +59,33 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
                     store_at(b, const(I8, 1), need, a)
                     with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))):
                         store_at(b, const(I8, 1), need, c)
+                    with if_(b, ternary):
+                        store_at(b, const(I8, 1), need, d)
                 with one:
-                    first = b.icmp_unsigned("==", choice, const(I8, 1))
-                    store_at(b, b.select(first, const(I8, ALIAS_A), const(I8, ALIAS_B)), mark, i)
-                    store_at(b, const(I8, 1), need, b.select(first, a, c))
+                    picks_first = b.icmp_unsigned("==", choice, const(I8, 1))
+                    store_at(b, b.select(picks_first, const(I8, ALIAS_FIRST), const(I8, ALIAS_SECOND)), mark, i)
+                    store_at(b, const(I8, 1), need, b.select(picks_first, first, second))
 
     count = Local(b, I64, 0, "count")
     with for_range(b, length) as i:  # forward: write what is kept, operands renamed through the aliases
         m = load_at(b, mark, i)
-        code, out_slot, a, c = (field(i, f) for f in range(4))
+        code, out_slot, a, c, d = (field(i, f) for f in range(5))
+        ternary = b.icmp_unsigned(">=", code, const(I64, FIRST_TERNARY))
         with if_(b, b.icmp_unsigned("==", m, const(I8, KEEP))):
             n = count.get()
-            row = b.mul(n, const(I64, 4))
+            row = b.mul(n, const(I64, abi.INSTRUCTION_WORDS))
             binary = b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))
             store_at(b, b.trunc(code, I32), out, row)
             store_at(b, b.trunc(out_slot, I32), out, b.add(row, const(I64, 1)))
             store_at(b, load_at(b, remap, a), out, b.add(row, const(I64, 2)))
             store_at(b, b.select(binary, load_at(b, remap, c), b.trunc(c, I32)), out, b.add(row, const(I64, 3)))
+            store_at(b, b.select(ternary, load_at(b, remap, d), b.trunc(d, I32)), out, b.add(row, const(I64, 4)))
             store_at(b, b.trunc(out_slot, I32), remap, out_slot)
             count.set(b.add(n, const(I64, 1)))
-        with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_A))):
-            store_at(b, load_at(b, remap, a), remap, out_slot)
-        with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_B))):
-            store_at(b, load_at(b, remap, c), remap, out_slot)
+        with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_FIRST))):
+            store_at(b, load_at(b, remap, b.select(ternary, c, a)), remap, out_slot)
+        with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_SECOND))):
+            store_at(b, load_at(b, remap, b.select(ternary, d, c)), remap, out_slot)
     b.store(b.sext(load_at(b, remap, output), I64), out_output)
     b.ret(count.get())
     return fn

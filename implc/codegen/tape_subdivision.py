@@ -134,7 +134,7 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
         child = b.add(level, const(I64, 1))
         with b.if_else(b.and_(b.icmp_signed("!=", prune, const(I64, 0)), decided)) as (simplified, shared):
             with simplified:
-                target = b.gep(tapes, [b.mul(b.mul(child, length), const(I64, 4))])
+                target = b.gep(tapes, [b.mul(b.mul(child, length), const(I64, abi.INSTRUCTION_WORDS))])
                 n = b.call(simplify, [program_of(level), length_of(level), output_of(level), choices_of(level),
                                       b.zext(c, I64), target, need, mark, remap, output_at(child)])
                 set_program(child, target, n, b.load(output_at(child)))
