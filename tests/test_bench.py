@@ -38,9 +38,11 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
         assert r["voxels"] >= r["numpy_cells"] > 0
         if "symengine llvm_cells" in r:
             assert r["symengine llvm_cells"] == r["numpy_cells"]
-    (model,) = data["models"]  # the ball of radius 1.5 over [-2, 2]³ (its --scale)
+    (model,) = data["models"]["rows"]  # the ball of radius 1.5 over [-2, 2]³ (its --scale)
     assert model["model"] == "ball" and model["instructions"] == 10
     assert model["depths"]["6"]["voxels"] > model["depths"]["5"]["voxels"] > 0
+    assert model["missed_128"] == 0 and model["voxels_128"] >= model["sign_change_cells_128"] > 0
+    assert model["compile_fresh_empty_cache_s"] > 0 and model["compile_fresh_s"] > 0
     growth = data["growth"]
     assert growth[1]["voxels"] > growth[0]["voxels"]
     assert (tmp_path / "latest.md").read_text().startswith("## implc benchmarks")
