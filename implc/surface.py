@@ -88,13 +88,31 @@ def choose_engine(tape: Tape, engine: str, vector_width: int = WIDTH) -> str:
         return engine
     if unsupported_ops(tape) or vector_width != WIDTH:
         return "jit"
-    plan = plan_regions(tape)  # what the compiled kernels prune themselves: a top-level chain, blend terms
-    handled = set(plan.after) | {t.root for t in plan.terms if t.kind == "sum"}
-    nested = any(op in CHOICE_NODES and i not in handled for i, (op, _, _) in enumerate(tape.nodes))
+    pruned = _pruned_by_kernels(tape)
+    nested = any(op in CHOICE_NODES and i not in pruned for i, (op, _, _) in enumerate(tape.nodes))
     return "tape" if nested or len(tape) > TAPE_ABOVE else "jit"
 
 
 CHOICE_NODES = ("min", "max", "select_lt", "select_le")
+
+
+def _pruned_by_kernels(tape: Tape) -> set[int]:
+    """The choice nodes the compiled kernels prune themselves: the top-level Min/Max chain, or the blend
+    terms of a top-level sum (:func:`implc.regions.plan_regions`; only planned for a sum, the chain is a
+    walk)."""
+    out = tape.outputs[0]
+    top = tape.nodes[out][0]
+    if top in ("min", "max"):
+        chain, stack = {out}, [out]
+        while stack:
+            for a in tape.nodes[stack.pop()][1]:
+                if tape.nodes[a][0] == top and a not in chain:
+                    chain.add(a)
+                    stack.append(a)
+        return chain
+    if top == "add":
+        return {t.root for t in plan_regions(tape).terms if t.kind == "sum"}
+    return set()
 
 
 class Surface:

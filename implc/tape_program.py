@@ -99,7 +99,8 @@ def encode(tape: Tape) -> TapeProgram:
     bad = unsupported_ops(tape)
     if bad:
         raise ValueError(f"the tape engine cannot run {', '.join(sorted(bad))}")
-    sub = tape.subtape(tape.outputs[0])
+    # lower() and the .vm reader hand over compacted tapes (every node needed, the output last)
+    sub = tape if tape.outputs == [len(tape.nodes) - 1] else tape.subtape(tape.outputs[0])
     rows: list[tuple[int, ...]] = []
     constants: list[tuple[float, float, float]] = []
     constant_slots: list[int] = []
