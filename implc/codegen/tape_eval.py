@@ -109,7 +109,7 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
     fn.linkage = "internal"
     header, program, length, output, slots, choices, box, result = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
-    vb = VectorBuilder(b, LANES, directed)
+    vb = VectorBuilder(b, LANES, directed, outline_elementary=True)  # their constants stay in their functions
     em = IntervalEmitter(vb)
     vslots, vbox = b.bitcast(slots, _P(V8)), b.bitcast(box, _P(V8))
     decided = Local(b, I8, 0, "decided")
@@ -181,7 +181,7 @@ def emit_tape_dual(module: ir.Module) -> ir.Function:
     fn.linkage = "internal"
     header, program, length, output, slots, points, result = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
-    vb = VectorBuilder(b, LANES)
+    vb = VectorBuilder(b, LANES, outline_elementary=True)
     vslots, vpoints = b.bitcast(dual_slots(b, header, slots), _P(V8)), b.bitcast(points, _P(V8))
     zero, one = vb.splat(0.0), vb.splat(1.0)
 
