@@ -73,7 +73,8 @@ MEAN_VALUE_ENTRIES = (INTERVAL_MVF, OCTANT_MVF)
 # -- the generic runtime module (implc.codegen.runtime_module), one per process ------------------------
 SUBDIVIDE = _entry("implc_subdivide",
                    "octant:fn* fine_octant:fn* fine_level:i64 prune:i64 refine:i64 geom:f64* stack:i32* "
-                   "masks:i64* state:i64* out:i32* out_masks:i64* capacity:i64 stats:i64* cancel:i32*", "i64")
+                   "masks:i64* state:i64* out:i32* out_masks:i64* capacity:i64 inside:i32* inside_capacity:i64 "
+                   "stats:i64* cancel:i32*", "i64")
 NORMALS = _entry("implc_normals", "gradient_live:fn* point:fn* leaf_geom:f64* coords:i32* masks:i64* n:i64 out:f32*")
 OCTREE_INSERT = _entry("implc_octree_insert", "nodes:i32* node_capacity:i64 state:i64* coords:i32* n:i64 "
                                               "first_index:i64", "i64")
@@ -89,8 +90,8 @@ TAPE_INTERVAL = _entry("implc_tape_interval", "program:i64* slots:f64* choices:i
 TAPE_GRADIENT = _entry("implc_tape_gradient", "program:i64* slots:f64* pts:f64* out_value:f64* out_grad:f64* n:i64")
 TAPE_SUBDIVIDE = _entry("implc_tape_subdivide",
                         "program:i64* prune:i64 geom:f64* state:i64* frames:i32* tapes:i32* choices:i8* "
-                        "slots:f64* marks:i8* remap:i32* out:i32* out_normals:f32* capacity:i64 stats:i64* "
-                        "cancel:i32*", "i64")
+                        "slots:f64* marks:i8* remap:i32* out:i32* out_normals:f32* capacity:i64 inside:i32* "
+                        "inside_capacity:i64 stats:i64* cancel:i32*", "i64")
 TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE)
 
 # -- layouts shared by native code and Python ------------------------------------------------------
@@ -105,8 +106,15 @@ GEOMETRY_DOUBLES = 6 + 3 * (MAX_DEPTH + 2)
 """Subdivision geometry (``geom``): origin (3), outward pad (3), then cell size per level (3 per level,
 one level past the deepest grid for leaf refinement)."""
 
-SUBDIVIDE_STATE_WORDS = 2
-"""``implc_subdivide``'s resumable state (int64): stack size, grid depth."""
+SUBDIVIDE_STATE_WORDS = 3
+"""``implc_subdivide``'s resumable state (int64): stack size, grid depth, and the inside octants it wrote in
+its last call."""
+INSIDE_WORDS = 4
+"""An inside octant, as both subdividers write them where ``inside`` is not NULL (int32): its cell (i, j,
+k) and its level. Its whole box lies where F < 0."""
+OCTANT_INSIDE_SHIFT = 8
+"""The octant kernels return bit c set where child c may meet the surface, and bit 8 + c where child c's
+enclosure lies below zero (inside)."""
 
 TAPE_SLOT_DOUBLES = 48
 """Scratch doubles per slot of a tape program: its interval (two vectors of eight) in the first third of
@@ -126,10 +134,11 @@ TAPE_LEVELS = MAX_DEPTH + 2
 TAPE_FRAME_WORDS = 5
 """``implc_tape_subdivide``'s frame per level (int32): the octant's cell (i, j, k), the children still
 to visit (bit c: child c), the children whose program is shorter than the octant's (a choice decided)."""
-TAPE_PHASE, TAPE_LEVEL, TAPE_DEPTH, TAPE_TASK_LEVEL, TAPE_PENDING = 0, 1, 2, 3, 4
+TAPE_PHASE, TAPE_LEVEL, TAPE_DEPTH, TAPE_TASK_LEVEL, TAPE_PENDING, TAPE_INSIDE_COUNT = 0, 1, 2, 3, 4, 5
 """``implc_tape_subdivide``'s state (int64): phase (0 new task, 1 running, 2 done), the level of the
-frame in hand, the grid depth, the task's level, whether the frame in hand still needs its children."""
-TAPE_PROGRAMS = 5
+frame in hand, the grid depth, the task's level, whether the frame in hand still needs its children, the
+inside octants written in the last call."""
+TAPE_PROGRAMS = 6
 """Start of the instructions' address per level (TAPE_LEVELS words), then of their count, then of the
 output slot (TAPE_LEVELS words each)."""
 TAPE_STATE_WORDS = TAPE_PROGRAMS + 3 * TAPE_LEVELS

@@ -111,10 +111,10 @@ def _surface_from_args(args):
     return sc.name, compile_surface(sc.surface, bounds), sc
 
 
-def _voxelize(surface, depth, workers, quiet):
+def _voxelize(surface, depth, workers, quiet, solid=False):
     from .voxelization import voxelize
     t0 = time.perf_counter()
-    voxels = voxelize(surface, depth, workers=workers, progress=not quiet and sys.stderr.isatty())
+    voxels = voxelize(surface, depth, workers=workers, progress=not quiet and sys.stderr.isatty(), solid=solid)
     return voxels, time.perf_counter() - t0
 
 
@@ -139,10 +139,14 @@ def cmd_voxelize(args) -> int:
     _check_surface_options(args)
     name, surface, sc = _surface_from_args(args)
     depth = args.depth if args.depth is not None else (sc.depth if sc else 9)
-    voxels, seconds = _voxelize(surface, depth, args.workers, args.quiet)
+    voxels, seconds = _voxelize(surface, depth, args.workers, args.quiet, solid=args.solid)
     voxel_files.save(voxels, out, compress=args.compress)
     if not args.quiet:
-        print(f"{name}: {len(voxels)} voxels at {1 << depth}³ in {seconds:.2f} s "
+        solid = ""
+        if args.solid:
+            lo, hi = voxels.volume_bounds()
+            solid = f", {len(voxels.inside)} inside octants, volume in [{lo:.6g}, {hi:.6g}]"
+        print(f"{name}: {len(voxels)} voxels at {1 << depth}³{solid} in {seconds:.2f} s "
               f"(yield {voxels.stats.parallel_yield:.0%}) -> {out}")
     return 0
 
@@ -288,6 +292,8 @@ def _parser():
     surface_args(v)
     v.add_argument("-o", "--output", required=True, help="output file: .npz, .ply (point cloud) or .npy (dense)")
     v.add_argument("--compress", action="store_true", help="deflate the .npz (smaller, several times slower)")
+    v.add_argument("--solid", action="store_true",
+                   help="also classify the inside (whole octants where F < 0): volume bounds, solid occupancy")
     v.set_defaults(run=cmd_voxelize)
 
     r = sub.add_parser("render", help="render a scene, formula or .npz to a PNG")

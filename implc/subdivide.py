@@ -97,6 +97,23 @@ class _TaskResult:
     def __init__(self):
         self.count = 0
         self._allocate(OUTPUT_CHUNK)
+        self.inside_count = 0  # a solid's inside octants (abi.INSIDE_WORDS int32 each), allocated on first use
+        self.inside = np.empty((0, abi.INSIDE_WORDS), dtype=np.int32)
+
+    def make_inside_room(self, free):
+        """At least ``free`` unused inside rows past ``inside_count``."""
+        if self.inside_count + free > len(self.inside):
+            grown = np.empty((max(self.inside_count + free, 2 * len(self.inside)), abi.INSIDE_WORDS), dtype=np.int32)
+            grown[: self.inside_count] = self.inside[: self.inside_count]
+            self.inside = grown
+        return len(self.inside) - self.inside_count
+
+    def inside_args(self, solid: bool) -> tuple:
+        """The native subdividers' (inside, inside_capacity) arguments: NULL and 0 unless ``solid``."""
+        if not solid:
+            return None, 0
+        room = self.make_inside_room(max(OUTPUT_CHUNK // 4, 64))  # the native side needs 8 free rows
+        return self.inside.ctypes.data + 4 * abi.INSIDE_WORDS * self.inside_count, room
 
     def _allocate(self, size):
         self.coords = np.empty((size, 3), dtype=np.uint32)
@@ -150,7 +167,7 @@ class Subdivider:
     """Runs one voxelization of ``surface`` to ``depth``; ``emit(coords, normals)`` receives the voxels."""
 
     def __init__(self, surface, depth: int, workers: int, runtime: Runtime, max_voxels: int | None = None,
-                 mean_value_levels: int = 0, prune: bool = True, refine_leaves: bool = False):
+                 mean_value_levels: int = 0, prune: bool = True, refine_leaves: bool = False, solid: bool = False):
         self.surface = surface
         self.depth = depth
         self.workers = workers
@@ -161,6 +178,8 @@ class Subdivider:
         self.leaf_geom = np.concatenate([self.geom[:3], leaf])
         self.prune = int(bool(prune))
         self.refine = int(bool(refine_leaves))
+        self.solid = bool(solid)
+        self._inside_parts: list[np.ndarray] = []  # a solid's inside octants: the plan's, then each task's
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
         if surface.program is None or mean_value_levels > 0 or refine_leaves:  # compiled kernels
@@ -194,14 +213,15 @@ class Subdivider:
             return
         w.stack[:4] = (*cell, level)
         w.masks[0] = -1  # every term live at a task's root
-        w.state[:] = (1, depth)
+        w.state[:] = (1, depth, 0)
         while True:
             room = result.make_room(OUTPUT_CHUNK)
             n = self.runtime.subdivide(self.box, self.fine_box, self.fine_level, self.prune, self.refine,
                                        self.geom_ptr, w.stack_ptr, w.masks_ptr, w.state_ptr,
                                        result.coords_ptr + 12 * result.count, result.masks_ptr + 8 * result.count,
-                                       room, w.stats_ptr, self.cancel_ptr)
+                                       room, *result.inside_args(self.solid), w.stats_ptr, self.cancel_ptr)
             result.count += n
+            result.inside_count += int(w.state[2])
             if w.state[0] == 0 or self.cancel[0]:
                 break
 
@@ -215,10 +235,18 @@ class Subdivider:
             room = result.make_room(OUTPUT_CHUNK)
             n = self.tape_engine.subdivide(*self.program_args, self.geom_ptr, *w.tape_buffers,
                                            result.coords_ptr + 12 * result.count,
-                                           result.normals_ptr + 12 * result.count, room, w.stats_ptr, self.cancel_ptr)
+                                           result.normals_ptr + 12 * result.count, room,
+                                           *result.inside_args(self.solid), w.stats_ptr, self.cancel_ptr)
             result.count += n
+            result.inside_count += int(w.tape_state[abi.TAPE_INSIDE_COUNT])
             if w.tape_state[abi.TAPE_PHASE] == 2 or self.cancel[0]:
                 break
+
+    @property
+    def inside(self) -> np.ndarray:
+        """A solid's inside octants found so far, in task order: (n, 4) int32 rows (i, j, k, level)."""
+        parts = [p for p in self._inside_parts if len(p)]
+        return np.concatenate(parts) if parts else np.empty((0, abi.INSIDE_WORDS), dtype=np.int32)
 
     def _normals(self, coords: np.ndarray, out: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
         """Unit normals at the centres of ``coords``, written to ``out`` (same length); ``masks``: each
@@ -238,6 +266,7 @@ class Subdivider:
         result = _TaskResult()
         self._run_task(w, (0, 0, 0), 0, level, result)
         cells = result.coords[: result.count].copy()
+        self._inside_parts = [result.inside[: result.inside_count].copy()]
         if self.program is not None:  # the tape engine wrote their normals too
             self._plan_normals = result.normals[: result.count].copy()
         self.stats.seconds["plan"] = time.perf_counter() - t0
@@ -303,6 +332,8 @@ class Subdivider:
                 try:
                     t0 = time.perf_counter()
                     emit(result.coords[: result.count], result.normals[: result.count])
+                    if self.solid:
+                        self._inside_parts.append(result.inside[: result.inside_count].copy())
                     storage_seconds[0] += time.perf_counter() - t0
                     if progress is not None:
                         progress.update(1)
@@ -327,7 +358,7 @@ class Subdivider:
                         return
                     with lock:
                         result = pool.pop() if pool else _TaskResult()
-                    result.count = 0
+                    result.count = result.inside_count = 0
                     t0 = time.perf_counter()
                     self._run_task(w, cells[t], level, self.depth, result)
                     t1 = time.perf_counter()

@@ -49,6 +49,8 @@ def save(voxels, path, *, compress: bool = False) -> Path:
 def save_npz(voxels, path, *, compress: bool = False) -> None:
     arrays = dict(implc_voxels=FORMAT_VERSION, coords=voxels.coords, normals=voxels.normals, depth=voxels.depth,
                   bounds=np.asarray(voxels.bounds, dtype=np.float64))
+    if getattr(voxels, "inside", None) is not None:  # a solid: its inside octants (i, j, k, level)
+        arrays["inside"] = voxels.inside
     with replacing(path) as tmp:
         (np.savez_compressed if compress else np.savez)(tmp, **arrays)
 
@@ -89,11 +91,26 @@ def load_npz(path) -> Voxels:
             if missing:
                 raise VoxelFileError(f"{path}: damaged implc voxel file, missing {', '.join(missing)}")
             coords, normals, depth, bounds = data["coords"], data["normals"], data["depth"], data["bounds"]
+            inside = data["inside"] if "inside" in data else None
     except VoxelFileError:
         raise
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
         raise VoxelFileError(f"cannot read {path}: damaged or truncated ({type(exc).__name__}: {exc})") from None
-    return Voxels(*_validated(path, coords, normals, depth, bounds), stats=None)
+    coords, normals, depth, bounds = _validated(path, coords, normals, depth, bounds)
+    return Voxels(coords, normals, depth, bounds, stats=None, inside=_validated_inside(path, inside, depth))
+
+
+def _validated_inside(path, inside, depth):
+    """A solid's inside octants as save_npz writes them (None for a shell); VoxelFileError otherwise."""
+    if inside is None:
+        return None
+    if inside.ndim != 2 or inside.shape[1:] != (4,) or inside.dtype.kind not in "iu":
+        raise VoxelFileError(f"{path}: inside must be an (N, 4) integer array, got {inside.dtype} {inside.shape}")
+    levels = inside[:, 3].astype(np.int64)
+    if len(inside) and (levels.min() < 1 or levels.max() > depth or inside[:, :3].min() < 0
+                        or np.any(inside[:, :3].astype(np.int64).max(axis=1) >= np.left_shift(1, levels))):
+        raise VoxelFileError(f"{path}: inside octants outside the grid of depth {depth}")
+    return inside.astype(np.int32, copy=False)
 
 
 def _validated(path, coords, normals, depth, bounds):
@@ -131,7 +148,8 @@ def describe(path) -> list[str]:
         return [f"file     {size}, implc voxels",
                 f"grid     {n}³ (depth {voxels.depth}) over {voxels.bounds}",
                 f"voxels   {len(voxels)} ({len(voxels) / n**3:.4%} of the cells)",
-                f"extent   cells {list(map(int, lo))} .. {list(map(int, hi))}"]
+                f"extent   cells {list(map(int, lo))} .. {list(map(int, hi))}",
+                *_solid_lines(voxels)]
     if fmt == ".npy":
         try:
             grid = np.load(path, mmap_mode="r", allow_pickle=False)
@@ -146,6 +164,14 @@ def describe(path) -> list[str]:
     count = next((int(line.split()[2]) for line in header if line.startswith("element vertex ")), None)
     comment = next((line[len("comment "):] for line in header if line.startswith("comment implc")), "")
     return [f"file     {size}, PLY point cloud", f"points   {count}", *([f"comment  {comment}"] if comment else [])]
+
+
+def _solid_lines(voxels) -> list[str]:
+    if voxels.inside is None:
+        return []
+    lo, hi = voxels.volume_bounds()
+    return [f"inside   {len(voxels.inside)} octants ({voxels.inside_voxels()} voxels)",
+            f"volume   [{lo!r}, {hi!r}] (contains the volume where F < 0 within the bounds)"]
 
 
 def _ply_header(path) -> list[str]:

@@ -34,15 +34,18 @@ def available_memory() -> int:
 
 
 class Voxels:
-    """The voxels of a surface at one depth: Morton-ordered cell indices and unit normals."""
+    """The voxels of a surface at one depth: Morton-ordered cell indices and unit normals; for a solid
+    (``voxelize(..., solid=True)``) also ``inside``: the octants whose whole box lies where F < 0, as
+    (n, 4) int32 rows (i, j, k, level), each a cube of 2^(depth − level) voxels per axis, never expanded."""
 
-    def __init__(self, coords, normals, depth, bounds, stats: SubdivisionStats, storage=None):
+    def __init__(self, coords, normals, depth, bounds, stats: SubdivisionStats, storage=None, inside=None):
         self.coords = coords
         self.normals = normals
         self.depth = depth
         self.bounds = bounds
         self.stats = stats
         self.storage = storage
+        self.inside = inside  # None: a shell (solid=False)
         self._octree = storage if isinstance(storage, Octree) else None
 
     def __len__(self) -> int:
@@ -71,12 +74,49 @@ class Voxels:
         origin = np.array([lo for lo, _ in self.bounds])
         return origin + (self.coords.astype(np.float64) + 0.5) * self.cell_size
 
-    def to_dense(self) -> np.ndarray:
-        """Occupancy as a bool array indexed [i, j, k]."""
+    def _solid(self) -> np.ndarray:
+        if self.inside is None:
+            raise ValueError("these voxels are a shell: voxelize(..., solid=True) classifies the inside")
+        return self.inside
+
+    def to_dense(self, solid: bool = False) -> np.ndarray:
+        """Occupancy as a bool array indexed [i, j, k]: the boundary voxels, and with ``solid`` the inside
+        octants too (every cell that may hold a point with F <= 0)."""
         n = 1 << self.depth
         grid = np.zeros((n, n, n), dtype=bool)
         grid[self.coords[:, 0], self.coords[:, 1], self.coords[:, 2]] = True
+        if solid:
+            for i, j, k, level in self._solid():
+                size = 1 << (self.depth - int(level))
+                grid[i * size:(i + 1) * size, j * size:(j + 1) * size, k * size:(k + 1) * size] = True
         return grid
+
+    def inside_voxels(self) -> int:
+        """How many voxels the inside octants cover."""
+        levels = self._solid()[:, 3].astype(np.int64)
+        return int(np.sum(np.left_shift(np.int64(1), 3 * (self.depth - levels)))) if len(levels) else 0
+
+    def volume_bounds(self) -> tuple[float, float]:
+        """(lo, hi) with lo <= the exact volume of {F < 0} within the bounds <= hi: the inside octants'
+        volume, and that plus the boundary voxels' (every other cell's enclosure lies above 0). Computed
+        exactly in rationals from the float bounds, then rounded outward."""
+        from fractions import Fraction
+        voxel = Fraction(1)
+        for lo, hi in self.bounds:
+            voxel *= (Fraction(hi) - Fraction(lo)) / (1 << self.depth)
+        inside = self.inside_voxels() * voxel
+        outer = inside + len(self.coords) * voxel
+        return _round_down(inside), _round_up(outer)
+
+
+def _round_down(value) -> float:
+    f = float(value)
+    return f if f <= value else float(np.nextafter(f, -np.inf))
+
+
+def _round_up(value) -> float:
+    f = float(value)
+    return f if f >= value else float(np.nextafter(f, np.inf))
 
 
 class _Collect:
@@ -138,7 +178,7 @@ def _check_memory(depth, storage, estimate_voxels, available):
 
 
 def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False, max_voxels=None,
-             mean_value_levels=0, prune=True, refine_leaves=False) -> Voxels:
+             mean_value_levels=0, prune=True, refine_leaves=False, solid=False) -> Voxels:
     """Voxelize a compiled surface on a 2^depth grid over its bounds.
 
     ``mean_value_levels``: how many of the deepest levels also use the mean-value form (tighter on small
@@ -146,6 +186,9 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     below each octant, the terms of a blend sum or a Min/Max chain that its enclosure showed dead there.
     ``refine_leaves``: keep a leaf only if one of its eight half-size sub-boxes may meet the surface
     (tighter, about twice the interval work). The tightest: ``mean_value_levels=1, refine_leaves=True``.
+    ``solid``: also classify the inside: octants whose enclosure lies below 0 are kept whole
+    (``Voxels.inside``, never expanded), which gives ``Voxels.volume_bounds()`` and
+    ``Voxels.to_dense(solid=True)``.
     """
     if not isinstance(surface, Surface):
         raise TypeError(f"voxelize expects an implc.Surface (from implc.compile), got {type(surface).__name__}")
@@ -163,7 +206,7 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     backend = OctreeBuilder(keep_normals=False) if storage == "octree" else make_backend(storage)
     subdivider = Subdivider(surface, depth, workers, surface.runtime, max_voxels=max_voxels,
                             mean_value_levels=min(mean_value_levels, depth), prune=prune,
-                            refine_leaves=refine_leaves)
+                            refine_leaves=refine_leaves, solid=solid)
     cells, level = subdivider.plan()
     estimate = _estimate_voxels(len(cells), level, depth)
     _check_memory(depth, storage, estimate, available)
@@ -192,4 +235,5 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     coords, normals = collect.arrays()
     if isinstance(result, Octree):
         result.normals = normals  # the octree's payload is the voxels' normals array itself
-    return Voxels(coords, normals, depth, surface.bounds, stats, storage=result)
+    return Voxels(coords, normals, depth, surface.bounds, stats, storage=result,
+                  inside=subdivider.inside if solid else None)

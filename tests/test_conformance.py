@@ -331,8 +331,8 @@ def test_point_and_gradient_evaluators_conform(name, width, compiled):
 
 @pytest.mark.parametrize("name", sorted(OP_CASES))
 def test_octant_kernel_conforms(name, compiled):
-    """implc_octant generates an octant's eight children from its cell index and geometry: its keep bits
-    and child masks are those of the batched kernel on the same eight boxes, exactly."""
+    """implc_octant generates an octant's eight children from its cell index and geometry: its keep and
+    inside bits and child masks are those of the batched kernel on the same eight boxes, exactly."""
     s = compiled(name)
     parents_lo, parents_hi = _boxes(name, 24)
     bits = np.array([[(c >> a) & 1 for a in range(3)] for c in range(8)], dtype=np.float64)
@@ -347,6 +347,7 @@ def test_octant_kernel_conforms(name, compiled):
         kept = octant(geom.ctypes.data, cell.ctypes.data, 1, -1, masks.ctypes.data)
         f_lo, f_hi = _interval_with_all_live(s, lo, hi, abi.INTERVAL)
         expected = sum(1 << c for c in range(8) if f_lo[c] <= 0 <= f_hi[c])
+        expected |= sum(1 << (abi.OCTANT_INSIDE_SHIFT + c) for c in range(8) if f_hi[c] < 0)  # inside
         assert kept == expected, f"{name}: parent {p_lo}..{p_hi}"
         live_out = np.empty(8, dtype=np.int64)
         s.kernel(abi.INTERVAL)(lo.ctypes.data, hi.ctypes.data, np.empty(8).ctypes.data, np.empty(8).ctypes.data,

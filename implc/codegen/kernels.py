@@ -23,7 +23,8 @@ vector registers from the octant's cell index:
   to the octant's (i, j, k) (int32) one level above ``level``; child c (x bit | y bit << 1 | z bit << 2)
   is the box [o + i·h − pad, o + (i + 1)·h + pad] per axis, i = 2·cell + bit, with the origin o, the pad and
   the cell size h of ``level`` read from ``geom`` (:data:`implc.abi.GEOMETRY_DOUBLES`). Returns
-  bit c set where child c's enclosure contains 0; writes the children's live masks to ``live_out[8]``.
+  bit c set where child c's enclosure contains 0 (or is undefined) and bit 8 + c where it lies below 0
+  (:data:`implc.abi.OCTANT_INSIDE_SHIFT`); writes the children's live masks to ``live_out[8]``.
 """
 
 from __future__ import annotations
@@ -166,6 +167,8 @@ def _octant_kernel(module, entry, width, directed, outline, enclose):
         contains = b.and_(vb.cmp("<=", f_lo, zero), vb.cmp(">=", f_hi, zero))
         bits = b.zext(b.bitcast(contains, ir.IntType(width)), i32)
         kept = b.or_(kept, b.shl(bits, ir.Constant(i32, first)))
+        below = b.zext(b.bitcast(vb.cmp("<", f_hi, zero), ir.IntType(width)), i32)  # inside (NaN: never)
+        kept = b.or_(kept, b.shl(below, ir.Constant(i32, first + abi.OCTANT_INSIDE_SHIFT)))
         with b.if_then(b.icmp_unsigned("!=", live_out, ir.Constant(_PI64, None))):
             ptr = b.bitcast(b.gep(live_out, [ir.Constant(I64, first)]), ir.PointerType(masks.type))
             b.store(masks, ptr, align=8)

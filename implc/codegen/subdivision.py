@@ -5,7 +5,8 @@ of an octant, generated and enclosed in vector registers) through a function poi
 kernel, e.g. the mean-value form, from a given child level on; optionally a leaf is kept only if one of
 its eight halves-per-axis may meet the surface), prunes children whose enclosure excludes 0, pushes the
 rest in reverse so that leaves come out in Morton order, and writes leaf coordinates with their
-live-term masks. It is resumable: when the output buffer is full or the cancel flag is raised it returns
+live-term masks; where ``inside`` is not NULL (a solid), also every child whose enclosure lies below 0
+(:data:`implc.abi.INSIDE_WORDS` each; their count goes to the state). It is resumable: when the output buffer is full or the cancel flag is raised it returns
 with its stack intact (the layouts are :mod:`implc.abi`'s).
 """
 
@@ -19,12 +20,15 @@ from .control import I32, I64, Local, at, bump, const, define, if_, load_at, loc
 
 def emit_subdivide(module: ir.Module):
     fn, b = define(module, abi.SUBDIVIDE)
-    box_ptr, fine_ptr, fine_level, prune, refine, geom, stack, masks, state, out, out_masks, cap, stats, cancel = fn.args
+    (box_ptr, fine_ptr, fine_level, prune, refine, geom, stack, masks, state, out, out_masks, cap, inside,
+     inside_cap, stats, cancel) = fn.args
     box = b.bitcast(box_ptr, ir.PointerType(abi.OCTANT.llvm_type()))
     fine = b.bitcast(fine_ptr, ir.PointerType(abi.OCTANT.llvm_type()))
     depth = b.trunc(load_at(b, state, 1), I32)
     size = Local(b, I64, load_at(b, state, 0), "size")
     count = Local(b, I64, 0, "count")
+    inside_count = Local(b, I64, 0, "inside_count")
+    solid = b.icmp_unsigned("!=", inside, ir.Constant(inside.type, None))
     child_masks = local_array(b, I64, 8, "child_masks")
     sub_cell = local_array(b, I32, 3, "sub_cell")
     pruning = b.icmp_signed("!=", prune, const(I64, 0))
@@ -43,6 +47,7 @@ def emit_subdivide(module: ir.Module):
         leaf = b.icmp_signed("==", child_level, depth)
         no_room = b.icmp_signed(">", b.add(count.get(), const(I64, 8)), cap)
         loop.break_if(b.and_(leaf, no_room))
+        loop.break_if(b.and_(solid, b.icmp_signed(">", b.add(inside_count.get(), const(I64, 8)), inside_cap)))
         size.set(b.sub(s, const(I64, 1)))
         parent_mask = b.select(pruning, load_at(b, masks, b.sub(s, const(I64, 1))), all_live)
 
@@ -50,8 +55,19 @@ def emit_subdivide(module: ir.Module):
         children = [[b.add(b.shl(cell[a], const(I32, 1)), const(I32, (c >> a) & 1)) for a in range(3)]
                     for c in range(8)]
         kernel = b.select(b.icmp_signed(">=", level64, fine_level), fine, box)
-        kept = b.call(kernel, [geom, at(b, stack, top), level64, parent_mask, child_masks])
+        decided = b.call(kernel, [geom, at(b, stack, top), level64, parent_mask, child_masks])
+        kept = b.and_(decided, const(I32, 0xFF))
         bump(b, stats, 0, 8)
+        with if_(b, solid):  # children whose box lies inside, in Morton order (branch-free)
+            n = inside_count.get()
+            for c in range(8):
+                row = b.mul(n, const(I64, abi.INSIDE_WORDS))
+                for a in range(3):
+                    store_at(b, children[c][a], inside, b.add(row, const(I64, a)))
+                store_at(b, child_level, inside, b.add(row, const(I64, 3)))
+                bit = b.lshr(decided, const(I32, abi.OCTANT_INSIDE_SHIFT + c))
+                n = b.add(n, b.zext(b.trunc(bit, ir.IntType(1)), I64))
+            inside_count.set(n)
         stat_slot = b.add(level64, const(I64, 1))
 
         def keep(c):
@@ -66,7 +82,7 @@ def emit_subdivide(module: ir.Module):
                 store_at(b, children[c][a], sub_cell, a)
             sub_kept = b.call(kernel, [geom, sub_cell, b.add(level64, const(I64, 1)), child_mask(c), null64])
             bump(b, stats, 0, 8)
-            return b.icmp_unsigned("!=", sub_kept, const(I32, 0))
+            return b.icmp_unsigned("!=", b.and_(sub_kept, const(I32, 0xFF)), const(I32, 0))
 
         ctpop = module.globals.get("llvm.ctpop.i32") or ir.Function(
             module, ir.FunctionType(I32, [I32]), name="llvm.ctpop.i32")
@@ -107,6 +123,7 @@ def emit_subdivide(module: ir.Module):
                             t = append(stack, masks, t, c, 4)
                         size.set(t)
     store_at(b, size.get(), state, 0)
+    store_at(b, inside_count.get(), state, 2)
     b.ret(count.get())
 
 

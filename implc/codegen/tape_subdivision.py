@@ -9,7 +9,8 @@ Morton order; a task starts from the full program simplified down the path from 
 octant. The children of an octant one level above the leaves are the voxels; their unit normals come
 eight at a time from ``tape_dual`` over the program two levels above the leaves (valid for every voxel
 below that octant, and barely longer than their parents'), through the normals block of
-:mod:`implc.codegen.normals`, before the voxels leave the call. Resumable: when the output is full or the cancel flag is raised it returns
+:mod:`implc.codegen.normals`, before the voxels leave the call. Where ``inside`` is not NULL (a solid),
+every child whose enclosure lies below 0 is written there too (:data:`implc.abi.INSIDE_WORDS` each). Resumable: when the output is full or the cancel flag is raised it returns
 with its frames and state intact (layouts in :mod:`implc.abi`).
 """
 
@@ -66,8 +67,9 @@ def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
 def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Function, simplify: ir.Function,
                         normals: ir.Function):
     fn, b = define(module, abi.TAPE_SUBDIVIDE)
-    (header, prune, geom, state, frames, tapes, choices, slots, marks, remap, out, out_normals, capacity, stats,
-     cancel) = fn.args
+    (header, prune, geom, state, frames, tapes, choices, slots, marks, remap, out, out_normals, capacity, inside,
+     inside_capacity, stats, cancel) = fn.args
+    solid = b.icmp_unsigned("!=", inside, ir.Constant(inside.type, None))
     program = b.inttoptr(load_at(b, header, abi.PROGRAM_INSTRUCTIONS), _P(I32))
     length = load_at(b, header, abi.PROGRAM_LENGTH)
     output = load_at(b, header, abi.PROGRAM_OUTPUT)
@@ -81,6 +83,7 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
         store_at(b, load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))), leaf_geom, 3 + a)
     need, mark = marks, b.gep(marks, [load_at(b, header, abi.PROGRAM_SLOT_COUNT)])
     count = Local(b, I64, 0, "count")
+    inside_count = Local(b, I64, 0, "inside_count")
     normals_done = Local(b, I64, 0, "normals_done")  # voxels before this one have their normals
     # normals come from the program two levels above the leaves (valid for all its voxels, eight at a time)
     normals_level = b.select(b.icmp_signed(">", b.sub(depth, const(I64, 2)), task_level), b.sub(depth, const(I64, 2)),
@@ -185,6 +188,17 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
         contains = b.or_(b.and_(b.fcmp_ordered("<=", f_lo, zero), b.fcmp_ordered(">=", f_hi, zero)),
                          b.or_(b.fcmp_unordered("uno", f_lo, f_lo), b.fcmp_unordered("uno", f_hi, f_hi)))
         kept = b.zext(b.bitcast(contains, I8), I32)
+        with if_(b, solid):  # children whose box lies inside, in Morton order (branch-free)
+            below = b.zext(b.bitcast(b.fcmp_ordered("<", f_hi, zero), I8), I32)
+            n = inside_count.get()
+            for c in range(LANES):
+                row = b.mul(n, const(I64, abi.INSIDE_WORDS))
+                for a in range(3):
+                    coord = b.add(b.shl(b.load(frame(level, a)), const(I32, 1)), const(I32, (c >> a) & 1))
+                    store_at(b, coord, inside, b.add(row, const(I64, a)))
+                store_at(b, b.trunc(child, I32), inside, b.add(row, const(I64, 3)))
+                n = b.add(n, b.zext(b.trunc(b.lshr(below, const(I32, c)), ir.IntType(1)), I64))
+            inside_count.set(n)
         slot = at(b, stats, 0)
         b.store(b.add(b.load(slot), const(I64, LANES)), slot)
         for index, amount in ((b.add(child, const(I64, 1)), b.zext(b.call(ctpop, [kept]), I64)),
@@ -216,6 +230,8 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
         leaf_parent = b.icmp_signed("==", b.add(level, const(I64, 1)), depth)
         no_room = b.icmp_signed(">", b.add(count.get(), const(I64, LANES)), capacity)
         loop.break_if(b.and_(pending, b.and_(leaf_parent, no_room)))
+        no_inside_room = b.icmp_signed(">", b.add(inside_count.get(), const(I64, LANES)), inside_capacity)
+        loop.break_if(b.and_(pending, b.and_(solid, no_inside_room)))
         with b.if_else(pending) as (expanding, stepping):
             with expanding:
                 expand(level)
@@ -240,4 +256,5 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
                         store_at(b, child, state, abi.TAPE_LEVEL)
                         store_at(b, const(I64, 1), state, abi.TAPE_PENDING)
     flush_normals()  # leaving (done, output full or cancelled): every voxel written has its normal
+    store_at(b, inside_count.get(), state, abi.TAPE_INSIDE_COUNT)
     b.ret(count.get())

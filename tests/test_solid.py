@@ -1,0 +1,115 @@
+"""Solids (``voxelize(..., solid=True)``): inside octants against sampling by numpy (lambdify, not implc's
+compiler), guaranteed volume bounds against analytic volumes, both engines, files and the CLI."""
+
+import math
+
+import numpy as np
+import pytest
+import sympy
+from sympy import Max, Min, Rational, cos, sin, sqrt
+
+import implc
+from implc import phi, r, shapes, theta, x, y, z
+from implc import subdivide as subdivide_module
+from implc.cli import main
+from implc.symbols import cartesian_form
+
+SPHERE = sqrt(x**2 + y**2 + z**2) - Rational(7, 10)
+TORUS = shapes.torus(Rational(3, 5), Rational(1, 4))
+BOX = Max(abs(x), abs(y), abs(z)) - Rational(1, 2)
+HOLLOW = Max(BOX, -(sqrt(x**2 + y**2 + z**2) - Rational(3, 10)))  # a box minus a ball inside it
+SURFACES = {
+    "sphere": (SPHERE, 4 / 3 * math.pi * 0.7**3),
+    "torus": (TORUS, 2 * math.pi**2 * 0.6 * 0.25**2),
+    "box": (BOX, 1.0),
+    "box minus ball": (HOLLOW, 1.0 - 4 / 3 * math.pi * 0.3**3),
+    "spherical": (r - Rational(3, 5) - Rational(1, 10) * cos(3 * phi) * sin(theta), None),
+    "csg on the tape engine": (Min(HOLLOW, sqrt((x - Rational(3, 4))**2 + y**2 + z**2) - Rational(1, 5)), None),
+}
+
+
+def inside_mask(voxels) -> np.ndarray:
+    """The cells covered by inside octants only."""
+    n = 1 << voxels.depth
+    grid = np.zeros((n,) * 3, bool)
+    for i, j, k, level in voxels.inside:
+        size = 1 << (voxels.depth - int(level))
+        grid[i * size:(i + 1) * size, j * size:(j + 1) * size, k * size:(k + 1) * size] = True
+    return grid
+
+
+@pytest.mark.parametrize("name", sorted(SURFACES))
+def test_inside_and_outside_agree_with_sampling(name):
+    expr, _ = SURFACES[name]
+    s = implc.compile(expr)
+    if name == "csg on the tape engine":
+        assert s.engine == "tape"
+    depth = 6
+    v = implc.voxelize(s, depth, solid=True)
+    inside, solid = inside_mask(v), v.to_dense(solid=True)
+    assert not (inside & v.to_dense()).any(), "an inside octant and a boundary voxel overlap"
+    pts = np.random.default_rng(len(name)).uniform(-1, 1, (40000, 3))
+    f = sympy.lambdify((x, y, z), cartesian_form(expr), "numpy")(*pts.T)
+    cells = np.minimum(((pts + 1) / 2 * (1 << depth)).astype(int), (1 << depth) - 1)
+    at = tuple(cells.T)
+    assert (f < 0).sum() > 1000 and (f > 0).sum() > 1000
+    assert solid[at][f < 0].all(), "a point with F < 0 outside the solid"
+    assert not inside[at][f > 0].any(), "a point with F > 0 in an inside octant"
+    assert inside.sum() > 0.2 * solid.sum()  # and the inside is mostly classified whole
+
+
+@pytest.mark.parametrize("name", ["sphere", "torus", "box", "box minus ball"])
+def test_volume_bounds_contain_the_exact_volume_and_tighten(name):
+    expr, exact = SURFACES[name]
+    s = implc.compile(expr)
+    widths = []
+    for depth in (5, 6, 7):
+        lo, hi = implc.voxelize(s, depth, solid=True).volume_bounds()
+        assert lo <= exact <= hi, (depth, lo, exact, hi)
+        widths.append(hi - lo)
+    for coarse, fine in zip(widths, widths[1:]):
+        assert 0.35 < fine / coarse < 0.65, widths  # the boundary shell halves in volume per level
+
+
+def test_solid_changes_no_voxel_and_workers_agree():
+    s = implc.compile(TORUS)
+    shell = implc.voxelize(s, 7)
+    one, three = implc.voxelize(s, 7, solid=True, workers=1), implc.voxelize(s, 7, solid=True, workers=3)
+    np.testing.assert_array_equal(shell.coords, one.coords)
+    np.testing.assert_array_equal(shell.normals, one.normals)
+    np.testing.assert_array_equal(one.inside, three.inside)
+    assert shell.inside is None
+    with pytest.raises(ValueError, match="solid=True"):
+        shell.volume_bounds()
+
+
+@pytest.mark.parametrize("engine", ["jit", "tape"])
+def test_a_task_resumes_when_its_inside_output_is_full(monkeypatch, engine):
+    s = implc.compile(Max(SPHERE, -(sqrt(x**2 + y**2) - Rational(1, 5))), engine=engine)
+    expected = implc.voxelize(s, 7, solid=True, workers=2)
+    monkeypatch.setattr(subdivide_module, "OUTPUT_CHUNK", 16)
+    chunked = implc.voxelize(s, 7, solid=True, workers=2)
+    np.testing.assert_array_equal(chunked.inside, expected.inside)
+    np.testing.assert_array_equal(chunked.coords, expected.coords)
+
+
+def test_both_engines_classify_alike():
+    a = implc.voxelize(implc.compile(HOLLOW, engine="jit"), 6, solid=True)
+    b = implc.voxelize(implc.compile(HOLLOW, engine="tape"), 6, solid=True)
+    np.testing.assert_array_equal(a.inside, b.inside)
+    assert a.volume_bounds() == b.volume_bounds()
+
+
+def test_a_solid_saves_loads_and_is_described(tmp_path, capsys):
+    out = tmp_path / "torus.npz"
+    assert main(["voxelize", "torus", "--depth", "6", "--solid", "-o", str(out)]) == 0
+    assert "inside octants, volume in [" in capsys.readouterr().out
+    from implc import voxel_files
+    loaded = voxel_files.load_npz(out)
+    direct = implc.voxelize(implc.compile(TORUS), 6, solid=True)
+    np.testing.assert_array_equal(loaded.inside, direct.inside)
+    assert loaded.volume_bounds() == direct.volume_bounds()
+    assert main(["info", str(out)]) == 0
+    text = capsys.readouterr().out
+    lo, hi = direct.volume_bounds()
+    assert f"volume   [{lo!r}, {hi!r}]" in text and "inside   " in text
