@@ -442,8 +442,32 @@ def techniques(args, out):
     return md
 
 
+def solids(args, out):
+    """Solid voxelization (inside octants kept whole) against the shell, all cores, at --solid-depths:
+    medians, the extra cost, inside octants and the width of the guaranteed volume bounds."""
+    rows = []
+    for name in args.solid_scenes.split(","):
+        sc = scene.load(name)
+        s = implc.compile(sc.surface, sc.bounds)
+        for depth in args.solid_depths:
+            implc.voxelize(s, depth, solid=True)
+            shell_s, _ = median_time(lambda: implc.voxelize(s, depth), args.repeats)
+            solid_s, v = median_time(lambda: implc.voxelize(s, depth, solid=True), args.repeats)
+            lo, hi = v.volume_bounds()
+            rows.append({"scene": name, "depth": depth, "shell_s": shell_s, "solid_s": solid_s,
+                         "voxels": len(v), "inside_octants": len(v.inside), "volume_lo": lo, "volume_hi": hi})
+    out["solids"] = rows
+    md = ["### Solids: inside octants kept whole, against the shell (all cores)", "",
+          "| scene | grid | shell s | solid s | extra | boundary voxels | inside octants | volume bounds |",
+          "|---|---|---|---|---|---|---|---|"]
+    md += [f"| {r['scene']} | {1 << r['depth']}³ | {r['shell_s']:.3f} | {r['solid_s']:.3f} | "
+           f"{r['solid_s'] / r['shell_s'] - 1:+.0%} | {r['voxels']} | {r['inside_octants']} | "
+           f"[{r['volume_lo']:.6g}, {r['volume_hi']:.6g}] |" for r in rows]
+    return md
+
+
 SECTIONS = {"table1": table1, "techniques": techniques, "baselines": baselines, "growth": growth,
-            "tightness": tightness, "kernels": kernels, "models": models}
+            "tightness": tightness, "kernels": kernels, "models": models, "solids": solids}
 
 
 def parser():
@@ -464,6 +488,8 @@ def parser():
                    help="folder of .vm models for the 'models' section (default: ../shared/models of the checkout)")
     p.add_argument("--models-skip", default="", help="comma list of model names to leave out")
     p.add_argument("--models-depths", default="8,9", help="grid depths for the models (default 8,9: 256³, 512³)")
+    p.add_argument("--solid-scenes", default="paper_blobs,torus", help="scenes for the 'solids' section")
+    p.add_argument("--solid-depths", default="9,10", help="grid depths for the 'solids' section (default 512³, 1024³)")
     p.add_argument("--out", default="implc-bench", help="folder for latest.md/.json (default ./implc-bench)")
     return p
 
@@ -477,6 +503,7 @@ def main(argv=None) -> int:
     args.growth_scenes = args.growth_scenes.split(",")
     args.growth_depths = [int(d) for d in args.growth_depths.split(",")]
     args.models_depths = [int(d) for d in args.models_depths.split(",")]
+    args.solid_depths = [int(d) for d in args.solid_depths.split(",")]
     args.tightness_scenes = args.tightness_scenes.split(",") if args.tightness_scenes else scene.available()
     sections = args.sections.split(",")
     unknown = [s for s in sections if s not in SECTIONS]

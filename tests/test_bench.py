@@ -21,7 +21,7 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
                                                   "r const 2.25\nout sub t r\n")
     status = main(["bench", "--depth", "5", "--workers", "1,2", "--repeats", "1", "--baseline-depths", "5",
                    "--growth-depths", "5,6", "--tightness-scenes", "torus,paper_blobs", "--tightness-depth", "6",
-                   "--models-dir", str(tmp_path / "models"), "--models-depths", "5,6"])
+                   "--models-dir", str(tmp_path / "models"), "--models-depths", "5,6", "--solid-depths", "5,6"])
     assert status == 0
     assert "Table 1 at 32³" in capsys.readouterr().out
     assert {p.name: p.read_bytes() for p in results.iterdir()} == quoted
@@ -43,6 +43,10 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
     assert model["depths"]["6"]["voxels"] > model["depths"]["5"]["voxels"] > 0
     assert model["missed_128"] == 0 and model["voxels_128"] >= model["sign_change_cells_128"] > 0
     assert model["compile_fresh_empty_cache_s"] > 0 and model["compile_fresh_s"] > 0
+    for r in data["solids"]:  # the volume of {F < 0} lies in the bounds, which shrink with depth
+        assert 0 < r["volume_lo"] < r["volume_hi"] and r["inside_octants"] > 0
+    torus = [r for r in data["solids"] if r["scene"] == "torus"]
+    assert torus[1]["volume_hi"] - torus[1]["volume_lo"] < torus[0]["volume_hi"] - torus[0]["volume_lo"]
     growth = data["growth"]
     assert growth[1]["voxels"] > growth[0]["voxels"]
     assert (tmp_path / "latest.md").read_text().startswith("## implc benchmarks")
