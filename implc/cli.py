@@ -132,15 +132,33 @@ def cmd_scenes(args) -> int:
     return 0
 
 
+def _check_folder_writable(path: Path):
+    """A folder of slices: new, or an existing folder to replace; its parent must exist and be writable."""
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"cannot write slices to {path}: it is a file (name a folder)")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise UsageError(f"cannot write {path}: folder {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise UsageError(f"cannot write {path}: permission denied")
+
+
 def cmd_voxelize(args) -> int:
     from . import voxel_files
     out = Path(args.output)
-    _check_writable(out, voxel_files.SUFFIXES)
+    if args.slices:
+        _check_folder_writable(out)
+    else:
+        _check_writable(out, voxel_files.SUFFIXES)
     _check_surface_options(args)
     name, surface, sc = _surface_from_args(args)
     depth = args.depth if args.depth is not None else (sc.depth if sc else 9)
     voxels, seconds = _voxelize(surface, depth, args.workers, args.quiet, solid=args.solid)
-    voxel_files.save(voxels, out, compress=args.compress)
+    if args.slices:
+        from .slices import save_slices
+        save_slices(voxels, out, args.slices)
+    else:
+        voxel_files.save(voxels, out, compress=args.compress)
     if not args.quiet:
         solid = ""
         if args.solid:
@@ -294,6 +312,8 @@ def _parser():
     v.add_argument("--compress", action="store_true", help="deflate the .npz (smaller, several times slower)")
     v.add_argument("--solid", action="store_true",
                    help="also classify the inside (whole octants where F < 0): volume bounds, solid occupancy")
+    v.add_argument("--slices", choices=("png", "tiff"),
+                   help="write one 1-bit image per z layer into the folder -o names (with --solid: the solid)")
     v.set_defaults(run=cmd_voxelize)
 
     r = sub.add_parser("render", help="render a scene, formula or .npz to a PNG")

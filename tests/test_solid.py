@@ -113,3 +113,32 @@ def test_a_solid_saves_loads_and_is_described(tmp_path, capsys):
     text = capsys.readouterr().out
     lo, hi = direct.volume_bounds()
     assert f"volume   [{lo!r}, {hi!r}]" in text and "inside   " in text
+
+
+@pytest.mark.parametrize("fmt", ["png", "tiff"])
+def test_slices_are_the_dense_solid_layer_by_layer(tmp_path, fmt):
+    from PIL import Image
+
+    from implc.slices import save_slices
+    v = implc.voxelize(implc.compile(HOLLOW), 5, solid=True)
+    dense = v.to_dense(solid=True)
+    folder = save_slices(v, tmp_path / "layers", fmt)
+    files = sorted(folder.iterdir())
+    assert len(files) == 32 and all(f.suffix == (".png" if fmt == "png" else ".tif") for f in files)
+    for z, path in enumerate(files):
+        with Image.open(path) as image:
+            assert image.mode == "1" and image.size == (32, 32)
+            pixels = np.array(image, dtype=bool)
+        np.testing.assert_array_equal(pixels, np.flipud(dense[:, :, z].T), err_msg=str(path))
+    save_slices(implc.voxelize(implc.compile(SPHERE), 5, solid=True), folder, fmt)  # replaces it whole
+    assert len(list(folder.iterdir())) == 32
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["layers"], "a temporary folder was left"
+
+
+def test_the_cli_writes_slices_and_names_a_bad_target(tmp_path, capsys):
+    assert main(["voxelize", "torus", "--depth", "5", "--solid", "--slices", "png", "--quiet",
+                 "-o", str(tmp_path / "torus")]) == 0
+    assert len(list((tmp_path / "torus").glob("layer_*.png"))) == 32
+    (tmp_path / "file").write_text("x")
+    assert main(["voxelize", "torus", "--depth", "5", "--slices", "png", "-o", str(tmp_path / "file")]) == 2
+    assert "is a file" in capsys.readouterr().err
