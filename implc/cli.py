@@ -64,7 +64,7 @@ def _bounds(text):
 
 
 def _check_writable(path: Path, suffixes):
-    if path.is_dir():
+    if path.is_dir() and path.suffix.lower() != ".zarr":  # a Zarr store is a folder, replaced whole
         raise UsageError(f"cannot write {path}: it is a folder")
     suffix = path.suffix.lower()
     if suffix not in suffixes:
@@ -306,9 +306,10 @@ def _parser():
         p.add_argument("--workers", type=int, help="threads (default: all usable cores)")
         p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
 
-    v = sub.add_parser("voxelize", help="voxelize a scene or formula and write .npz, .ply or .npy")
+    v = sub.add_parser("voxelize", help="voxelize a scene or formula and write .npz, .ply, .npy or .zarr")
     surface_args(v)
-    v.add_argument("-o", "--output", required=True, help="output file: .npz, .ply (point cloud) or .npy (dense)")
+    v.add_argument("-o", "--output", required=True,
+                   help="output: .npz, .ply (point cloud), .npy (dense) or .zarr (dense, Zarr v3, written in shards)")
     v.add_argument("--compress", action="store_true", help="deflate the .npz (smaller, several times slower)")
     v.add_argument("--solid", action="store_true",
                    help="also classify the inside (whole octants where F < 0): volume bounds, solid occupancy")

@@ -19,7 +19,7 @@ from .atomic_file import replacing
 from .voxelization import Voxels
 
 FORMAT_VERSION = 1
-SUFFIXES = (".npz", ".ply", ".npy")
+SUFFIXES = (".npz", ".ply", ".npy", ".zarr")
 _MAGIC = {b"PK\x03\x04": ".npz", b"PK\x05\x06": ".npz", b"\x93NUMPY": ".npy", b"ply\n": ".ply", b"ply\r": ".ply"}
 
 
@@ -33,15 +33,19 @@ def suffix_of(path) -> str:
 
 
 def save(voxels, path, *, compress: bool = False) -> Path:
-    """Write ``voxels`` in the format named by the extension: .npz, .ply or .npy (dense occupancy).
+    """Write ``voxels`` in the format named by the extension: .npz, .ply, .npy (dense occupancy) or .zarr
+    (a Zarr v3 array of the occupancy, written shard by shard: :mod:`implc.zarr_store`).
 
     ``compress``: deflate the .npz (about 3x smaller for Morton-ordered voxels, and several times slower).
     """
+    from .zarr_store import save_zarr
     path = Path(path)
-    writers = {".npz": lambda v, p: save_npz(v, p, compress=compress), ".ply": save_ply, ".npy": save_dense}
+    writers = {".npz": lambda v, p: save_npz(v, p, compress=compress), ".ply": save_ply, ".npy": save_dense,
+               ".zarr": save_zarr}
     suffix = suffix_of(path)
     if suffix not in writers:
-        raise ValueError(f"unknown output format {path.suffix or '(none)'!r} for {path}: use .npz, .ply or .npy")
+        raise ValueError(f"unknown output format {path.suffix or '(none)'!r} for {path}: use .npz, .ply, .npy "
+                         "or .zarr")
     writers[suffix](voxels, path)
     return path
 

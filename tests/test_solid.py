@@ -142,3 +142,31 @@ def test_the_cli_writes_slices_and_names_a_bad_target(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
     assert main(["voxelize", "torus", "--depth", "5", "--slices", "png", "-o", str(tmp_path / "file")]) == 2
     assert "is a file" in capsys.readouterr().err
+
+
+def test_zarr_holds_the_dense_solid_and_the_cli_writes_it(tmp_path, capsys):
+    import zarr
+
+    from implc import voxel_files
+    v = implc.voxelize(implc.compile(HOLLOW), 6, solid=True)
+    path = voxel_files.save(v, tmp_path / "hollow.zarr")
+    array = zarr.open(path, mode="r")
+    assert array.shape == (64, 64, 64) and array.dtype == bool and array.metadata.zarr_format == 3
+    np.testing.assert_array_equal(array[:], v.to_dense(solid=True))
+    assert array.attrs["implc"]["depth"] == 6 and array.attrs["implc"]["solid"] is True
+    shell = implc.voxelize(implc.compile(HOLLOW), 6)
+    voxel_files.save(shell, path)  # replaces the store whole
+    np.testing.assert_array_equal(zarr.open(path, mode="r")[:], shell.to_dense())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hollow.zarr"], "a temporary folder was left"
+    out = tmp_path / "torus.zarr"
+    assert main(["voxelize", "torus", "--depth", "9", "--solid", "--quiet", "-o", str(out)]) == 0
+    big = zarr.open(out, mode="r")
+    direct = implc.voxelize(implc.compile(TORUS), 9, solid=True)
+    layer = np.zeros((512, 512), bool)  # layer i = 200 of the dense solid, from the voxels and octants
+    cells = direct.coords[direct.coords[:, 0] == 200]
+    layer[cells[:, 1], cells[:, 2]] = True
+    for i, j, k, level in direct.inside:
+        size = 1 << (9 - int(level))
+        if i * size <= 200 < (i + 1) * size:
+            layer[j * size:(j + 1) * size, k * size:(k + 1) * size] = True
+    np.testing.assert_array_equal(big[200], layer)
