@@ -9,8 +9,6 @@ column) is cell (i = column, j = n − 1 − row) of the layer: x to the right, 
 
 from __future__ import annotations
 
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -53,26 +51,14 @@ def save_slices(voxels, folder, fmt: str = "png") -> Path:
     folder is written under a temporary name beside it and renamed into place: an interrupted save leaves
     no partial stack, and an existing folder is replaced only once the new one is complete."""
     from PIL import Image
+
+    from .atomic_file import replacing_folder
     if fmt not in FORMATS:
         raise ValueError(f"unknown slice format {fmt!r}: use {' or '.join(FORMATS)}")
     folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise ValueError(f"{folder} exists and is not a folder")
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-    try:
+    with replacing_folder(folder) as tmp:
         digits = max(5, len(str((1 << voxels.depth) - 1)))
         options = {"compression": "group4"} if fmt == "tiff" else {"optimize": False}
         for z, image in layers(voxels):
             Image.fromarray(image).convert("1").save(tmp / f"layer_{z:0{digits}d}{FORMATS[fmt]}", **options)
-        if folder.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{folder.name}.old.", dir=folder.parent))
-            folder.rename(old / folder.name)
-            tmp.rename(folder)
-            shutil.rmtree(old)
-        else:
-            tmp.rename(folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return folder

@@ -11,11 +11,11 @@ name beside the target and renamed into place.
 
 from __future__ import annotations
 
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from .atomic_file import replacing_folder
 
 CHUNK = 64
 SHARD = 256
@@ -66,14 +66,12 @@ def save_zarr(voxels, path) -> Path:
     small_order = np.argsort(small_keys, kind="stable")
     small_keys = small_keys[small_order]
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
-    try:
+    with replacing_folder(path) as tmp:
+        about = {"depth": voxels.depth, "bounds": [list(b) for b in voxels.bounds], "solid": voxels.inside is not None,
+                 "index": "[i, j, k]: cell (i, j, k) of the grid"}
         array = zarr.create_array(store=str(tmp), shape=(n, n, n), chunks=(chunk,) * 3, shards=(shard,) * 3,
                                   dtype="bool", fill_value=False, zarr_format=3, overwrite=True,
-                                  attributes={"implc": {"depth": voxels.depth, "bounds": [list(b) for b in voxels.bounds],
-                                                        "solid": voxels.inside is not None,
-                                                        "index": "[i, j, k]: cell (i, j, k) of the grid"}})
+                                  attributes={"implc": about})
         big_rows = inside[big]
         for key in range(per_axis ** 3):
             block = np.zeros((shard,) * 3, dtype=bool)
@@ -91,14 +89,4 @@ def save_zarr(voxels, path) -> Path:
                     block[...] = True
             if block.any():
                 array[origin[0]:origin[0] + shard, origin[1]:origin[1] + shard, origin[2]:origin[2] + shard] = block
-        if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old.", dir=path.parent))
-            path.rename(old / path.name)
-            tmp.rename(path)
-            shutil.rmtree(old)
-        else:
-            tmp.rename(path)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return path

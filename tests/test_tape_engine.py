@@ -30,15 +30,7 @@ def sampled_sign_changes(expr, bounds, depth):
     gx, gy, gz = np.meshgrid(*axes, indexing="ij")
     with np.errstate(all="ignore"):
         f = np.broadcast_to(sympy.lambdify((x, y, z), expr, "numpy")(gx, gy, gz), gx.shape)
-    lo, hi = np.full((n,) * 3, np.inf), np.full((n,) * 3, -np.inf)
-    undefined = np.zeros((n,) * 3, bool)
-    for dx in (0, 1):
-        for dy in (0, 1):
-            for dz in (0, 1):
-                c = f[dx:dx + n, dy:dy + n, dz:dz + n]
-                lo, hi = np.minimum(lo, c), np.maximum(hi, c)
-                undefined |= np.isnan(c)
-    return ((lo <= 0) & (hi >= 0)) | undefined
+    return corner_sign_changes(f)
 
 
 def _primitive(kind, cx, cy, cz, size):

@@ -11,6 +11,8 @@ from implc.cli import main
 from implc.regions import plan_regions
 from implc.vm import VmError, parse_vm
 
+from .truth import corner_sign_changes
+
 # every op of the format, in three small models written here
 CSG = """# a box minus a sphere, unioned with a rounded bump --scale 0.8
 x var-x
@@ -134,17 +136,7 @@ def interpret(text, x, y, z):
 def sign_change_cells(text, bounds, depth):
     n = 1 << depth
     axes = [np.linspace(lo, hi, n + 1) for lo, hi in bounds]
-    gx, gy, gz = np.meshgrid(*axes, indexing="ij")
-    f = interpret(text, gx, gy, gz)
-    lo, hi = np.full((n, n, n), np.inf), np.full((n, n, n), -np.inf)
-    undefined = np.zeros((n, n, n), bool)
-    for dx in (0, 1):
-        for dy in (0, 1):
-            for dz in (0, 1):
-                c = f[dx:dx + n, dy:dy + n, dz:dz + n]
-                lo, hi = np.minimum(lo, c), np.maximum(hi, c)
-                undefined |= np.isnan(c)
-    return ((lo <= 0) & (hi >= 0)) | undefined
+    return corner_sign_changes(interpret(text, *np.meshgrid(*axes, indexing="ij")))
 
 
 @pytest.mark.parametrize("name, text", [("csg", CSG), ("blend", BLEND), ("tangle", TANGLE)])
@@ -228,6 +220,7 @@ def test_a_model_composes_with_sympy():
     """model(x, y, z) is a SymPy expression that compile inlines: a 2-D model extruded by Max, and a model
     moved and scaled, each against the numpy run of the .vm text."""
     import sympy
+
     from implc import x, y, z
     disc = parse_vm(DISC, name="disc")
     slab = sympy.Max(disc(x, y, z), sympy.Abs(z) - sympy.Rational(1, 10))

@@ -10,6 +10,8 @@ from sympy import Max, Min, Rational, cos, exp, log, sin, sqrt
 import implc
 from implc import phi, r, scene, shapes, theta, x, y, z
 
+from .truth import corner_sign_changes
+
 SURFACES = {
     "paper_blobs": None, "paper_sin4_sin8": None, "paper_sin3_sin4": None,  # from scenes/
     "csg": (shapes.difference(shapes.box((Rational(3, 5),) * 3),
@@ -48,18 +50,7 @@ def sign_change_cells(surface, depth):
     n = 1 << depth
     axes = [np.linspace(lo, hi, n + 1) for lo, hi in surface.bounds]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    f = surface.eval(grid).reshape(n + 1, n + 1, n + 1)
-    lo = np.full((n, n, n), np.inf)
-    hi = np.full((n, n, n), -np.inf)
-    undefined = np.zeros((n, n, n), dtype=bool)
-    for dx in (0, 1):
-        for dy in (0, 1):
-            for dz in (0, 1):
-                c = f[dx:dx + n, dy:dy + n, dz:dz + n]
-                lo = np.minimum(lo, c)
-                hi = np.maximum(hi, c)
-                undefined |= np.isnan(c)
-    return ((lo <= 0) & (hi >= 0)) | undefined
+    return corner_sign_changes(surface.eval(grid).reshape(n + 1, n + 1, n + 1))
 
 
 @pytest.mark.parametrize("depth", [5, 6, 7, 8])

@@ -140,3 +140,18 @@ def assert_encloses(surface, expr, lo, hi, rng, per_box=6, mean_value=False):
             assert mpmath.mpf(f_lo[i]) <= v <= mpmath.mpf(f_hi[i]), (
                 f"{expr}: F({p.tolist()}) = {mpmath.nstr(v, 20)} outside [{f_lo[i]!r}, {f_hi[i]!r}] "
                 f"for box {lo[i].tolist()}..{hi[i].tolist()}")
+
+
+def corner_sign_changes(f: np.ndarray) -> np.ndarray:
+    """The cells of a grid whose eight corner values ``f`` ((n + 1)³, computed by the caller without
+    implc's compiler) change sign, touch 0 or include NaN: the cells a sound voxelization must keep."""
+    n = f.shape[0] - 1
+    lo, hi = np.full((n,) * 3, np.inf), np.full((n,) * 3, -np.inf)
+    undefined = np.zeros((n,) * 3, dtype=bool)
+    for dx in (0, 1):
+        for dy in (0, 1):
+            for dz in (0, 1):
+                c = f[dx:dx + n, dy:dy + n, dz:dz + n]
+                lo, hi = np.minimum(lo, c), np.maximum(hi, c)
+                undefined |= np.isnan(c)
+    return ((lo <= 0) & (hi >= 0)) | undefined
