@@ -21,6 +21,7 @@ from implc.tape_program import OPCODES, encode
 
 from .test_vm import CSG, interpret
 from .test_vm import sign_change_cells as vm_sign_change_cells
+from .truth import corner_sign_changes
 
 
 def sampled_sign_changes(expr, bounds, depth):
