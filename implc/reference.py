@@ -113,9 +113,14 @@ def i_mul(args, attr):
 
 def i_div(args, attr):
     a, b = args
-    q = (a[0] / b[0], a[0] / b[1], a[1] / b[0], a[1] / b[1])
-    lo = widen_down(np.minimum(np.minimum(q[0], q[1]), np.minimum(q[2], q[3])), R.ARITH)
-    hi = widen_up(np.maximum(np.maximum(q[0], q[1]), np.maximum(q[2], q[3])), R.ARITH)
+    # the corners holding the extremes, picked by sign before dividing (two divisions, not four; rounding
+    # is monotone, so they are also the extremes of the four rounded quotients)
+    positive = b[0] > 0
+    lo_num, hi_num = np.where(positive, a[0], a[1]), np.where(positive, a[1], a[0])
+    lo_den, hi_den = np.where(lo_num >= 0, b[1], b[0]), np.where(hi_num >= 0, b[0], b[1])
+    undefined = np.isnan(a[0]) | np.isnan(a[1]) | np.isnan(b[0]) | np.isnan(b[1])
+    lo = widen_down(np.where(undefined, np.nan, lo_num / lo_den), R.ARITH)
+    hi = widen_up(np.where(undefined, np.nan, hi_num / hi_den), R.ARITH)
     across_zero = (b[0] <= 0) & (b[1] >= 0)
     keep_nan = (a[0] + a[1]) * 0.0  # NaN when a is (partly) undefined or unbounded
     return np.where(across_zero, -INF + keep_nan, lo), np.where(across_zero, INF + keep_nan, hi)

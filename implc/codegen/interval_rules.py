@@ -94,9 +94,15 @@ class IntervalEmitter:
     def i_div(self, a, attr):
         v = self.v
         (alo, ahi), (blo, bhi) = a
-        q = (v.div(alo, blo), v.div(alo, bhi), v.div(ahi, blo), v.div(ahi, bhi))
-        lo = v.widen_down(self.min4(q), R.ARITH)
-        hi = v.widen_up(self.max4(q), R.ARITH)
+        zero = v.splat(0.0)
+        positive = v.cmp(">", blo, zero)
+        lo_num, hi_num = v.select(positive, alo, ahi), v.select(positive, ahi, alo)
+        lo_den = v.select(v.cmp(">=", lo_num, zero), bhi, blo)
+        hi_den = v.select(v.cmp(">=", hi_num, zero), blo, bhi)  # the extremes' corners: two divisions
+        undefined = v.or_(v.or_(v.isnan(alo), v.isnan(ahi)), v.or_(v.isnan(blo), v.isnan(bhi)))
+        nan = v.splat(NAN)
+        lo = v.widen_down(v.select(undefined, nan, v.div(lo_num, lo_den)), R.ARITH)
+        hi = v.widen_up(v.select(undefined, nan, v.div(hi_num, hi_den)), R.ARITH)
         across_zero = self.contains_zero((blo, bhi))
         keep_nan = v.mul(v.add(alo, ahi), v.splat(0.0))
         return (v.select(across_zero, v.add(v.splat(-INF), keep_nan), lo),
