@@ -203,7 +203,7 @@ class Subdivider:
 
     # -- native steps ------------------------------------------------------------------------------
     def _new_worker(self, depth) -> _Worker:
-        return _Worker(depth, None if self.program is None else self.program)
+        return _Worker(depth, self.program)
 
     def _run_task(self, w: _Worker, cell, level: int, depth: int, result: _TaskResult) -> None:
         """Append all kept cells at ``depth`` below ``cell`` (at ``level``) to ``result``, in Morton order

@@ -19,9 +19,9 @@ from .codegen.kernels import WIDTH, WIDTHS, build_mean_value_module, build_modul
 from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape
-from .regions import plan_regions
 from .jit import NativeModule, host_has_avx512
 from .lower import lower
+from .regions import plan_regions
 from .runtime import Runtime
 from .tape_program import TapeProgram, encode, slot_scratch, unsupported_ops
 from .vm import VmModel
@@ -118,9 +118,10 @@ def _pruned_by_kernels(tape: Tape) -> set[int]:
 class Surface:
     """A compiled implicit surface F(x, y, z) = 0 (F < 0 inside) over a bounding box.
 
-    ``engine``: "jit" (kernels compiled for this surface by LLVM, on first use) or "tape" (the shared tape
-    engine runs the surface's :class:`~implc.tape_program.TapeProgram`, pruning every decided Min/Max
-    and select per octant; compiled kernels are still built on first use by what needs them, e.g. the mean-value form).
+    ``engine``: "jit" (kernels compiled for this surface by LLVM when it is compiled) or "tape" (the shared
+    tape engine runs the surface's :class:`~implc.tape_program.TapeProgram`, pruning every decided Min/Max
+    and select per octant; compiled kernels are built on first use by what needs them, e.g. the mean-value
+    form).
     """
 
     def __init__(self, expr: sympy.Expr, bounds, tape: Tape, vector_width: int = WIDTH, directed: bool = False,
@@ -136,9 +137,8 @@ class Surface:
         self._native: NativeModule | None = None  # compiled on first use
         self._mean_value_native: NativeModule | None = None  # compiled on first use
         self._bound: dict[str, object] = {}
-        if engine == "tape":
-            self._engine = self.runtime.tape_engine(directed)  # shared: built once, then from the cache
-        else:
+        self._engine = self.runtime.tape_engine(directed) if engine == "tape" else None  # shared, cached
+        if engine == "jit":
             self._module_of(abi.POINT)  # this surface's kernels: compiled now, or loaded from the cache
 
     @property
@@ -155,7 +155,7 @@ class Surface:
 
     @property
     def tape_engine(self):
-        """The shared :class:`~implc.runtime.TapeEngine` that runs this surface (engine "tape")."""
+        """The shared :class:`~implc.runtime.TapeEngine` that runs this surface (None for engine "jit")."""
         return self._engine
 
     @property

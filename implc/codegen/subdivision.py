@@ -1,14 +1,14 @@
 """``implc_subdivide``: Fig. 1 of the paper, the native depth-first subdivision of one task.
 
-A loop over an explicit stack. It calls a surface's octant kernel (``implc_octant``: the eight children
-of an octant, generated and enclosed in vector registers) through a function pointer (a second, finer
-kernel, e.g. the mean-value form, from a given child level on; optionally a leaf is kept only if one of
-its eight halves-per-axis may meet the surface), prunes children whose enclosure excludes 0, pushes the
-rest in reverse so that leaves come out in Morton order, and writes leaf coordinates with their
-live-term masks; where ``inside`` is not NULL (a solid), also every child whose enclosure lies below 0
-(:data:`implc.abi.INSIDE_WORDS` each; their count goes to the state). It is resumable: when the output buffer is full or the cancel flag is raised it returns
-with its stack intact (the layouts are :mod:`implc.abi`'s).
-"""
+A loop over an explicit stack. It calls a surface's octant kernel (``implc_octant``: the eight children of
+an octant, generated and enclosed in vector registers) through a function pointer (a second, finer kernel,
+e.g. the mean-value form, from a given child level on; optionally a leaf is kept only if one of its eight
+halves-per-axis may meet the surface), prunes children whose enclosure excludes 0, pushes the rest in
+reverse so that leaves come out in Morton order, and writes leaf coordinates with their live-term masks;
+where ``inside`` is not NULL (a solid), also every child whose enclosure lies below 0
+(:data:`implc.abi.INSIDE_WORDS` each; their count goes to the state). It is resumable: when the output
+buffer is full or the cancel flag is raised it returns with its stack intact (the layouts are
+:mod:`implc.abi`'s)."""
 
 from __future__ import annotations
 

@@ -79,7 +79,8 @@ def emit_tape_prefill(module: ir.Module) -> ir.Function:
     with for_range(b, _header(b, header, abi.PROGRAM_CONSTANT_COUNT)) as k:
         slot = b.sext(load_at(b, constant_slots, k), I64)
         row = b.mul(k, ir.Constant(I64, 3))
-        nearest, lo, hi = (broadcast(b, load_at(b, constants, b.add(row, ir.Constant(I64, c))), LANES) for c in range(3))
+        nearest, lo, hi = (broadcast(b, load_at(b, constants, b.add(row, ir.Constant(I64, c))), LANES)
+                           for c in range(3))
         b.store(lo, b.gep(vslots, [b.mul(slot, ir.Constant(I64, 2))]), align=8)
         b.store(hi, b.gep(vslots, [b.add(b.mul(slot, ir.Constant(I64, 2)), ir.Constant(I64, 1))]), align=8)
         for c, value in enumerate((nearest, zero, zero, zero)):

@@ -2,16 +2,17 @@
 
 ``tape_simplify(program, length, output, choices, lane, out, need, mark, remap, out_output) -> length'``
 (internal): given the choices ``tape_interval`` wrote for box ``lane``, every Min/Max whose choice was
-decided becomes an alias of its winning operand (a select: of the branch its condition takes), and every instruction that only fed the losing one is
-dropped; the new program's output slot goes to ``out_output``.
+decided becomes an alias of its winning operand (a select: of the branch its condition takes), and every
+instruction that only fed the losing one is dropped; the new program's output slot goes to ``out_output``.
 
-Two passes, both linear in the program: backward from the output, marking what the result
-needs (``need``, one byte per slot) and what each instruction becomes (``mark``: dropped, kept, or an
-alias of its first or second value operand); forward, writing the kept instructions with their operands renamed through
-the aliases (``remap``, one int32 per slot; constants and coordinates, which no instruction writes, name
-themselves: :func:`~implc.codegen.tape_eval.emit_tape_prefill` sets them). Kept instructions keep their slots, so constants and the
-interval rules see exactly what they saw in the full program; the result is bit for bit the full
-program's wherever the choices hold (a decided Min/Max returns its winning operand's enclosure exactly).
+Two passes, both linear in the program: backward from the output, marking what the result needs (``need``,
+one byte per slot) and what each instruction becomes (``mark``: dropped, kept, or an alias of its first or
+second value operand); forward, writing the kept instructions with their operands renamed through the
+aliases (``remap``, one int32 per slot; constants and coordinates, which no instruction writes, name
+themselves: :func:`~implc.codegen.tape_eval.emit_tape_prefill` sets them). Kept instructions keep their
+slots, so constants and the interval rules see exactly what they saw in the full program. Below the box
+the result encloses F (a decided choice holds at every point of the box), and it equals the full
+program's wherever the interval rules are inclusion-monotone (docs/soundness.md).
 """
 
 from __future__ import annotations

@@ -1,18 +1,17 @@
 """``implc_tape_subdivide``: Fig. 1 for the tape engine, each octant running its own simplified program.
 
-A depth-first walk with one frame per level (:data:`implc.abi.TAPE_FRAME_WORDS`): expanding a frame
-encloses its octant's eight children with ``tape_interval`` over the octant's program, recording the
-Min/Max choices each child's enclosure decided; stepping into a child that may meet the surface gives
-it its own program, ``tape_simplify``'d by those choices (or its parent's, where none was decided or
-pruning is off), so that below an octant every decided branch costs nothing. Children are visited in
-Morton order; a task starts from the full program simplified down the path from the root to its
-octant. The children of an octant one level above the leaves are the voxels; their unit normals come
-eight at a time from ``tape_dual`` over the program two levels above the leaves (valid for every voxel
-below that octant, and barely longer than their parents'), through the normals block of
-:mod:`implc.codegen.normals`, before the voxels leave the call. Where ``inside`` is not NULL (a solid),
-every child whose enclosure lies below 0 is written there too (:data:`implc.abi.INSIDE_WORDS` each). Resumable: when the output is full or the cancel flag is raised it returns
-with its frames and state intact (layouts in :mod:`implc.abi`).
-"""
+A depth-first walk with one frame per level (:data:`implc.abi.TAPE_FRAME_WORDS`): expanding a frame encloses
+its octant's eight children with ``tape_interval`` over the octant's program, recording the Min/Max choices
+each child's enclosure decided; stepping into a child that may meet the surface gives it its own program,
+``tape_simplify``'d by those choices (or its parent's, where none was decided or pruning is off), so that
+below an octant every decided branch costs nothing. Children are visited in Morton order; a task starts from
+the full program simplified down the path from the root to its octant. The children of an octant one level
+above the leaves are the voxels; their unit normals come eight at a time from ``tape_dual`` over the program
+two levels above the leaves (valid for every voxel below that octant, and barely longer than their
+parents'), through the normals block of :mod:`implc.codegen.normals`, before the voxels leave the call.
+Where ``inside`` is not NULL (a solid), every child whose enclosure lies below 0 is written there too
+(:data:`implc.abi.INSIDE_WORDS` each). Resumable: when the output is full or the cancel flag is raised it
+returns with its frames and state intact (layouts in :mod:`implc.abi`)."""
 
 from __future__ import annotations
 
@@ -171,8 +170,8 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
             pending = b.and_(pending, const(I64, -LANES))
         with if_(b, b.icmp_signed(">", pending, const(I64, 0))):
             offset = b.mul(first, const(I64, 3))
-            b.call(normals, [header, program_of(normals_level), length_of(normals_level), output_of(normals_level), slots,
-                             leaf_geom,
+            b.call(normals, [header, program_of(normals_level), length_of(normals_level), output_of(normals_level),
+                             slots, leaf_geom,
                              b.gep(out, [offset]), pending, b.gep(out_normals, [offset])])
             normals_done.set(b.add(first, pending))
 
