@@ -41,7 +41,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 # -- helpers ---------------------------------------------------------------------------------------
-_COUNT_WORDS = {2: "two", 3: "three", 6: "six"}
+_COUNT_WORDS = {1: "one", 2: "two", 3: "three", 6: "six"}
 
 
 def _numbers(text, count, what, example):
@@ -188,18 +188,34 @@ def cmd_render(args) -> int:
     else:
         _, surface, sc = _surface_from_args(args)
         depth = args.depth if args.depth is not None else (sc.depth if sc else 9)
-        voxels, _ = _voxelize(surface, depth, args.workers, args.quiet)
+        voxels, _ = _voxelize(surface, depth, args.workers, args.quiet, solid=args.solid)
         default_view = sc.view if sc else None
     azimuth, elevation = view_angles or default_view or (35.0, 25.0)
     if args.lod is not None and not 1 <= args.lod <= voxels.depth:
         raise UsageError(f"--lod must be from 1 to {voxels.depth}, got {args.lod}")
+    cut = _cut(args.cut, voxels) if args.cut else None
+    if cut is not None and args.lod is not None:
+        raise UsageError("--cut draws the voxels themselves; it cannot be combined with --lod")
     t0 = time.perf_counter()
     image = render_voxels(voxels, size=args.size, view=View(azimuth, elevation, perspective=args.perspective),
-                          style=style, lod=args.lod)
+                          style=style, lod=args.lod, cut=cut)
     save_png(image, out)
     if not args.quiet:
         print(f"rendered {len(voxels)} voxels to {out} ({args.size}² in {time.perf_counter() - t0:.2f} s)")
     return 0
+
+
+def _cut(text, voxels) -> tuple[int, float]:
+    """--cut AXIS=VALUE (x, y or z, a number inside the bounds) as (axis, value)."""
+    axis, sep, value = text.partition("=")
+    if not sep or axis.strip() not in ("x", "y", "z"):
+        raise UsageError(f"--cut must be AXIS=VALUE with AXIS x, y or z, got {text!r}")
+    (number,) = _numbers(value, 1, "--cut", "AXIS=VALUE")
+    a = "xyz".index(axis.strip())
+    lo, hi = voxels.bounds[a]
+    if not lo <= number <= hi:
+        raise UsageError(f"--cut {text}: {axis.strip()} must lie within the bounds {lo}..{hi}")
+    return a, number
 
 
 def _color(text):
@@ -323,6 +339,8 @@ def _parser():
     r.add_argument("--size", type=int, default=1024, help="image size in pixels (default 1024)")
     r.add_argument("--view", help="azimuth,elevation in degrees (default: the scene's, or 35,25)")
     r.add_argument("--lod", type=int, help="draw octree level K instead of the voxels")
+    r.add_argument("--cut", help="cut-away: remove what lies beyond AXIS=VALUE (e.g. z=0) and draw the section")
+    r.add_argument("--solid", action="store_true", help="voxelize a solid (the section of a cut is filled)")
     r.add_argument("--perspective", action="store_true", help="perspective camera (default orthographic)")
     r.add_argument("--color", help="surface colour R,G,B in 0..1")
     r.set_defaults(run=cmd_render)

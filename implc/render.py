@@ -106,15 +106,57 @@ def render_points(centers, normals, cell_size, bounds, *, size=1024, view: View 
     return image.reshape(size, size, 3)
 
 
-def render_voxels(voxels, *, size=1024, view: View = View(), style: Style = Style(), lod: int | None = None):
-    """Render a :class:`~implc.voxelization.Voxels` (or anything with coords, normals, depth, bounds)."""
+AXES = "xyz"
+
+
+def cross_section(voxels, axis: int, index: int) -> np.ndarray:
+    """The cells of layer ``index`` along ``axis`` that the voxels' solid covers: the boundary voxels there
+    and every cell of the inside octants that cross it ((m, 3) uint32; a shell has only its voxels)."""
+    parts = [voxels.coords[voxels.coords[:, axis] == index].astype(np.int64)]
+    inside = voxels.inside if getattr(voxels, "inside", None) is not None else np.empty((0, 4), np.int32)
+    others = [a for a in range(3) if a != axis]
+    for level in np.unique(inside[:, 3]):
+        size = 1 << (voxels.depth - int(level))
+        rows = inside[(inside[:, 3] == level) & (inside[:, axis] == index // size)].astype(np.int64)
+        if not len(rows):
+            continue
+        offsets = np.stack(np.meshgrid(np.arange(size), np.arange(size), indexing="ij"), -1).reshape(-1, 2)
+        cells = np.empty((len(rows) * len(offsets), 3), dtype=np.int64)
+        cells[:, axis] = index
+        for n, a in enumerate(others):
+            cells[:, a] = (rows[:, a, None] * size + offsets[None, :, n]).ravel()
+        parts.append(cells)
+    return np.concatenate(parts).astype(np.uint32)
+
+
+def render_voxels(voxels, *, size=1024, view: View = View(), style: Style = Style(), lod: int | None = None,
+                  cut: tuple[int, float] | None = None):
+    """Render a :class:`~implc.voxelization.Voxels` (or anything with coords, normals, depth, bounds).
+
+    ``cut = (axis, value)``: a cut-away. Everything beyond the plane (coordinate ``axis`` above ``value``,
+    in world units) is removed, and the cross-section on the plane is drawn facing the removed side: for a
+    solid (``voxelize(..., solid=True)``) the filled section, for a shell only the surface's ring."""
     depth = voxels.depth
     coords, normals = voxels.coords, voxels.normals
     if lod is not None:
         if not 1 <= lod <= depth:
             raise ValueError(f"lod must be from 1 to {depth}, got {lod}")
+        if cut is not None:
+            raise ValueError("a cut-away is drawn from the voxels, not from an octree level (drop lod)")
         coords, normals = voxels.octree.level(lod)
         depth = lod
+    if cut is not None:
+        axis, value = cut
+        lo_axis, hi_axis = voxels.bounds[axis]
+        if not lo_axis <= value <= hi_axis:
+            raise ValueError(f"the cut {AXES[axis]}={value} lies outside the bounds {lo_axis}..{hi_axis}")
+        index = min(int((value - lo_axis) / (hi_axis - lo_axis) * (1 << depth)), (1 << depth) - 1)
+        keep = coords[:, axis] < index
+        section = cross_section(voxels, axis, index)
+        facing = np.zeros((len(section), 3), dtype=np.float32)
+        facing[:, axis] = 1.0
+        coords = np.concatenate([coords[keep], section])
+        normals = np.concatenate([normals[keep], facing])
     lo = np.array([b[0] for b in voxels.bounds], dtype=np.float64)
     cell = np.array([(b[1] - b[0]) / (1 << depth) for b in voxels.bounds])
     centers = lo + (coords.astype(np.float64) + 0.5) * cell

@@ -170,3 +170,44 @@ def test_zarr_holds_the_dense_solid_and_the_cli_writes_it(tmp_path, capsys):
         if i * size <= 200 < (i + 1) * size:
             layer[j * size:(j + 1) * size, k * size:(k + 1) * size] = True
     np.testing.assert_array_equal(big[200], layer)
+
+
+def test_a_cross_section_is_the_dense_solid_layer():
+    from implc.render import cross_section
+    v = implc.voxelize(implc.compile(TORUS), 6, solid=True)
+    dense = v.to_dense(solid=True)
+    for axis, index in ((2, 32), (0, 20), (1, 45)):
+        cells = cross_section(v, axis, index)
+        got = np.zeros_like(dense)
+        got[cells[:, 0], cells[:, 1], cells[:, 2]] = True
+        expected = np.zeros_like(dense)
+        layer = [slice(None)] * 3
+        layer[axis] = index
+        expected[tuple(layer)] = dense[tuple(layer)]
+        np.testing.assert_array_equal(got, expected)
+
+
+def test_a_cut_away_shows_the_filled_section_of_a_solid():
+    """A ball cut at z = 0 seen from above: the solid's section is one flat disk (one colour at the
+    centre), the shell's is the inside of the lower half (shaded)."""
+    from implc.render import View, render_voxels
+    s = implc.compile(SPHERE)
+    view = View(0.0, 90.0)
+    solid = render_voxels(implc.voxelize(s, 6, solid=True), size=128, view=view, cut=(2, 0.0))
+    shell = render_voxels(implc.voxelize(s, 6), size=128, view=view, cut=(2, 0.0))
+    centre = (slice(44, 84), slice(44, 84))
+    assert len(np.unique(solid[centre].reshape(-1, 3), axis=0)) == 1
+    assert len(np.unique(shell[centre].reshape(-1, 3), axis=0)) > 10
+    with pytest.raises(ValueError, match="outside the bounds"):
+        render_voxels(implc.voxelize(s, 4), size=64, cut=(0, 3.0))
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--cut", "w=0"], "--cut must be AXIS=VALUE"),
+    (["--cut", "z=abc"], "--cut must be one number"),
+    (["--cut", "z=5"], "must lie within the bounds"),
+    (["--cut", "z=0", "--lod", "3"], "cannot be combined with --lod"),
+])
+def test_bad_cuts_are_named(tmp_path, capsys, argv, words):
+    assert main(["render", "torus", "--depth", "4", "--quiet", "-o", str(tmp_path / "t.png"), *argv]) == 2
+    assert words in capsys.readouterr().err
