@@ -234,7 +234,15 @@ def cmd_info(args) -> int:
         print(f"model    {args.file}: {model.instructions} instructions, {len(model.tape)} after sharing")
         print(f"bounds   {model.bounds} (suggested by its --scale, or [-1, 1]³)")
         return 0
-    for line in voxel_files.describe(args.file):
+    if Path(args.file).suffix.lower() == ".zarr" and Path(args.file).is_dir():
+        from .zarr_store import describe_zarr
+        try:
+            lines = describe_zarr(args.file)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    else:
+        lines = voxel_files.describe(args.file)
+    for line in lines:
         print(line)
     return 0
 

@@ -90,3 +90,21 @@ def save_zarr(voxels, path) -> Path:
             if block.any():
                 array[origin[0]:origin[0] + shard, origin[1]:origin[1] + shard, origin[2]:origin[2] + shard] = block
     return path
+
+
+def describe_zarr(path) -> list[str]:
+    """Lines describing a Zarr store this module wrote (for ``implc info``); ValueError if it is not one."""
+    import zarr
+    try:
+        array = zarr.open_array(str(path), mode="r")
+    except Exception as exc:  # zarr raises several kinds for a folder that is not an array
+        raise ValueError(f"cannot read {path} as a Zarr array: {type(exc).__name__}: {exc}") from None
+    about = array.attrs.get("implc")
+    if not isinstance(about, dict):
+        raise ValueError(f"{path} is a Zarr array but not one implc wrote (no 'implc' attribute)")
+    n = array.shape[0]
+    return [f"file     {path}, Zarr v{array.metadata.zarr_format} {array.dtype} array "
+            f"{'x'.join(map(str, array.shape))}, chunks {array.chunks}, shards {array.shards}",
+            f"grid     {n}³ (depth {about['depth']}) over {tuple(tuple(b) for b in about['bounds'])}",
+            f"content  {'the solid (inside and boundary)' if about['solid'] else 'the boundary voxels'}, "
+            f"indexed {about['index']}"]

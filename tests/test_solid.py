@@ -170,6 +170,13 @@ def test_zarr_holds_the_dense_solid_and_the_cli_writes_it(tmp_path, capsys):
         if i * size <= 200 < (i + 1) * size:
             layer[j * size:(j + 1) * size, k * size:(k + 1) * size] = True
     np.testing.assert_array_equal(big[200], layer)
+    capsys.readouterr()
+    assert main(["info", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "Zarr v3 bool array 512x512x512" in text and "depth 9" in text and "the solid" in text
+    (tmp_path / "other.zarr").mkdir()
+    assert main(["info", str(tmp_path / "other.zarr")]) == 2
+    assert "cannot read" in capsys.readouterr().err
 
 
 def test_a_cross_section_is_the_dense_solid_layer():
