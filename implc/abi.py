@@ -89,7 +89,7 @@ TAPE_INTERVAL = _entry("implc_tape_interval", "program:i64* slots:f64* choices:i
                                               "lo:f64* hi:f64* out_lo:f64* out_hi:f64* n:i64")
 TAPE_GRADIENT = _entry("implc_tape_gradient", "program:i64* slots:f64* pts:f64* out_value:f64* out_grad:f64* n:i64")
 TAPE_SUBDIVIDE = _entry("implc_tape_subdivide",
-                        "program:i64* prune:i64 geom:f64* state:i64* frames:i32* tapes:i32* choices:i8* "
+                        "program:i64* prune:i64 refine:i64 geom:f64* state:i64* frames:i32* tapes:i32* choices:i8* "
                         "slots:f64* marks:i8* remap:i32* out:i32* out_normals:f32* capacity:i64 inside:i32* "
                         "inside_capacity:i64 stats:i64* cancel:i32*", "i64")
 TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE)

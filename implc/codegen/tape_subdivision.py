@@ -6,7 +6,8 @@ each child's enclosure decided; stepping into a child that may meet the surface 
 ``tape_simplify``'d by those choices (or its parent's, where none was decided or pruning is off), so that
 below an octant every decided branch costs nothing. Children are visited in Morton order; a task starts from
 the full program simplified down the path from the root to its octant. The children of an octant one level
-above the leaves are the voxels; their unit normals come eight at a time from ``tape_dual`` over the program
+above the leaves are the voxels (with ``refine``, those one of whose eighths may meet the surface); their
+unit normals come eight at a time from ``tape_dual`` over the program
 two levels above the leaves (valid for every voxel below that octant, and barely longer than their
 parents'), through the normals block of :mod:`implc.codegen.normals`, before the voxels leave the call.
 Where ``inside`` is not NULL (a solid), every child whose enclosure lies below 0 is written there too
@@ -18,7 +19,21 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, Local, at, const, define, for_range, if_, load_at, local_array, store_at, while_true
+from .control import (
+    I32,
+    I64,
+    Local,
+    at,
+    const,
+    define,
+    for_range,
+    for_set_bits,
+    if_,
+    load_at,
+    local_array,
+    store_at,
+    while_true,
+)
 from .kernels import load_xyz, store_xyz
 from .normals import emit_normals_body
 from .tape_eval import I8, LANES, V8
@@ -66,8 +81,8 @@ def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
 def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Function, simplify: ir.Function,
                         normals: ir.Function):
     fn, b = define(module, abi.TAPE_SUBDIVIDE)
-    (header, prune, geom, state, frames, tapes, choices, slots, marks, remap, out, out_normals, capacity, inside,
-     inside_capacity, stats, cancel) = fn.args
+    (header, prune, refine, geom, state, frames, tapes, choices, slots, marks, remap, out, out_normals, capacity,
+     inside, inside_capacity, stats, cancel) = fn.args
     solid = b.icmp_unsigned("!=", inside, ir.Constant(inside.type, None))
     program = b.inttoptr(load_at(b, header, abi.PROGRAM_INSTRUCTIONS), _P(I32))
     length = load_at(b, header, abi.PROGRAM_LENGTH)
@@ -113,9 +128,11 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
     def choices_of(level):
         return b.gep(choices, [b.mul(b.mul(level, length), const(I64, LANES))])
 
-    def enclose_children(level, cell):
-        """Enclose the eight children of the octant ``cell`` (three i32) at ``level`` with that level's
-        program, recording its choices; returns the lanes with a decided choice (i8)."""
+    def enclose_children(level, cell, program_level=None):
+        """Enclose the eight children of the octant ``cell`` (three i32) at ``level`` with the program of
+        ``program_level`` (default: that level's), recording its choices; returns the lanes with a decided
+        choice (i8)."""
+        program_level = level if program_level is None else program_level
         child = b.add(level, const(I64, 1))
         vbox = b.bitcast(box, _P(V8))
         ivec = ir.VectorType(I32, LANES)
@@ -127,8 +144,8 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
             i_lo, i_hi = b.uitofp(index, V8), b.uitofp(b.add(index, ir.Constant(ivec, [1] * LANES)), V8)
             b.store(b.fsub(b.fadd(origin, b.fmul(i_lo, h)), pad), b.gep(vbox, [const(I64, a)]), align=8)
             b.store(b.fadd(b.fadd(origin, b.fmul(i_hi, h)), pad), b.gep(vbox, [const(I64, 3 + a)]), align=8)
-        return b.call(interval, [header, program_of(level), length_of(level), output_of(level), slots,
-                                 choices_of(level), box, result])
+        return b.call(interval, [header, program_of(program_level), length_of(program_level),
+                                 output_of(program_level), slots, choices_of(level), box, result])
 
     def program_for_child(level, c, decided):
         """The program of child ``c`` (i32) of the octant at ``level``: simplified by its choices where one
@@ -187,6 +204,22 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
         contains = b.or_(b.and_(b.fcmp_ordered("<=", f_lo, zero), b.fcmp_ordered(">=", f_hi, zero)),
                          b.or_(b.fcmp_unordered("uno", f_lo, f_lo), b.fcmp_unordered("uno", f_hi, f_hi)))
         kept = b.zext(b.bitcast(contains, I8), I32)
+        refined = Local(b, I32, kept, "refined")  # with refine, a leaf stays only if one of its eighths may meet F
+        with if_(b, b.and_(b.icmp_signed("==", child, depth), b.icmp_signed("!=", refine, const(I64, 0)))):
+            with for_set_bits(b, kept) as c:
+                leaf = [b.add(b.shl(b.load(frame(level, a)), const(I32, 1)), b.and_(b.lshr(c, const(I32, a)),
+                                                                                      const(I32, 1)))
+                        for a in range(3)]
+                enclose_children(child, leaf, program_level=level)
+                sub_lo, sub_hi = b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
+                sub = b.or_(b.and_(b.fcmp_ordered("<=", sub_lo, zero), b.fcmp_ordered(">=", sub_hi, zero)),
+                            b.or_(b.fcmp_unordered("uno", sub_lo, sub_lo), b.fcmp_unordered("uno", sub_hi, sub_hi)))
+                empty = b.icmp_unsigned("==", b.bitcast(sub, I8), const(I8, 0))
+                drop = b.select(empty, b.shl(const(I32, 1), c), const(I32, 0))
+                refined.set(b.and_(refined.get(), b.not_(drop)))
+                slot = at(b, stats, 0)
+                b.store(b.add(b.load(slot), const(I64, LANES)), slot)
+        kept = refined.get()
         with if_(b, solid):  # children whose box lies inside, in Morton order (branch-free)
             below = b.zext(b.bitcast(b.fcmp_ordered("<", f_hi, zero), I8), I32)
             n = inside_count.get()
