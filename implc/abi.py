@@ -90,7 +90,7 @@ TAPE_INTERVAL = _entry("implc_tape_interval", "program:i64* slots:f64* choices:i
 TAPE_GRADIENT = _entry("implc_tape_gradient", "program:i64* slots:f64* pts:f64* out_value:f64* out_grad:f64* n:i64")
 TAPE_SUBDIVIDE = _entry("implc_tape_subdivide",
                         "program:i64* prune:i64 refine:i64 geom:f64* state:i64* frames:i32* tapes:i32* choices:i8* "
-                        "slots:f64* marks:i8* remap:i32* out:i32* out_normals:f32* capacity:i64 inside:i32* "
+                        "slots:f64* need:i32* marks:i8* remap:i32* out:i32* out_normals:f32* capacity:i64 inside:i32* "
                         "inside_capacity:i64 stats:i64* cancel:i32*", "i64")
 TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE)
 
@@ -134,11 +134,11 @@ TAPE_LEVELS = MAX_DEPTH + 2
 TAPE_FRAME_WORDS = 5
 """``implc_tape_subdivide``'s frame per level (int32): the octant's cell (i, j, k), the children still
 to visit (bit c: child c), the children whose program is shorter than the octant's (a choice decided)."""
-TAPE_PHASE, TAPE_LEVEL, TAPE_DEPTH, TAPE_TASK_LEVEL, TAPE_PENDING, TAPE_INSIDE_COUNT = 0, 1, 2, 3, 4, 5
+TAPE_PHASE, TAPE_LEVEL, TAPE_DEPTH, TAPE_TASK_LEVEL, TAPE_PENDING, TAPE_INSIDE_COUNT, TAPE_STAMP = range(7)
 """``implc_tape_subdivide``'s state (int64): phase (0 new task, 1 running, 2 done), the level of the
 frame in hand, the grid depth, the task's level, whether the frame in hand still needs its children, the
-inside octants written in the last call."""
-TAPE_PROGRAMS = 6
+inside octants written in the last call, the last stamp simplification used (``need`` starts zeroed)."""
+TAPE_PROGRAMS = 7
 """Start of the instructions' address per level (TAPE_LEVELS words), then of their count, then of the
 output slot (TAPE_LEVELS words each)."""
 TAPE_STATE_WORDS = TAPE_PROGRAMS + 3 * TAPE_LEVELS

@@ -154,10 +154,11 @@ class _Worker:
             self.tapes = np.empty(abi.TAPE_LEVELS * n * abi.INSTRUCTION_WORDS, dtype=np.int32)  # untouched: free
             self.choices = np.empty(abi.TAPE_LEVELS * n * 8, dtype=np.uint8)
             self.slots = slot_scratch(slots)
-            self.marks = np.empty(slots + n, dtype=np.uint8)
+            self.need = np.zeros(slots, dtype=np.int32)  # stamps (abi.TAPE_STAMP): zero is no call's
+            self.marks = np.empty(n, dtype=np.uint8)
             self.remap = np.empty(slots, dtype=np.int32)
             self.tape_buffers = tuple(a.ctypes.data for a in (self.tape_state, self.frames, self.tapes, self.choices,
-                                                              self.slots, self.marks, self.remap))
+                                                              self.slots, self.need, self.marks, self.remap))
         self.busy = 0.0
         self.normals = 0.0
         self.tasks = 0

@@ -211,3 +211,21 @@ def test_a_vm_model_runs_on_the_engine_without_missing_a_cell():
     assert expected.sum() > 100 and not (expected & ~got).any()
     pts = np.random.default_rng(3).uniform(-1.2, 1.2, (64, 3))
     np.testing.assert_allclose(s.eval(pts), interpret(CSG, *pts.T), rtol=1e-12, atol=1e-12)
+
+
+def test_simplification_stamps_start_over_without_changing_anything(monkeypatch):
+    """tape_simplify marks what a program needs with a per-call stamp instead of clearing a buffer; when the
+    stamps run out they start over (the buffer cleared once): the voxels are the same."""
+    from implc import abi
+    s = implc.compile(nested_scene(), engine="tape")
+    expected = implc.voxelize(s, 7, workers=1)
+    original = subdivide_module._Worker.__init__
+
+    def near_the_end(self, depth, program=None):
+        original(self, depth, program)
+        if program is not None:
+            self.tape_state[abi.TAPE_STAMP] = 0x7FFFFFFF - 5
+    monkeypatch.setattr(subdivide_module._Worker, "__init__", near_the_end)
+    again = implc.voxelize(s, 7, workers=1)
+    np.testing.assert_array_equal(again.coords, expected.coords)
+    np.testing.assert_array_equal(again.normals, expected.normals)

@@ -1,12 +1,13 @@
 """The tape engine's per-region simplification: the program one box's descendants run.
 
-``tape_simplify(program, length, output, choices, lane, out, need, mark, remap, out_output) -> length'``
+``tape_simplify(program, length, output, choices, lane, out, need, stamp, mark, remap, out_output) -> length'``
 (internal): given the choices ``tape_interval`` wrote for box ``lane``, every Min/Max whose choice was
 decided becomes an alias of its winning operand (a select: of the branch its condition takes), and every
 instruction that only fed the losing one is dropped; the new program's output slot goes to ``out_output``.
 
-Two passes, both linear in the program: backward from the output, marking what the result needs (``need``,
-one byte per slot) and what each instruction becomes (``mark``: dropped, kept, or an alias of its first or
+Two passes, both linear in the program: backward from the output, marking what the result needs
+(``need``, one int32 per slot: a slot is needed when it holds this call's ``stamp``, so nothing is cleared
+between calls) and what each instruction becomes (``mark``: dropped, kept, or an alias of its first or
 second value operand); forward, writing the kept instructions with their operands renamed through the
 aliases (``remap``, one int32 per slot; constants and coordinates, which no instruction writes, name
 themselves: :func:`~implc.codegen.tape_eval.emit_tape_prefill` sets them). Kept instructions keep their
@@ -30,18 +31,16 @@ _P = ir.PointerType
 
 def emit_tape_simplify(module: ir.Module) -> ir.Function:
     """Define ``tape_simplify`` (see the module docstring) in ``module``."""
-    fn = ir.Function(module, ir.FunctionType(I64, [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I8), _P(I8), _P(I32),
-                                                   _P(I64)]), name="implc.tape.simplify")
+    fn = ir.Function(module, ir.FunctionType(I64, [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I32), I32, _P(I8),
+                                                   _P(I32), _P(I64)]), name="implc.tape.simplify")
     fn.linkage = "internal"
-    program, length, output, choices, lane, out, need, mark, remap, out_output = fn.args
+    program, length, output, choices, lane, out, need, stamp, mark, remap, out_output = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
 
     def field(i, k):
         return b.zext(load_at(b, program, b.add(b.mul(i, const(I64, abi.INSTRUCTION_WORDS)), const(I64, k))), I64)
 
-    with for_range(b, length) as i:  # nothing is needed yet
-        store_at(b, const(I8, 0), need, field(i, 1))
-    store_at(b, const(I8, 1), need, output)
+    store_at(b, stamp, need, output)
     last = b.sub(length, const(I64, 1))
 
     with for_range(b, length) as k:  # backward: i = length - 1 - k
@@ -50,22 +49,22 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
         ternary = b.icmp_unsigned(">=", code, const(I64, FIRST_TERNARY))
         first, second = b.select(ternary, c, a), b.select(ternary, d, c)  # the value operands a choice picks from
         store_at(b, const(I8, DROP), mark, i)
-        with if_(b, b.icmp_unsigned("!=", load_at(b, need, out_slot), const(I8, 0))):
+        with if_(b, b.icmp_unsigned("==", load_at(b, need, out_slot), stamp)):
             is_choice = b.or_(ternary, b.or_(b.icmp_unsigned("==", code, const(I64, OPCODES["min"])),
                                              b.icmp_unsigned("==", code, const(I64, OPCODES["max"]))))
             choice = b.select(is_choice, load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane)), const(I8, 3))
             with b.if_else(b.icmp_unsigned("==", choice, const(I8, 3))) as (both, one):
                 with both:
                     store_at(b, const(I8, KEEP), mark, i)
-                    store_at(b, const(I8, 1), need, a)
+                    store_at(b, stamp, need, a)
                     with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))):
-                        store_at(b, const(I8, 1), need, c)
+                        store_at(b, stamp, need, c)
                     with if_(b, ternary):
-                        store_at(b, const(I8, 1), need, d)
+                        store_at(b, stamp, need, d)
                 with one:
                     picks_first = b.icmp_unsigned("==", choice, const(I8, 1))
                     store_at(b, b.select(picks_first, const(I8, ALIAS_FIRST), const(I8, ALIAS_SECOND)), mark, i)
-                    store_at(b, const(I8, 1), need, b.select(picks_first, first, second))
+                    store_at(b, stamp, need, b.select(picks_first, first, second))
 
     count = Local(b, I64, 0, "count")
     with for_range(b, length) as i:  # forward: write what is kept, operands renamed through the aliases

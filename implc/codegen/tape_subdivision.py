@@ -81,8 +81,8 @@ def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
 def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Function, simplify: ir.Function,
                         normals: ir.Function):
     fn, b = define(module, abi.TAPE_SUBDIVIDE)
-    (header, prune, refine, geom, state, frames, tapes, choices, slots, marks, remap, out, out_normals, capacity,
-     inside, inside_capacity, stats, cancel) = fn.args
+    (header, prune, refine, geom, state, frames, tapes, choices, slots, need, mark, remap, out, out_normals,
+     capacity, inside, inside_capacity, stats, cancel) = fn.args
     solid = b.icmp_unsigned("!=", inside, ir.Constant(inside.type, None))
     program = b.inttoptr(load_at(b, header, abi.PROGRAM_INSTRUCTIONS), _P(I32))
     length = load_at(b, header, abi.PROGRAM_LENGTH)
@@ -95,7 +95,6 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
     for a in range(3):
         store_at(b, load_at(b, geom, a), leaf_geom, a)
         store_at(b, load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))), leaf_geom, 3 + a)
-    need, mark = marks, b.gep(marks, [load_at(b, header, abi.PROGRAM_SLOT_COUNT)])
     count = Local(b, I64, 0, "count")
     inside_count = Local(b, I64, 0, "inside_count")
     normals_done = Local(b, I64, 0, "normals_done")  # voxels before this one have their normals
@@ -154,8 +153,15 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
         with b.if_else(b.and_(b.icmp_signed("!=", prune, const(I64, 0)), decided)) as (simplified, shared):
             with simplified:
                 target = b.gep(tapes, [b.mul(b.mul(child, length), const(I64, abi.INSTRUCTION_WORDS))])
+                stamp = b.add(load_at(b, state, abi.TAPE_STAMP), const(I64, 1))
+                with if_(b, b.icmp_signed(">=", stamp, const(I64, 0x7FFFFFFF))):  # start the stamps over
+                    with for_range(b, load_at(b, header, abi.PROGRAM_SLOT_COUNT)) as k:
+                        store_at(b, const(I32, 0), need, k)
+                stamp = b.select(b.icmp_signed(">=", stamp, const(I64, 0x7FFFFFFF)), const(I64, 1), stamp)
+                store_at(b, stamp, state, abi.TAPE_STAMP)
                 n = b.call(simplify, [program_of(level), length_of(level), output_of(level), choices_of(level),
-                                      b.zext(c, I64), target, need, mark, remap, output_at(child)])
+                                      b.zext(c, I64), target, need, b.trunc(stamp, I32), mark, remap,
+                                      output_at(child)])
                 set_program(child, target, n, b.load(output_at(child)))
             with shared:
                 set_program(child, program_of(level), length_of(level), output_of(level))
