@@ -183,7 +183,9 @@ class Subdivider:
         self._inside_parts: list[np.ndarray] = []  # a solid's inside octants: the plan's, then each task's
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
-        if surface.program is None or mean_value_levels > 0:  # compiled kernels
+        # the tape engine runs the surface where it is the surface's engine (the mean-value form is compiled only)
+        self.program = surface.program if mean_value_levels == 0 else None
+        if self.program is None:  # compiled kernels
             self.box = surface.kernel_address(abi.OCTANT)
             self.fine_box = surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else self.box
             self.gradient = surface.kernel_address(abi.GRADIENT_LIVE)
@@ -192,8 +194,6 @@ class Subdivider:
         self.geom_ptr, self.leaf_geom_ptr = self.geom.ctypes.data, self.leaf_geom.ctypes.data
         self.cancel_ptr = self.cancel.ctypes.data
         self.stats = SubdivisionStats(depth=depth, workers=workers, kept_per_level=[1] + [0] * depth)
-        # the tape engine runs the surface where it is the surface's engine (the mean-value form is compiled only)
-        self.program = surface.program if mean_value_levels == 0 else None
         self._plan_normals = None
         if self.program is not None:
             self.tape_engine = surface.tape_engine

@@ -86,9 +86,9 @@ class Voxels:
         grid = np.zeros((n, n, n), dtype=bool)
         grid[self.coords[:, 0], self.coords[:, 1], self.coords[:, 2]] = True
         if solid:
-            for i, j, k, level in self._solid():
-                size = 1 << (self.depth - int(level))
-                grid[i * size:(i + 1) * size, j * size:(j + 1) * size, k * size:(k + 1) * size] = True
+            inside = self._solid()
+            sizes = np.left_shift(1, self.depth - inside[:, 3].astype(np.int64))
+            paint_cubes(grid, inside[:, :3].astype(np.int64) * sizes[:, None], sizes)
         return grid
 
     def inside_voxels(self) -> int:
@@ -107,6 +107,24 @@ class Voxels:
         inside = self.inside_voxels() * voxel
         outer = inside + len(self.coords) * voxel
         return _round_down(inside), _round_up(outer)
+
+
+def paint_cubes(block: np.ndarray, firsts: np.ndarray, sizes: np.ndarray) -> None:
+    """Set the cubes (first cell ``firsts[n]``, edge ``sizes[n]``, aligned to their edge: octants) inside
+    the bool ``block``, edge by edge: cube by cube where they are few, else on a coarse grid enlarged to
+    cells."""
+    for size in np.unique(sizes):
+        size = int(size)
+        corners = firsts[sizes == size]
+        if size == 1:
+            block[corners[:, 0], corners[:, 1], corners[:, 2]] = True
+        elif len(corners) < 4096:
+            for a, b, c in corners:
+                block[a:a + size, b:b + size, c:c + size] = True
+        else:
+            coarse = np.zeros(tuple(n // size for n in block.shape), dtype=bool)
+            coarse[tuple((corners // size).T)] = True
+            block |= coarse.repeat(size, 0).repeat(size, 1).repeat(size, 2)
 
 
 def _round_down(value) -> float:

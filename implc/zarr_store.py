@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic_file import replacing_folder
+from .voxelization import paint_cubes
 
 CHUNK = 64
 SHARD = 256
@@ -24,23 +25,6 @@ SHARD = 256
 def _shard_keys(cells: np.ndarray, shift: int, per_axis: int) -> np.ndarray:
     blocks = cells.astype(np.int64) >> shift
     return (blocks[:, 0] * per_axis + blocks[:, 1]) * per_axis + blocks[:, 2]
-
-
-def _paint(block: np.ndarray, firsts: np.ndarray, sizes: np.ndarray) -> None:
-    """Set the cubes (first cell, edge) inside ``block``, level by level: cube by cube where they are
-    few, else on a coarse grid enlarged to cells."""
-    for size in np.unique(sizes):
-        size = int(size)
-        corners = firsts[sizes == size]
-        if size == 1:
-            block[corners[:, 0], corners[:, 1], corners[:, 2]] = True
-        elif len(corners) < 4096:
-            for a, b, c in corners:
-                block[a:a + size, b:b + size, c:c + size] = True
-        else:
-            coarse = np.zeros((block.shape[0] // size,) * 3, dtype=bool)
-            coarse[tuple((corners // size).T)] = True
-            block |= coarse.repeat(size, 0).repeat(size, 1).repeat(size, 2)
 
 
 def save_zarr(voxels, path) -> Path:
@@ -81,7 +65,7 @@ def save_zarr(voxels, path) -> Path:
             block[cells[:, 0], cells[:, 1], cells[:, 2]] = True
             lo, hi = np.searchsorted(small_keys, [key, key + 1])
             here = small_order[lo:hi]
-            _paint(block, small_first[here] - origin, small_sizes[here])
+            paint_cubes(block, small_first[here] - origin, small_sizes[here])
             for i, j, k, level in big_rows:  # whole shards inside an octant
                 size = 1 << (voxels.depth - int(level))
                 first = np.array([i, j, k], dtype=np.int64) * size

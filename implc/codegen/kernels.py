@@ -82,7 +82,8 @@ def store_xyz(builder, base, block, vectors, width):
     builder.store(rows, _vector_ptr(builder, base, offset, 3 * width), align=8)
 
 
-def _store(builder, base, block, vector, width):
+def store_lanes(builder, base, block, vector, width):
+    """Store a vector of ``width`` lanes as entries ``width·block ..`` of a flat array."""
     offset = builder.mul(block, ir.Constant(I64, width))
     builder.store(vector, _vector_ptr(builder, base, offset, width), align=8)
 
@@ -129,8 +130,8 @@ def _interval_kernel(module, entry, width, directed, outline, enclose):
         vb = VectorBuilder(b, width, directed, outline)
         f_lo, f_hi, masks = enclose(vb, load_xyz(b, lo, i, width), load_xyz(b, hi, i, width),
                                     _parent_mask(b, live_in, i, width))
-        _store(b, out_lo, i, f_lo, width)
-        _store(b, out_hi, i, f_hi, width)
+        store_lanes(b, out_lo, i, f_lo, width)
+        store_lanes(b, out_hi, i, f_hi, width)
         _live_masks(b, live_in, live_out, i, masks, width)
     b.ret_void()
 
@@ -195,14 +196,14 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     pts, out, _ = fn.args
     with for_range(b, blocks) as i:
         (value,) = emit_point(VectorBuilder(b, width), value_tape, load_xyz(b, pts, i, width))
-        _store(b, out, i, value, width)
+        store_lanes(b, out, i, value, width)
     b.ret_void()
 
     fn, b, blocks = _kernel(module, abi.GRADIENT, width)
     pts, out_value, out_grad, _ = fn.args
     with for_range(b, blocks) as i:
         value, *grad = emit_point(VectorBuilder(b, width), gradient_tape, load_xyz(b, pts, i, width))
-        _store(b, out_value, i, value, width)
+        store_lanes(b, out_value, i, value, width)
         store_xyz(b, out_grad, i, grad, width)
     b.ret_void()
 
@@ -216,7 +217,7 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
             value, grad = emit_pruned_gradient(vb, value_tape, plan, load_xyz(b, pts, i, width), live)
         else:  # nothing to prune; normals need no more than the vector functions' 1e-15
             value, *grad = emit_point(vb, gradient_tape, load_xyz(b, pts, i, width), vector_elementary=True)
-        _store(b, out_value, i, value, width)
+        store_lanes(b, out_value, i, value, width)
         store_xyz(b, out_grad, i, grad, width)
     b.ret_void()
 

@@ -18,6 +18,20 @@ from .. import abi
 from .control import I32, I64, Local, at, bump, const, define, if_, load_at, local_array, store_at, while_true
 
 
+def append_inside(b: ir.IRBuilder, inside, count: Local, cells, level, inside_bits):
+    """Append the eight children ``cells`` (per child, three i32) of one octant at ``level`` (i32) whose
+    bit is set in ``inside_bits`` (i32, bit c: child c) to ``inside`` (:data:`implc.abi.INSIDE_WORDS` per
+    row), in Morton order and branch-free (every child is written, only the inside ones are kept)."""
+    n = count.get()
+    for c in range(8):
+        row = b.mul(n, const(I64, abi.INSIDE_WORDS))
+        for a in range(3):
+            store_at(b, cells[c][a], inside, b.add(row, const(I64, a)))
+        store_at(b, level, inside, b.add(row, const(I64, 3)))
+        n = b.add(n, b.zext(b.trunc(b.lshr(inside_bits, const(I32, c)), ir.IntType(1)), I64))
+    count.set(n)
+
+
 def emit_subdivide(module: ir.Module):
     fn, b = define(module, abi.SUBDIVIDE)
     (box_ptr, fine_ptr, fine_level, prune, refine, geom, stack, masks, state, out, out_masks, cap, inside,
@@ -58,16 +72,9 @@ def emit_subdivide(module: ir.Module):
         decided = b.call(kernel, [geom, at(b, stack, top), level64, parent_mask, child_masks])
         kept = b.and_(decided, const(I32, 0xFF))
         bump(b, stats, 0, 8)
-        with if_(b, solid):  # children whose box lies inside, in Morton order (branch-free)
-            n = inside_count.get()
-            for c in range(8):
-                row = b.mul(n, const(I64, abi.INSIDE_WORDS))
-                for a in range(3):
-                    store_at(b, children[c][a], inside, b.add(row, const(I64, a)))
-                store_at(b, child_level, inside, b.add(row, const(I64, 3)))
-                bit = b.lshr(decided, const(I32, abi.OCTANT_INSIDE_SHIFT + c))
-                n = b.add(n, b.zext(b.trunc(bit, ir.IntType(1)), I64))
-            inside_count.set(n)
+        with if_(b, solid):  # children whose box lies inside
+            append_inside(b, inside, inside_count, children, child_level,
+                          b.lshr(decided, const(I32, abi.OCTANT_INSIDE_SHIFT)))
         stat_slot = b.add(level64, const(I64, 1))
 
         def keep(c):

@@ -14,7 +14,7 @@ from llvmlite import ir
 from .. import abi
 from .control import I64, define, for_range, load_at, local_array
 from .interval_rules import whole_line_if_undefined
-from .kernels import load_xyz, store_xyz
+from .kernels import load_xyz, store_lanes, store_xyz
 from .tape_eval import LANES, V8, emit_tape_dual, emit_tape_interval, emit_tape_prefill
 from .tape_simplify import emit_tape_simplify
 from .tape_subdivision import emit_tape_normals, emit_tape_subdivide
@@ -28,10 +28,6 @@ def _soa(b, base, block, target):
     vtarget = b.bitcast(target, _P(V8))
     for a, axis in enumerate(load_xyz(b, base, block, LANES)):
         b.store(axis, b.gep(vtarget, [ir.Constant(I64, a)]), align=8)
-
-
-def _store(b, base, block, vector):
-    b.store(vector, b.bitcast(b.gep(base, [b.mul(block, ir.Constant(I64, LANES))]), _P(V8)), align=8)
 
 
 def build_tape_engine(directed: bool) -> str:
@@ -63,8 +59,8 @@ def build_tape_engine(directed: bool) -> str:
         vresult = b.bitcast(result, _P(V8))
         f_lo, f_hi = whole_line_if_undefined(VectorBuilder(b, LANES), b.load(vresult, align=8),
                                              b.load(b.gep(vresult, [ir.Constant(I64, 1)]), align=8))
-        _store(b, out_lo, block, f_lo)
-        _store(b, out_hi, block, f_hi)
+        store_lanes(b, out_lo, block, f_lo, LANES)
+        store_lanes(b, out_hi, block, f_hi, LANES)
     b.ret_void()
 
     fn, b = define(module, abi.TAPE_GRADIENT)
@@ -77,7 +73,7 @@ def build_tape_engine(directed: bool) -> str:
         _soa(b, pts, block, points)
         b.call(dual, [header, *program, slots, points, result])
         vresult = b.bitcast(result, _P(V8))
-        _store(b, out_value, block, b.load(vresult, align=8))
+        store_lanes(b, out_value, block, b.load(vresult, align=8), LANES)
         store_xyz(b, out_grad, block, [b.load(b.gep(vresult, [ir.Constant(I64, 1 + a)]), align=8) for a in range(3)],
                   LANES)
     b.ret_void()

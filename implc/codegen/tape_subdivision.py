@@ -36,6 +36,7 @@ from .control import (
 )
 from .kernels import load_xyz, store_xyz
 from .normals import emit_normals_body
+from .subdivision import append_inside
 from .tape_eval import I8, LANES, V8
 from .vector import DOUBLE, broadcast
 
@@ -198,6 +199,12 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
                              b.gep(out, [offset]), pending, b.gep(out_normals, [offset])])
             normals_done.set(b.add(first, pending))
 
+    def may_meet(lo, hi):
+        """The lanes whose enclosure contains 0 or is undefined (NaN)."""
+        zero = ir.Constant(V8, [0.0] * LANES)
+        return b.or_(b.and_(b.fcmp_ordered("<=", lo, zero), b.fcmp_ordered(">=", hi, zero)),
+                     b.or_(b.fcmp_unordered("uno", lo, lo), b.fcmp_unordered("uno", hi, hi)))
+
     def expand(level):
         """Enclose the children of the octant in frame ``level``; keep those that may meet the surface
         (the leaves: write them with their normals)."""
@@ -207,9 +214,7 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
         vresult = b.bitcast(result, _P(V8))
         f_lo, f_hi = b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
         zero = ir.Constant(V8, [0.0] * LANES)
-        contains = b.or_(b.and_(b.fcmp_ordered("<=", f_lo, zero), b.fcmp_ordered(">=", f_hi, zero)),
-                         b.or_(b.fcmp_unordered("uno", f_lo, f_lo), b.fcmp_unordered("uno", f_hi, f_hi)))
-        kept = b.zext(b.bitcast(contains, I8), I32)
+        kept = b.zext(b.bitcast(may_meet(f_lo, f_hi), I8), I32)
         refined = Local(b, I32, kept, "refined")  # with refine, a leaf stays only if one of its eighths may meet F
         with if_(b, b.and_(b.icmp_signed("==", child, depth), b.icmp_signed("!=", refine, const(I64, 0)))):
             with for_set_bits(b, kept) as c:
@@ -218,25 +223,17 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
                         for a in range(3)]
                 enclose_children(child, leaf, program_level=level)
                 sub_lo, sub_hi = b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
-                sub = b.or_(b.and_(b.fcmp_ordered("<=", sub_lo, zero), b.fcmp_ordered(">=", sub_hi, zero)),
-                            b.or_(b.fcmp_unordered("uno", sub_lo, sub_lo), b.fcmp_unordered("uno", sub_hi, sub_hi)))
-                empty = b.icmp_unsigned("==", b.bitcast(sub, I8), const(I8, 0))
+                empty = b.icmp_unsigned("==", b.bitcast(may_meet(sub_lo, sub_hi), I8), const(I8, 0))
                 drop = b.select(empty, b.shl(const(I32, 1), c), const(I32, 0))
                 refined.set(b.and_(refined.get(), b.not_(drop)))
                 slot = at(b, stats, 0)
                 b.store(b.add(b.load(slot), const(I64, LANES)), slot)
         kept = refined.get()
-        with if_(b, solid):  # children whose box lies inside, in Morton order (branch-free)
+        with if_(b, solid):  # children whose box lies inside
             below = b.zext(b.bitcast(b.fcmp_ordered("<", f_hi, zero), I8), I32)
-            n = inside_count.get()
-            for c in range(LANES):
-                row = b.mul(n, const(I64, abi.INSIDE_WORDS))
-                for a in range(3):
-                    coord = b.add(b.shl(b.load(frame(level, a)), const(I32, 1)), const(I32, (c >> a) & 1))
-                    store_at(b, coord, inside, b.add(row, const(I64, a)))
-                store_at(b, b.trunc(child, I32), inside, b.add(row, const(I64, 3)))
-                n = b.add(n, b.zext(b.trunc(b.lshr(below, const(I32, c)), ir.IntType(1)), I64))
-            inside_count.set(n)
+            cells = [[b.add(b.shl(b.load(frame(level, a)), const(I32, 1)), const(I32, (c >> a) & 1))
+                      for a in range(3)] for c in range(LANES)]
+            append_inside(b, inside, inside_count, cells, b.trunc(child, I32), below)
         slot = at(b, stats, 0)
         b.store(b.add(b.load(slot), const(I64, LANES)), slot)
         for index, amount in ((b.add(child, const(I64, 1)), b.zext(b.call(ctpop, [kept]), I64)),
