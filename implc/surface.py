@@ -78,15 +78,15 @@ def choose_engine(tape: Tape, engine: str, vector_width: int = WIDTH) -> str:
     Min/Max or a select that only the engine prunes, i.e. neither in the top-level chain nor a blend term
     of a top-level sum, or is large). The engine's vectors are eight wide: another ``vector_width`` means
     the compiled kernels."""
+    unsupported = unsupported_ops(tape) if engine != "jit" else set()
     if engine == "tape":
-        if unsupported_ops(tape):
-            raise CompileError(f"engine='tape' cannot run {', '.join(sorted(unsupported_ops(tape)))} "
-                               "(use engine='jit' or 'auto')")
+        if unsupported:
+            raise CompileError(f"engine='tape' cannot run {', '.join(sorted(unsupported))} (use engine='jit' or 'auto')")
         if vector_width != WIDTH:
             raise CompileError(f"engine='tape' runs {WIDTH} lanes; vector_width={vector_width} needs engine='jit'")
     if engine != "auto":
         return engine
-    if unsupported_ops(tape) or vector_width != WIDTH:
+    if unsupported or vector_width != WIDTH:
         return "jit"
     pruned = _pruned_by_kernels(tape)
     nested = any(op in CHOICE_NODES and i not in pruned for i, (op, _, _) in enumerate(tape.nodes))
