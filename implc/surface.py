@@ -81,7 +81,8 @@ def choose_engine(tape: Tape, engine: str, vector_width: int = WIDTH) -> str:
     unsupported = unsupported_ops(tape) if engine != "jit" else set()
     if engine == "tape":
         if unsupported:
-            raise CompileError(f"engine='tape' cannot run {', '.join(sorted(unsupported))} (use engine='jit' or 'auto')")
+            raise CompileError(f"engine='tape' cannot run {', '.join(sorted(unsupported))} "
+                               "(use engine='jit' or 'auto')")
         if vector_width != WIDTH:
             raise CompileError(f"engine='tape' runs {WIDTH} lanes; vector_width={vector_width} needs engine='jit'")
     if engine != "auto":
