@@ -330,10 +330,11 @@ def _parser():
         p.add_argument("--workers", type=int, help="threads (default: all usable cores)")
         p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
 
-    v = sub.add_parser("voxelize", help="voxelize a scene or formula and write .npz, .ply, .npy or .zarr")
+    v = sub.add_parser("voxelize", help="voxelize a scene or formula and write .npz, .ply, .npy, .vdb or .zarr")
     surface_args(v)
     v.add_argument("-o", "--output", required=True,
-                   help="output: .npz, .ply (point cloud), .npy (dense) or .zarr (dense, Zarr v3, written in shards)")
+                   help="output: .npz, .ply (point cloud), .npy (dense), .vdb (OpenVDB occupancy and normals grids) "
+                        "or .zarr (dense, Zarr v3, written in shards)")
     v.add_argument("--compress", action="store_true", help="deflate the .npz (smaller, several times slower)")
     v.add_argument("--solid", action="store_true",
                    help="also classify the inside (whole octants where F < 0): volume bounds, solid occupancy")

@@ -1,4 +1,5 @@
-"""Voxel files: ``.npz`` (exact round trip), binary ``.ply`` point clouds with normals, dense ``.npy``.
+"""Voxel files: ``.npz`` (exact round trip), binary ``.ply`` point clouds with normals, dense ``.npy``;
+the writers of ``.vdb`` (:mod:`implc.vdb_file`) and ``.zarr`` (:mod:`implc.zarr_store`) by extension.
 
 Every file is written under a temporary name and renamed into place (:mod:`implc.atomic_file`): an
 interrupted save never damages an existing file. Reading checks what a file is by its first bytes and
@@ -16,11 +17,13 @@ import numpy as np
 
 from .abi import MAX_DEPTH
 from .atomic_file import replacing
+from .vdb_file import describe_vdb, save_vdb
 from .voxelization import Voxels
 
 FORMAT_VERSION = 1
-SUFFIXES = (".npz", ".ply", ".npy", ".zarr")
-_MAGIC = {b"PK\x03\x04": ".npz", b"PK\x05\x06": ".npz", b"\x93NUMPY": ".npy", b"ply\n": ".ply", b"ply\r": ".ply"}
+SUFFIXES = (".npz", ".ply", ".npy", ".vdb", ".zarr")
+_MAGIC = {b"PK\x03\x04": ".npz", b"PK\x05\x06": ".npz", b"\x93NUMPY": ".npy", b"ply\n": ".ply", b"ply\r": ".ply",
+          b" BDV": ".vdb"}
 
 
 class VoxelFileError(ValueError):
@@ -33,19 +36,20 @@ def suffix_of(path) -> str:
 
 
 def save(voxels, path, *, compress: bool = False) -> Path:
-    """Write ``voxels`` in the format named by the extension: .npz, .ply, .npy (dense occupancy) or .zarr
-    (a Zarr v3 array of the occupancy, written shard by shard: :mod:`implc.zarr_store`).
+    """Write ``voxels`` in the format named by the extension: .npz, .ply, .npy (dense occupancy), .vdb
+    (OpenVDB occupancy and normals grids: :mod:`implc.vdb_file`) or .zarr (a Zarr v3 array of the
+    occupancy, written shard by shard: :mod:`implc.zarr_store`).
 
     ``compress``: deflate the .npz (about 3x smaller for Morton-ordered voxels, and several times slower).
     """
     from .zarr_store import save_zarr
     path = Path(path)
     writers = {".npz": lambda v, p: save_npz(v, p, compress=compress), ".ply": save_ply, ".npy": save_dense,
-               ".zarr": save_zarr}
+               ".vdb": save_vdb, ".zarr": save_zarr}
     suffix = suffix_of(path)
     if suffix not in writers:
-        raise ValueError(f"unknown output format {path.suffix or '(none)'!r} for {path}: use .npz, .ply, .npy "
-                         "or .zarr")
+        raise ValueError(f"unknown output format {path.suffix or '(none)'!r} for {path}: use "
+                         f"{', '.join(SUFFIXES)}")
     writers[suffix](voxels, path)
     return path
 
@@ -60,7 +64,7 @@ def save_npz(voxels, path, *, compress: bool = False) -> None:
 
 
 def sniff(path) -> str:
-    """The format of an existing file by its first bytes: ".npz", ".npy", ".ply" or "" (unknown)."""
+    """The format of an existing file by its first bytes: ".npz", ".npy", ".ply", ".vdb" or "" (unknown)."""
     with open(path, "rb") as f:
         head = f.read(8)
     return next((fmt for magic, fmt in _MAGIC.items() if head.startswith(magic)), "")
@@ -76,7 +80,7 @@ def _check_readable(path: Path) -> str:
     if not fmt:
         size = path.stat().st_size
         raise VoxelFileError(f"{path} is {'empty' if size == 0 else 'not a voxel file'} "
-                             "(implc reads the .npz, .ply and .npy files it writes)")
+                             "(implc reads the .npz, .ply, .npy and .vdb files it writes)")
     return fmt
 
 
@@ -85,7 +89,7 @@ def load_npz(path) -> Voxels:
     path = Path(path)
     fmt = _check_readable(path)
     if fmt != ".npz":
-        what = {".ply": "a PLY point cloud", ".npy": "a dense .npy occupancy grid"}[fmt]
+        what = {".ply": "a PLY point cloud", ".npy": "a dense .npy occupancy grid", ".vdb": "an OpenVDB file"}[fmt]
         raise VoxelFileError(f"{path} is {what}: voxels are read back from the .npz files implc writes")
     try:
         with np.load(path, allow_pickle=False) as data:
@@ -164,6 +168,11 @@ def describe(path) -> list[str]:
                                  f"{grid.shape}")
         return [f"file     {size}, dense occupancy grid", f"grid     {'x'.join(map(str, grid.shape))}",
                 f"voxels   {int(np.count_nonzero(grid))}"]
+    if fmt == ".vdb":
+        try:
+            return describe_vdb(path)
+        except (ValueError, OSError) as exc:
+            raise VoxelFileError(str(exc)) from None
     header = _ply_header(path)
     count = next((int(line.split()[2]) for line in header if line.startswith("element vertex ")), None)
     comment = next((line[len("comment "):] for line in header if line.startswith("comment implc")), "")
