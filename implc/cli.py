@@ -153,19 +153,27 @@ def cmd_voxelize(args) -> int:
     _check_surface_options(args)
     name, surface, sc = _surface_from_args(args)
     depth = args.depth if args.depth is not None else (sc.depth if sc else 9)
-    voxels, seconds = _voxelize(surface, depth, args.workers, args.quiet, solid=args.solid)
-    if args.slices:
-        from .slices import save_slices
-        save_slices(voxels, out, args.slices)
+    if out.suffix.lower() == ".zarr" and not args.slices:  # streamed: the voxels are never all in memory
+        from .zarr_store import write_zarr
+        t0 = time.perf_counter()
+        result = write_zarr(surface, depth, out, solid=args.solid, workers=args.workers,
+                            progress=not args.quiet and sys.stderr.isatty())
+        count, inside, seconds = result.voxels, result.inside_octants, time.perf_counter() - t0
     else:
-        voxel_files.save(voxels, out, compress=args.compress)
+        result, seconds = _voxelize(surface, depth, args.workers, args.quiet, solid=args.solid)
+        count, inside = len(result), len(result.inside) if args.solid else 0
+        if args.slices:
+            from .slices import save_slices
+            save_slices(result, out, args.slices)
+        else:
+            voxel_files.save(result, out, compress=args.compress)
     if not args.quiet:
         solid = ""
         if args.solid:
-            lo, hi = voxels.volume_bounds()
-            solid = f", {len(voxels.inside)} inside octants, volume in [{lo:.6g}, {hi:.6g}]"
-        print(f"{name}: {len(voxels)} voxels at {1 << depth}³{solid} in {seconds:.2f} s "
-              f"(yield {voxels.stats.parallel_yield:.0%}) -> {out}")
+            lo, hi = result.volume_bounds()
+            solid = f", {inside} inside octants, volume in [{lo:.6g}, {hi:.6g}]"
+        print(f"{name}: {count} voxels at {1 << depth}³{solid} in {seconds:.2f} s "
+              f"(yield {result.stats.parallel_yield:.0%}) -> {out}")
     return 0
 
 

@@ -181,6 +181,7 @@ class Subdivider:
         self.refine = int(bool(refine_leaves))
         self.solid = bool(solid)
         self._inside_parts: list[np.ndarray] = []  # a solid's inside octants: the plan's, then each task's
+        self._emit_inside = None  # run()'s receiver of each task's inside octants, if any
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
         # the tape engine runs the surface where it is the surface's engine (the mean-value form is compiled only)
@@ -286,9 +287,12 @@ class Subdivider:
                 self.stats.octants_per_level[level] += int(w.stats[2 * abi.TAPE_LEVELS + level])
         w.stats[:] = 0
 
-    def run(self, emit, progress=None, plan=None) -> SubdivisionStats:
+    def run(self, emit, progress=None, plan=None, emit_inside=None) -> SubdivisionStats:
         """Voxelize, handing Morton-ordered batches to ``emit``; ``plan``: the result of :meth:`plan` when
-        the caller already made it."""
+        the caller already made it. A solid's inside octants are kept (:attr:`inside`), or with
+        ``emit_inside`` handed to it task by task, each task's after its voxels (the plan's stay in
+        :attr:`inside`)."""
+        self._emit_inside = emit_inside
         cells, level = plan if plan is not None else self.plan()
         if level == self.depth:  # the plan already reached the leaves
             if self.max_voxels is not None and len(cells) > self.max_voxels:
@@ -333,7 +337,9 @@ class Subdivider:
                 try:
                     t0 = time.perf_counter()
                     emit(result.coords[: result.count], result.normals[: result.count])
-                    if self.solid:
+                    if self.solid and self._emit_inside is not None:
+                        self._emit_inside(result.inside[: result.inside_count])
+                    elif self.solid:
                         self._inside_parts.append(result.inside[: result.inside_count].copy())
                     storage_seconds[0] += time.perf_counter() - t0
                     if progress is not None:

@@ -100,31 +100,30 @@ class Voxels:
         """(lo, hi) with lo <= the exact volume of {F < 0} within the bounds <= hi: the inside octants'
         volume, and that plus the boundary voxels' (every other cell's enclosure lies above 0). Computed
         exactly in rationals from the float bounds, then rounded outward."""
-        from fractions import Fraction
-        voxel = Fraction(1)
-        for lo, hi in self.bounds:
-            voxel *= (Fraction(hi) - Fraction(lo)) / (1 << self.depth)
-        inside = self.inside_voxels() * voxel
-        outer = inside + len(self.coords) * voxel
-        return _round_down(inside), _round_up(outer)
+        return volume_bounds(self.bounds, self.depth, self.inside_voxels(), len(self.coords))
+
+
+def volume_bounds(bounds, depth: int, inside_voxels: int, boundary_voxels: int) -> tuple[float, float]:
+    """(lo, hi): the volume of ``inside_voxels`` cells, and of those and ``boundary_voxels`` more, of the
+    2^depth grid over ``bounds``, computed exactly in rationals and rounded outward."""
+    from fractions import Fraction
+    voxel = Fraction(1)
+    for lo, hi in bounds:
+        voxel *= (Fraction(hi) - Fraction(lo)) / (1 << depth)
+    inside = inside_voxels * voxel
+    return _round_down(inside), _round_up(inside + boundary_voxels * voxel)
 
 
 def paint_cubes(block: np.ndarray, firsts: np.ndarray, sizes: np.ndarray) -> None:
     """Set the cubes (first cell ``firsts[n]``, edge ``sizes[n]``, aligned to their edge: octants) inside
-    the bool ``block``, edge by edge: cube by cube where they are few, else on a coarse grid enlarged to
-    cells."""
+    the bool ``block`` (a cube whose edge is a multiple of every size), edge by edge, each edge's cubes at
+    once through a view of the block as cubes of that edge."""
+    n = block.shape[0]
     for size in np.unique(sizes):
         size = int(size)
-        corners = firsts[sizes == size]
-        if size == 1:
-            block[corners[:, 0], corners[:, 1], corners[:, 2]] = True
-        elif len(corners) < 4096:
-            for a, b, c in corners:
-                block[a:a + size, b:b + size, c:c + size] = True
-        else:
-            coarse = np.zeros(tuple(n // size for n in block.shape), dtype=bool)
-            coarse[tuple((corners // size).T)] = True
-            block |= coarse.repeat(size, 0).repeat(size, 1).repeat(size, 2)
+        corners = firsts[sizes == size] // size
+        view = block.reshape(n // size, size, n // size, size, n // size, size)
+        view[corners[:, 0], :, corners[:, 1], :, corners[:, 2], :] = True
 
 
 def _round_down(value) -> float:

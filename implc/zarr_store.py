@@ -1,79 +1,205 @@
 """Zarr v3 export: the dense occupancy of voxels (the solid where the inside is classified), written
-shard by shard from the voxels and the inside octants, never as one dense array.
+shard by shard, never as one dense array.
 
 The array is bool, indexed [i, j, k] like :meth:`implc.voxelization.Voxels.to_dense`, in chunks of
 :data:`CHUNK`³ cells gathered into shards of :data:`SHARD`³ (Zarr v3 sharding: few files, each read in
-parts). Each shard is filled from the voxels and octants inside it (both bucketed once by shard), so the
-peak memory is one shard plus the bucketing arrays (a few bytes per voxel and octant). Attributes record
-the grid depth, the bounds and whether the inside is included. The store is written under a temporary
-name beside the target and renamed into place.
+parts). Attributes record the grid depth, the bounds and whether the inside is included. The store is
+written under a temporary name beside the target and renamed into place.
+
+Two ways in: :func:`save_zarr` writes a voxelization held in memory; :func:`write_zarr` voxelizes
+straight into the store, the voxelizer handing each task's voxels and inside octants (in Morton order) to
+a :class:`ShardWriter` as the tasks finish, which writes every shard no later task can touch. Nothing
+then holds all the voxels: the peak memory is the tasks in flight, the pending shards' voxels and one
+shard.
 """
 
 from __future__ import annotations
 
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .atomic_file import replacing_folder
-from .voxelization import paint_cubes
+from .subdivide import Subdivider, SubdivisionStats, default_workers
+from .voxelization import _check_count, _check_depth, paint_cubes, volume_bounds
 
-CHUNK = 64
+CHUNK = 128  # 2 MiB of bool: zarr recommends chunks of 1 MB or more; 64³ made writing twice as slow
 SHARD = 256
 
 
-def _shard_keys(cells: np.ndarray, shift: int, per_axis: int) -> np.ndarray:
-    blocks = cells.astype(np.int64) >> shift
-    return (blocks[:, 0] * per_axis + blocks[:, 1]) * per_axis + blocks[:, 2]
+def _spread(v: np.ndarray) -> np.ndarray:
+    """The bits of ``v`` (< 2^21) moved to every third bit."""
+    v = v.astype(np.uint64) & np.uint64(0x1FFFFF)
+    for shift, mask in ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
+                        (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249)):
+        v = (v | (v << np.uint64(shift))) & np.uint64(mask)
+    return v
+
+
+def _morton(cells: np.ndarray) -> np.ndarray:
+    """Morton codes in the voxelizer's order (octant c = x bit | y bit << 1 | z bit << 2)."""
+    return _spread(cells[:, 0]) | (_spread(cells[:, 1]) << np.uint64(1)) | (_spread(cells[:, 2]) << np.uint64(2))
+
+
+def _create(path: Path, depth: int, bounds, solid: bool):
+    import zarr
+    n = 1 << depth
+    shard = min(SHARD, n)
+    about = {"depth": depth, "bounds": [list(b) for b in bounds], "solid": solid,
+             "index": "[i, j, k]: cell (i, j, k) of the grid"}
+    return zarr.create_array(store=str(path), shape=(n, n, n), chunks=(min(CHUNK, shard),) * 3, shards=(shard,) * 3,
+                             dtype="bool", fill_value=False, zarr_format=3, overwrite=True, attributes={"implc": about})
+
+
+class ShardWriter:
+    """Fills the shards of a bool Zarr array from voxels and inside octants added in any order, writing a
+    shard when :meth:`flush` is told no later addition touches it. Octants larger than a shard cover
+    whole shards and are written at once; empty shards are never written (they read as False)."""
+
+    def __init__(self, array, depth: int):
+        self.array, self.depth = array, depth
+        self.shard = array.shards[0]
+        self.shift = self.shard.bit_length() - 1
+        self.coords: list[np.ndarray] = []
+        self.cubes: list[tuple[np.ndarray, np.ndarray]] = []  # (first cells, edges) of octants within a shard
+        self.shards_written = 0
+
+    def add(self, coords: np.ndarray, inside: np.ndarray | None = None):
+        """Voxels (n, 3) and inside octants (m, 4) rows (i, j, k, level); both are copied."""
+        if len(coords):
+            self.coords.append(np.array(coords, dtype=np.uint32))
+        if inside is None or not len(inside):
+            return
+        sizes = np.left_shift(np.int64(1), self.depth - inside[:, 3].astype(np.int64))
+        firsts = inside[:, :3].astype(np.int64) * sizes[:, None]
+        big = sizes > self.shard
+        for first, size in zip(firsts[big], sizes[big]):
+            per = int(size) >> self.shift
+            for a in range(per):
+                for b in range(per):
+                    for c in range(per):
+                        lo = first + np.array([a, b, c]) * self.shard
+                        self._write(lo, np.ones((self.shard,) * 3, dtype=bool))
+        if not np.all(big):
+            self.cubes.append((firsts[~big], sizes[~big]))
+
+    def _write(self, origin, block):
+        i, j, k = map(int, origin)
+        s = self.shard
+        self.array[i:i + s, j:j + s, k:k + s] = block
+        self.shards_written += 1
+
+    def flush(self, before: int | None = None):
+        """Write every pending shard whose Morton code (in shards) is below ``before`` (None: all)."""
+        coords = np.concatenate(self.coords) if self.coords else np.empty((0, 3), np.uint32)
+        firsts = np.concatenate([f for f, _ in self.cubes]) if self.cubes else np.empty((0, 3), np.int64)
+        sizes = np.concatenate([s for _, s in self.cubes]) if self.cubes else np.empty(0, np.int64)
+        vkey = _morton(coords >> np.uint32(self.shift))
+        ckey = _morton(firsts >> self.shift)
+        done_v = np.ones(len(vkey), bool) if before is None else vkey < np.uint64(before)
+        done_c = np.ones(len(ckey), bool) if before is None else ckey < np.uint64(before)
+        self.coords = [coords[~done_v]] if not np.all(done_v) else []
+        self.cubes = [(firsts[~done_c], sizes[~done_c])] if not np.all(done_c) else []
+        coords, vkey, firsts, sizes, ckey = coords[done_v], vkey[done_v], firsts[done_c], sizes[done_c], ckey[done_c]
+        vorder, corder = np.argsort(vkey, kind="stable"), np.argsort(ckey, kind="stable")
+        coords, vkey, firsts, sizes, ckey = coords[vorder], vkey[vorder], firsts[corder], sizes[corder], ckey[corder]
+        for key in np.unique(np.concatenate([vkey, ckey])):
+            v0, v1 = np.searchsorted(vkey, [key, key + np.uint64(1)])
+            c0, c1 = np.searchsorted(ckey, [key, key + np.uint64(1)])
+            sample = coords[v0].astype(np.int64) if v1 > v0 else firsts[c0]
+            origin = (sample >> self.shift) << self.shift
+            block = np.zeros((self.shard,) * 3, dtype=bool)
+            cells = coords[v0:v1].astype(np.int64) - origin
+            block[cells[:, 0], cells[:, 1], cells[:, 2]] = True
+            paint_cubes(block, firsts[c0:c1] - origin, sizes[c0:c1])
+            self._write(origin, block)
 
 
 def save_zarr(voxels, path) -> Path:
     """Write the occupancy of ``voxels`` (with the inside octants, for a solid) as a Zarr v3 array at
     ``path`` (a folder, conventionally ending in .zarr), readable by ``zarr.open``."""
-    import zarr
     path = Path(path)
-    n = 1 << voxels.depth
-    shard = min(SHARD, n)
-    chunk = min(CHUNK, shard)
-    per_axis = n // shard
-    shift = shard.bit_length() - 1
-    inside = voxels.inside if voxels.inside is not None else np.empty((0, 4), dtype=np.int32)
-    sizes = np.left_shift(1, voxels.depth - inside[:, 3].astype(np.int64))
-    big = sizes > shard  # octants larger than a shard cover whole shards: few, painted shard by shard
-    small = inside[~big]
-    small_sizes = sizes[~big]
-    small_first = small[:, :3].astype(np.int64) * small_sizes[:, None]  # their first cell
-    voxel_keys = _shard_keys(voxels.coords, shift, per_axis)
-    voxel_order = np.argsort(voxel_keys, kind="stable")
-    voxel_keys = voxel_keys[voxel_order]
-    small_keys = _shard_keys(small_first, shift, per_axis)
-    small_order = np.argsort(small_keys, kind="stable")
-    small_keys = small_keys[small_order]
-
     with replacing_folder(path) as tmp:
-        about = {"depth": voxels.depth, "bounds": [list(b) for b in voxels.bounds], "solid": voxels.inside is not None,
-                 "index": "[i, j, k]: cell (i, j, k) of the grid"}
-        array = zarr.create_array(store=str(tmp), shape=(n, n, n), chunks=(chunk,) * 3, shards=(shard,) * 3,
-                                  dtype="bool", fill_value=False, zarr_format=3, overwrite=True,
-                                  attributes={"implc": about})
-        big_rows = inside[big]
-        for key in range(per_axis ** 3):
-            block = np.zeros((shard,) * 3, dtype=bool)
-            origin = np.array([key // per_axis**2, key // per_axis % per_axis, key % per_axis]) * shard
-            lo, hi = np.searchsorted(voxel_keys, [key, key + 1])
-            cells = voxels.coords[voxel_order[lo:hi]].astype(np.int64) - origin
-            block[cells[:, 0], cells[:, 1], cells[:, 2]] = True
-            lo, hi = np.searchsorted(small_keys, [key, key + 1])
-            here = small_order[lo:hi]
-            paint_cubes(block, small_first[here] - origin, small_sizes[here])
-            for i, j, k, level in big_rows:  # whole shards inside an octant
-                size = 1 << (voxels.depth - int(level))
-                first = np.array([i, j, k], dtype=np.int64) * size
-                if np.all(first <= origin) and np.all(origin < first + size):
-                    block[...] = True
-            if block.any():
-                array[origin[0]:origin[0] + shard, origin[1]:origin[1] + shard, origin[2]:origin[2] + shard] = block
+        writer = ShardWriter(_create(tmp, voxels.depth, voxels.bounds, voxels.inside is not None), voxels.depth)
+        writer.add(voxels.coords, voxels.inside)
+        writer.flush()
     return path
+
+
+@dataclass
+class ZarrWrite:
+    """What :func:`write_zarr` wrote: counts, the subdivider's statistics and the volume bounds."""
+    path: Path
+    depth: int
+    bounds: tuple
+    voxels: int
+    inside_octants: int
+    inside_voxels: int
+    shards: int
+    stats: SubdivisionStats
+    seconds: float
+    solid: bool
+
+    def volume_bounds(self) -> tuple[float, float]:
+        """As :meth:`implc.voxelization.Voxels.volume_bounds` (a solid only)."""
+        if not self.solid:
+            raise ValueError("a shell was written: write_zarr(..., solid=True) classifies the inside")
+        return volume_bounds(self.bounds, self.depth, self.inside_voxels, self.voxels)
+
+
+def write_zarr(surface, depth, path, *, solid: bool = True, workers=None, progress: bool = False) -> ZarrWrite:
+    """Voxelize ``surface`` at ``depth`` straight into a Zarr v3 array at ``path`` (the occupancy of
+    :func:`save_zarr`), in memory bounded by the tasks in flight rather than the voxel count."""
+    depth = _check_depth(depth)
+    workers = default_workers() if workers is None else _check_count("workers", workers)
+    path = Path(path)
+    t0 = time.perf_counter()
+    subdivider = Subdivider(surface, depth, workers, surface.runtime, solid=solid)
+    cells, level = subdivider.plan()
+    task_keys = _morton(cells.astype(np.int64) << (depth - level)) if len(cells) else np.empty(0, np.uint64)
+    counts = {"voxels": 0, "inside": 0, "inside_voxels": 0, "tasks": 0}
+    bar = None
+    with replacing_folder(path) as tmp:
+        writer = ShardWriter(_create(tmp, depth, surface.bounds, solid), depth)
+        shard_shift = np.uint64(3 * writer.shift)
+
+        def task_done():
+            t = counts["tasks"] = counts["tasks"] + 1
+            writer.flush(int(task_keys[t] >> shard_shift) if t < len(task_keys) else None)
+
+        def count_inside(rows):
+            counts["inside"] += len(rows)
+            edges_log2 = depth - rows[:, 3].astype(np.int64)
+            counts["inside_voxels"] += int(np.sum(np.left_shift(np.int64(1), 3 * edges_log2)))
+
+        def emit(coords, _normals):
+            counts["voxels"] += len(coords)
+            writer.add(coords)
+            if not solid:
+                task_done()
+
+        def emit_inside(rows):
+            count_inside(rows)
+            writer.add(np.empty((0, 3), np.uint32), rows)
+            task_done()
+
+        plan_inside = subdivider.inside
+        if solid:
+            count_inside(plan_inside)
+            writer.add(np.empty((0, 3), np.uint32), plan_inside)
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(total=len(cells), unit="octant", desc=f"voxelize {1 << depth}³ to Zarr", leave=False)
+        try:
+            stats = subdivider.run(emit, progress=bar, plan=(cells, level), emit_inside=emit_inside)
+        finally:
+            if bar is not None:
+                bar.close()
+        writer.flush()
+    return ZarrWrite(path, depth, surface.bounds, counts["voxels"], counts["inside"], counts["inside_voxels"],
+                     writer.shards_written, stats, time.perf_counter() - t0, solid)
 
 
 def describe_zarr(path) -> list[str]:

@@ -179,6 +179,34 @@ def test_zarr_holds_the_dense_solid_and_the_cli_writes_it(tmp_path, capsys):
     assert "cannot read" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("shard,chunk", [(8, 4), (16, 8), (64, 32)],
+                         ids=["shards below octants", "shards below tasks", "shards above tasks"])
+@pytest.mark.parametrize("solid", [True, False], ids=["solid", "shell"])
+def test_zarr_written_while_voxelizing_is_the_dense_voxelization(tmp_path, monkeypatch, shard, chunk, solid):
+    """write_zarr streams each task's voxels and octants into shards as tasks finish: whatever the shard size
+    against the tasks' cells (32³ here) and the octants, and for every worker count, the store is the
+    in-memory voxelization's dense occupancy, and so are the counts and volume bounds it reports."""
+    import zarr
+
+    from implc import zarr_store
+    monkeypatch.setattr(zarr_store, "SHARD", shard)
+    monkeypatch.setattr(zarr_store, "CHUNK", chunk)
+    surface = implc.compile(HOLLOW)
+    v = implc.voxelize(surface, 7, solid=solid)
+    dense = v.to_dense(solid=solid)
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}.zarr"
+        result = zarr_store.write_zarr(surface, 7, out, solid=solid, workers=workers)
+        array = zarr.open(out, mode="r")
+        assert array.shards == (shard,) * 3
+        np.testing.assert_array_equal(array[:], dense)
+        assert result.voxels == len(v)
+        if solid:
+            assert (result.inside_octants, result.inside_voxels) == (len(v.inside), v.inside_voxels())
+            assert result.volume_bounds() == v.volume_bounds()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["w1.zarr", "w2.zarr"]
+
+
 def test_a_cross_section_is_the_dense_solid_layer():
     from implc.render import cross_section
     v = implc.voxelize(implc.compile(TORUS), 6, solid=True)
