@@ -67,6 +67,8 @@ class Voxels:
             builder.begin(self.depth, self.bounds)
             builder.add(self.coords, self.normals)
             self._octree = builder.finish()
+            if self.inside is not None:
+                self._octree.add_inside(self.inside)
         return self._octree
 
     def centers(self) -> np.ndarray:
@@ -246,11 +248,13 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
             bar.close()
     t1 = time.perf_counter()
     result = backend.finish()
+    coords, normals = collect.arrays()
+    inside = subdivider.inside if solid else None
+    if isinstance(result, Octree):
+        result.normals = normals  # the octree's payload is the voxels' normals array itself
+        if solid:
+            result.add_inside(inside)
     stats.seconds["finish"] = time.perf_counter() - t1
     stats.seconds["setup"] = t0 - t_start - stats.seconds["plan"]
     stats.seconds["total"] = time.perf_counter() - t_start
-    coords, normals = collect.arrays()
-    if isinstance(result, Octree):
-        result.normals = normals  # the octree's payload is the voxels' normals array itself
-    return Voxels(coords, normals, depth, surface.bounds, stats, storage=result,
-                  inside=subdivider.inside if solid else None)
+    return Voxels(coords, normals, depth, surface.bounds, stats, storage=result, inside=inside)

@@ -22,25 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from .atomic_file import replacing_folder
+from .morton import morton_codes
 from .subdivide import Subdivider, SubdivisionStats, default_workers
 from .voxelization import _check_count, _check_depth, paint_cubes, volume_bounds
 
 CHUNK = 128  # 2 MiB of bool: zarr recommends chunks of 1 MB or more; 64³ made writing twice as slow
 SHARD = 256
-
-
-def _spread(v: np.ndarray) -> np.ndarray:
-    """The bits of ``v`` (< 2^21) moved to every third bit."""
-    v = v.astype(np.uint64) & np.uint64(0x1FFFFF)
-    for shift, mask in ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
-                        (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249)):
-        v = (v | (v << np.uint64(shift))) & np.uint64(mask)
-    return v
-
-
-def _morton(cells: np.ndarray) -> np.ndarray:
-    """Morton codes in the voxelizer's order (octant c = x bit | y bit << 1 | z bit << 2)."""
-    return _spread(cells[:, 0]) | (_spread(cells[:, 1]) << np.uint64(1)) | (_spread(cells[:, 2]) << np.uint64(2))
 
 
 def _create(path: Path, depth: int, bounds, solid: bool):
@@ -96,8 +83,8 @@ class ShardWriter:
         coords = np.concatenate(self.coords) if self.coords else np.empty((0, 3), np.uint32)
         firsts = np.concatenate([f for f, _ in self.cubes]) if self.cubes else np.empty((0, 3), np.int64)
         sizes = np.concatenate([s for _, s in self.cubes]) if self.cubes else np.empty(0, np.int64)
-        vkey = _morton(coords >> np.uint32(self.shift))
-        ckey = _morton(firsts >> self.shift)
+        vkey = morton_codes(coords >> np.uint32(self.shift))
+        ckey = morton_codes(firsts >> self.shift)
         done_v = np.ones(len(vkey), bool) if before is None else vkey < np.uint64(before)
         done_c = np.ones(len(ckey), bool) if before is None else ckey < np.uint64(before)
         self.coords = [coords[~done_v]] if not np.all(done_v) else []
@@ -158,7 +145,7 @@ def write_zarr(surface, depth, path, *, solid: bool = True, workers=None, progre
     t0 = time.perf_counter()
     subdivider = Subdivider(surface, depth, workers, surface.runtime, solid=solid)
     cells, level = subdivider.plan()
-    task_keys = _morton(cells.astype(np.int64) << (depth - level)) if len(cells) else np.empty(0, np.uint64)
+    task_keys = morton_codes(cells.astype(np.int64) << (depth - level)) if len(cells) else np.empty(0, np.uint64)
     counts = {"voxels": 0, "inside": 0, "inside_voxels": 0, "tasks": 0}
     bar = None
     with replacing_folder(path) as tmp:

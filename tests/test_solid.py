@@ -246,3 +246,78 @@ def test_a_cut_away_shows_the_filled_section_of_a_solid():
 def test_bad_cuts_are_named(tmp_path, capsys, argv, words):
     assert main(["render", "torus", "--depth", "4", "--quiet", "-o", str(tmp_path / "t.png"), *argv]) == 2
     assert words in capsys.readouterr().err
+
+
+# -- the octree of a solid -------------------------------------------------------------------------
+def _cells_of(levels, coords, depth):
+    n = 1 << depth
+    grid = np.zeros((n,) * 3, bool)
+    for (i, j, k), level in zip(coords, levels):
+        size = 1 << (depth - int(level))
+        grid[i * size:(i + 1) * size, j * size:(j + 1) * size, k * size:(k + 1) * size] = True
+    return grid
+
+
+def test_the_octree_records_the_inside_and_its_levels_know_it():
+    """The tree's inside entries cover exactly the inside octants' cells; the boundary traversal is the
+    shell's; at each level, inside nodes lie where numpy's F < 0 (sampled inside each) and boundary nodes
+    hold boundary voxels."""
+    depth = 7
+    surface = implc.compile(HOLLOW)
+    solid, shell = implc.voxelize(surface, depth, solid=True), implc.voxelize(surface, depth)
+    tree = solid.octree
+    levels, coords = tree.inside_nodes()
+    assert np.array_equal(_cells_of(levels, coords, depth), inside_mask(solid))
+    assert set(np.unique(tree.nodes[tree.nodes < 0])) == {-1}
+    for level in range(depth + 1):
+        assert np.array_equal(tree.traverse(level)[0], shell.octree.traverse(level)[0])
+    f = sympy.lambdify((x, y, z), HOLLOW, "numpy")
+    rng = np.random.default_rng(3)
+    for k in (3, 5):
+        cells, normals, inside = tree.level(k, solid=True)
+        boundary, _ = tree.level(k)
+        assert np.array_equal(cells[~inside], boundary) and np.all(normals[inside] == 0)
+        assert np.all(np.diff(implc.morton.morton_codes(cells).astype(np.float64)) > 0)  # Morton order, distinct
+        size = 2.0 / (1 << k)
+        points = -1 + (cells[inside][:, None, :] + rng.uniform(0, 1, (len(cells[inside]), 16, 3))) * size
+        assert np.all(f(*points.reshape(-1, 3).T) < 0)
+        expected = np.zeros((1 << k,) * 3, bool)
+        expected[tuple((solid.coords >> (depth - k)).T)] = True
+        assert np.array_equal(_cells_of(np.full(len(boundary), k), boundary, k), expected)
+        covered = _cells_of(np.full(int(inside.sum()), k), cells[inside], k)
+        full = inside_mask(solid).reshape((1 << k, 1 << (depth - k)) * 3).all(axis=(1, 3, 5))
+        assert np.array_equal(covered, full & ~expected)
+
+
+def test_eight_inside_siblings_merge_into_their_parent():
+    from implc.storage.octree import merge_inside
+    depth = 5
+    fine = np.array([[4 + a, 6 + b, 2 + c, 4] for a in (0, 1) for b in (0, 1) for c in (0, 1)], np.int32)
+    grand = np.array([[8 + a, 8 + b, 8 + c, 5] for a in range(4) for b in range(4) for c in range(4)], np.int32)
+    lone = np.array([[0, 0, 0, 5]], np.int32)
+    merged = merge_inside(np.concatenate([fine, grand, lone]), depth)
+    assert sorted(map(tuple, merged.tolist())) == [(0, 0, 0, 5), (2, 2, 2, 3), (2, 3, 1, 3)]
+    rows = np.concatenate([fine, grand, lone])
+    assert np.array_equal(_cells_of(merged[:, 3], merged[:, :3], depth), _cells_of(rows[:, 3], rows[:, :3], depth))
+
+
+def test_inside_away_from_the_boundary_creates_its_nodes_and_saves(tmp_path):
+    """Inside octants under no boundary node (a hand-built case) get the nodes above them; the tree saves
+    and loads with its states."""
+    from implc.storage.octree import Octree
+    inside = np.array([[15, 15, 15, 4], [3, 3, 2, 2], [0, 1, 0, 4]], np.int32)
+    voxels = implc.voxelization.Voxels(np.array([[0, 0, 0], [1, 0, 0]], np.uint32),
+                                       np.array([[0, 0, 1]] * 2, np.float32), 4, ((-1, 1),) * 3, stats=None,
+                                       inside=inside)
+    tree = voxels.octree
+    levels, coords = tree.inside_nodes()
+    found = sorted(zip(levels.tolist(), map(tuple, coords.tolist())))
+    assert found == [(2, (3, 3, 2)), (4, (0, 1, 0)), (4, (15, 15, 15))]
+    assert np.array_equal(tree.traverse()[0], voxels.coords)
+    tree.save(tmp_path / "t.npz")
+    again = Octree.load(tmp_path / "t.npz")
+    assert np.array_equal(again.inside_nodes()[1], coords)
+    cells, normals, inside = again.level(1, solid=True)
+    assert cells.tolist() == [[0, 0, 0], [1, 1, 1]] and inside.tolist() == [False, False]
+    cells, normals, inside = again.level(2, solid=True)
+    assert [c for c, i in zip(cells.tolist(), inside) if i] == [[3, 3, 2]]

@@ -3,7 +3,8 @@
 - ``implc_octree_insert``: Morton-ordered voxels go into an (M, 8) int32 node array, each starting from
   the previous voxel's path and ascending only to the common parent; it clears each node it creates, so
   the node array may be reserved uninitialised. Its state words are laid out in :mod:`implc.abi`.
-- ``implc_octree_traverse``: depth-first traversal yielding the nodes of one level in order.
+- ``implc_octree_traverse``: depth-first traversal yielding the nodes of one level in order (the
+  boundary's: entries below zero, a solid's inside octants, are neither visited nor yielded).
 """
 
 from __future__ import annotations
@@ -123,10 +124,11 @@ def emit_octree_traverse(module: ir.Module):
             with visit:
                 store_at(b, b.add(i, const(I64, 1)), next_child, lv)
                 entry = load_at(b, nodes, b.add(b.mul(load_at(b, node_stack, lv), const(I64, 8)), i))
-                with if_(b, b.icmp_signed("!=", entry, const(I32, 0))):
+                # a node or a voxel (neither empty nor inside)
+                with if_(b, b.icmp_signed(">", entry, const(I32, 0))):
                     i32 = b.trunc(i, I32)
-                    child = [b.or_(b.shl(xyz[a].get(), const(I32, 1)), b.and_(b.lshr(i32, const(I32, a)), const(I32, 1)))
-                             for a in range(3)]
+                    child = [b.or_(b.shl(xyz[a].get(), const(I32, 1)),
+                                   b.and_(b.lshr(i32, const(I32, a)), const(I32, 1))) for a in range(3)]
                     child_level = b.add(lv, const(I64, 1))
                     with b.if_else(b.icmp_signed("==", child_level, target)) as (emit, descend):
                         with emit:

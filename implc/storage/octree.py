@@ -4,6 +4,12 @@ Nodes are rows of an (M, 8) int32 array: entry c of node n is its child in octan
 z bit << 2), 0 meaning empty (the root, node 0, is nobody's child). Nodes at level depth − 1 hold
 ``voxel index + 1`` instead: the payload, a normal per voxel, lives in ``normals``. Insertion and
 traversal run natively (:mod:`implc.codegen.octree_index`).
+
+A solid's tree also records its inside: an entry :data:`INSIDE` (−1) says the child's whole box lies where
+F < 0, and nothing is stored below it. So each node is in one of three states, in the entry that points
+at it: boundary (a node: it holds boundary voxels), inside (−1) or outside (0). Inside octants are merged
+upward first (eight inside siblings make an inside parent), so an inside entry is the largest octant the
+voxelization proved inside.
 """
 
 from __future__ import annotations
@@ -11,7 +17,37 @@ from __future__ import annotations
 import numpy as np
 
 from ..abi import DEPTH, LEVEL_COUNTS, NODE_COUNT, OCTREE_STATE_WORDS
+from ..morton import morton_codes
 from ..runtime import Runtime
+
+INSIDE = -1
+"""A child entry: the child's whole box is inside (F < 0 in all of it); nothing is stored below it."""
+
+
+def merge_inside(inside: np.ndarray, depth: int) -> np.ndarray:
+    """Inside octants (n, 4) rows (i, j, k, level), distinct and disjoint, with every eight siblings
+    replaced by their parent, repeatedly: the same cells in the fewest octants. Morton order of first
+    cells within each level, levels from the coarsest."""
+    by_level = {level: inside[inside[:, 3] == level][:, :3].astype(np.int64) for level in np.unique(inside[:, 3])}
+    for level in range(depth, 0, -1):
+        cells = by_level.get(level)
+        if cells is None or not len(cells):
+            continue
+        parents = cells >> 1
+        keys = morton_codes(parents)
+        unique, first, counts = np.unique(keys, return_index=True, return_counts=True)
+        full = counts == 8
+        if not np.any(full):
+            continue
+        by_level[level] = cells[~np.isin(keys, unique[full])]
+        merged = parents[first[full]]
+        by_level[level - 1] = np.concatenate([by_level[level - 1], merged]) if level - 1 in by_level else merged
+    rows = []
+    for level in sorted(by_level):
+        cells = by_level[level]
+        cells = cells[np.argsort(morton_codes(cells), kind="stable")]
+        rows.append(np.column_stack([cells, np.full(len(cells), level)]).astype(np.int32))
+    return np.concatenate(rows) if rows else np.empty((0, 4), dtype=np.int32)
 
 
 class Octree:
@@ -64,18 +100,100 @@ class Octree:
         assert got == count, f"octree traversal found {got} nodes at level {level}, expected {count}"
         return coords, payload
 
-    def level(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Level of detail: the nodes at depth k and the normalised mean normal of the voxels below each."""
+    def level(self, k: int, solid: bool = False):
+        """Level of detail: the boundary nodes at depth k and the normalised mean normal of the voxels below
+        each. With ``solid``: (coords, normals, inside), the inside nodes at depth k too (normal 0, 0, 0),
+        all in Morton order, ``inside`` marking them."""
         coords, payload = self.traverse(k)
         if k == self.depth:
-            return coords, self.normals[payload]
-        voxels, index = self.traverse(self.depth)
-        prefix = voxels >> np.uint32(self.depth - k)
-        starts = np.flatnonzero(np.r_[True, np.any(prefix[1:] != prefix[:-1], axis=1)])
-        sums = np.add.reduceat(self.normals[index].astype(np.float64), starts, axis=0)
-        lengths = np.linalg.norm(sums, axis=1, keepdims=True)
-        mean = np.where(lengths > 0, sums / np.where(lengths > 0, lengths, 1), [0.0, 0.0, 1.0])
-        return coords, mean.astype(np.float32)
+            normals = self.normals[payload]
+        else:
+            voxels, index = self.traverse(self.depth)
+            prefix = voxels >> np.uint32(self.depth - k)
+            starts = np.flatnonzero(np.r_[True, np.any(prefix[1:] != prefix[:-1], axis=1)]) if len(voxels) else []
+            sums = np.zeros((len(coords), 3))
+            if len(voxels):  # a node with no voxel below (never on a sound voxelization) keeps the default
+                at = np.searchsorted(morton_codes(coords), morton_codes(prefix[starts]))
+                sums[at] = np.add.reduceat(self.normals[index].astype(np.float64), starts, axis=0)
+            lengths = np.linalg.norm(sums, axis=1, keepdims=True)
+            normals = np.where(lengths > 0, sums / np.where(lengths > 0, lengths, 1), [0.0, 0.0, 1.0])
+            normals = normals.astype(np.float32)
+        if not solid:
+            return coords, normals
+        inside = self.inside_at(k)
+        all_coords = np.concatenate([coords, inside])
+        order = np.argsort(morton_codes(all_coords), kind="stable")
+        all_normals = np.concatenate([normals, np.zeros((len(inside), 3), np.float32)])
+        is_inside = np.r_[np.zeros(len(coords), bool), np.ones(len(inside), bool)]
+        return all_coords[order], all_normals[order], is_inside[order]
+
+    # -- a solid's inside ------------------------------------------------------------------------
+    def _node_ids(self, level: int, cells: np.ndarray) -> np.ndarray:
+        """The node index of each boundary node at ``level`` (< depth) with coordinates ``cells``, creating
+        the missing ones (with their parents)."""
+        if level == 0:
+            return np.zeros(len(cells), dtype=np.int64)
+        coords, ids = self.traverse(level)
+        keys, wanted = morton_codes(coords), morton_codes(cells)
+        at = np.minimum(np.searchsorted(keys, wanted), max(len(keys) - 1, 0))
+        found = (at < len(keys)) & (keys[at] == wanted) if len(keys) else np.zeros(len(cells), bool)
+        if np.all(found):
+            return ids[at]
+        _, first = np.unique(wanted[~found], return_index=True)
+        missing = cells[~found][first].astype(np.int64)
+        parents = self._node_ids(level - 1, missing >> 1)
+        fresh = np.arange(len(self.nodes), len(self.nodes) + len(missing))
+        self.nodes = np.concatenate([self.nodes, np.zeros((len(missing), 8), np.int32)])
+        self.nodes[parents, _slots(missing)] = fresh
+        self.level_counts[level] += len(missing)
+        return self._node_ids(level, cells)
+
+    def add_inside(self, inside: np.ndarray) -> None:
+        """Record a solid's inside octants, (n, 4) rows (i, j, k, level), merged (:func:`merge_inside`)."""
+        merged = merge_inside(np.asarray(inside), self.depth)
+        for level in np.unique(merged[:, 3]):
+            cells = merged[merged[:, 3] == level][:, :3].astype(np.int64)
+            parents = self._node_ids(int(level) - 1, cells >> 1)
+            self.nodes[parents, _slots(cells)] = INSIDE
+
+    def inside_nodes(self) -> tuple[np.ndarray, np.ndarray]:
+        """The inside entries as (levels (n,) int32, coords (n, 3) uint32 at each one's level), coarsest
+        level first, Morton order within a level."""
+        levels, coords = [], []
+        for level in range(self.depth):
+            cells, ids = self.traverse(level)
+            node, slot = np.nonzero(self.nodes[ids] == INSIDE)
+            if len(node):
+                child = (cells[node].astype(np.uint32) << np.uint32(1)) | _slot_bits(slot)
+                coords.append(child)
+                levels.append(np.full(len(child), level + 1, np.int32))
+        if not coords:
+            return np.empty(0, np.int32), np.empty((0, 3), np.uint32)
+        return np.concatenate(levels), np.concatenate(coords)
+
+    def inside_at(self, k: int) -> np.ndarray:
+        """The cells at depth k covered by inside entries, (n, 3) uint32 in Morton order (coarser entries
+        expanded to depth k; finer ones lie in boundary nodes at depth k)."""
+        levels, coords = self.inside_nodes()
+        out = []
+        for level in np.unique(levels[levels <= k]):
+            cells = coords[levels == level]
+            per = 1 << (k - int(level))
+            steps = np.stack(np.meshgrid(*(np.arange(per, dtype=np.uint32),) * 3, indexing="ij"), -1).reshape(-1, 3)
+            out.append((cells[:, None, :] * np.uint32(per) + steps[None]).reshape(-1, 3))
+        cells = np.concatenate(out) if out else np.empty((0, 3), np.uint32)
+        return cells[np.argsort(morton_codes(cells), kind="stable")]
+
+
+def _slots(cells: np.ndarray) -> np.ndarray:
+    """Each cell's octant in its parent (x bit | y bit << 1 | z bit << 2)."""
+    c = cells.astype(np.int64) & 1
+    return c[:, 0] | (c[:, 1] << 1) | (c[:, 2] << 2)
+
+
+def _slot_bits(slot: np.ndarray) -> np.ndarray:
+    """(n, 3) uint32 low bits of the children in octants ``slot``."""
+    return np.column_stack([(slot >> a) & 1 for a in range(3)]).astype(np.uint32)
 
 
 class OctreeBuilder:
