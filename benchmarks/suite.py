@@ -430,21 +430,29 @@ def techniques(args, out):
         r["speedup_vs_all_off"] = base / r["seconds"]
     out["techniques"] = rows
     md = [f"### Techniques at {1 << args.depth}³, one worker (each switched off in turn)", "",
-          f"| case | variant | seconds | speedup vs all off | voxels | over-inclusion at {1 << args.tightness_depth}³ |",
+          f"| case | variant | seconds | speedup vs all off | voxels "
+          f"| over-inclusion at {1 << args.tightness_depth}³ |",
           "|---|---|---|---|---|---|"]
     md += [f"| {r['case']} | {r['variant']} | {r['seconds']:.3f} | {r['speedup_vs_all_off']:.1f}× | {r['voxels']} "
            f"| {r['over_inclusion']:.3f} |" for r in rows]
     md += ["", "pruning: terms dead below an octant skipped (implc/regions.py); scalar kernels: compile(..., "
            "vector_width=1) instead of 8 lanes; widened rounding: compile(..., rounding='widen'), bounds rounded "
            "to nearest and then widened instead of rounded outward by AVX-512 instructions (the default where the "
-           "CPU has them; elsewhere the default widens too); mean-value leaves: voxelize(..., mean_value_levels=1); refined "
-           "leaves: voxelize(..., refine_leaves=True), a leaf kept only if one of its eighths may meet F."]
+           "CPU has them; elsewhere the default widens too); mean-value leaves: voxelize(..., mean_value_levels=1); "
+           "refined leaves: voxelize(..., refine_leaves=True), a leaf kept only if one of its eighths may meet F."]
     return md
+
+
+def _folder_bytes(path: Path) -> int:
+    return sum(f.stat().st_size for f in path.rglob("*") if f.is_file()) if path.is_dir() else path.stat().st_size
 
 
 def solids(args, out):
     """Solid voxelization (inside octants kept whole) against the shell, all cores, at --solid-depths:
-    medians, the extra cost, inside octants and the width of the guaranteed volume bounds."""
+    medians, the extra cost, inside octants, the width of the guaranteed volume bounds, and the exports:
+    .vdb from the voxels in memory, .zarr voxelized straight into the store (voxelization included)."""
+    from implc.vdb_file import save_vdb
+    from implc.zarr_store import write_zarr
     rows = []
     for name in args.solid_scenes.split(","):
         sc = scene.load(name)
@@ -454,15 +462,25 @@ def solids(args, out):
             shell_s, _ = median_time(lambda: implc.voxelize(s, depth), args.repeats)
             solid_s, v = median_time(lambda: implc.voxelize(s, depth, solid=True), args.repeats)
             lo, hi = v.volume_bounds()
+            with tempfile.TemporaryDirectory() as tmp:
+                vdb_s, path = median_time(lambda: save_vdb(v, Path(tmp) / "s.vdb"), 1)
+                vdb_mib = _folder_bytes(path) / 2**20
+                zarr_s, result = median_time(lambda: write_zarr(s, depth, Path(tmp) / "s.zarr"), 1)
+                zarr_mib = _folder_bytes(result.path) / 2**20
             rows.append({"scene": name, "depth": depth, "shell_s": shell_s, "solid_s": solid_s,
-                         "voxels": len(v), "inside_octants": len(v.inside), "volume_lo": lo, "volume_hi": hi})
+                         "voxels": len(v), "inside_octants": len(v.inside), "volume_lo": lo, "volume_hi": hi,
+                         "vdb_s": vdb_s, "vdb_mib": vdb_mib, "zarr_s": zarr_s, "zarr_mib": zarr_mib})
     out["solids"] = rows
-    md = ["### Solids: inside octants kept whole, against the shell (all cores)", "",
-          "| scene | grid | shell s | solid s | extra | boundary voxels | inside octants | volume bounds |",
-          "|---|---|---|---|---|---|---|---|"]
+    md = ["### Solids: inside octants kept whole, against the shell (all cores), and their exports", "",
+          "| scene | grid | shell s | solid s | extra | boundary voxels | inside octants | volume bounds "
+          "| .vdb write s (MiB) | .zarr voxelize + write s (MiB) |",
+          "|---|---|---|---|---|---|---|---|---|---|"]
     md += [f"| {r['scene']} | {1 << r['depth']}³ | {r['shell_s']:.3f} | {r['solid_s']:.3f} | "
            f"{r['solid_s'] / r['shell_s'] - 1:+.0%} | {r['voxels']} | {r['inside_octants']} | "
-           f"[{r['volume_lo']:.6g}, {r['volume_hi']:.6g}] |" for r in rows]
+           f"[{r['volume_lo']:.6g}, {r['volume_hi']:.6g}] | {r['vdb_s']:.2f} ({r['vdb_mib']:.1f}) | "
+           f"{r['zarr_s']:.2f} ({r['zarr_mib']:.1f}) |" for r in rows]
+    md += ["", "Exports: `implc voxelize --solid -o x.vdb` (OpenVDB occupancy with inside tiles, and normals) and "
+           "`-o x.zarr` (streamed: solid Scene 1 at 4096³ peaks at 1.35 GiB RSS)."]
     return md
 
 

@@ -79,8 +79,10 @@ NORMALS = _entry("implc_normals", "gradient_live:fn* point:fn* leaf_geom:f64* co
 OCTREE_INSERT = _entry("implc_octree_insert", "nodes:i32* node_capacity:i64 state:i64* coords:i32* n:i64 "
                                               "first_index:i64", "i64")
 OCTREE_TRAVERSE = _entry("implc_octree_traverse", "nodes:i32* depth:i64 level:i64 out:i32* payload:i64*", "i64")
+OCTREE_MARK_INSIDE = _entry("implc_octree_mark_inside", "nodes:i32* node_capacity:i64 state:i64* rows:i32* n:i64",
+                            "i64")
 SPLAT = _entry("implc_splat", "px:i64* py:i64* sizes:i64* depth:f64* n:i64 size:i64 zbuf:f64* winner:i64*")
-RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, OCTREE_INSERT, OCTREE_TRAVERSE, SPLAT)
+RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, SPLAT)
 
 # -- the tape engine (implc.codegen.tape_engine_module): one interpreter for every program -----------------
 # (``program``: a program header, implc.tape_program; ``slots``: TAPE_SLOT_DOUBLES per slot of the full
@@ -147,7 +149,8 @@ TAPE_STATS_WORDS = 3 * TAPE_LEVELS
 ``implc_subdivide``'s, TAPE_LEVELS words), instructions run per level (the octant's level), octants
 expanded per level."""
 
-# implc_octree_insert's state (int64 words)
+# implc_octree_insert's state (int64 words; implc_octree_mark_inside reads and updates NODE_COUNT, DEPTH
+# and LEVEL_COUNTS)
 NODE_COUNT, DEPTH, STARTED, PREV = 0, 1, 2, 3
 """Indices of the node count, the grid depth, whether a voxel was inserted, the previous voxel (3 words)."""
 LEVEL_COUNTS = 8

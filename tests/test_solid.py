@@ -290,15 +290,35 @@ def test_the_octree_records_the_inside_and_its_levels_know_it():
 
 
 def test_eight_inside_siblings_merge_into_their_parent():
-    from implc.storage.octree import merge_inside
+    """Eight inside siblings become their parent, up the levels (64 grandchildren: one octant two levels
+    up), in any order; the cells covered stay the same and no node is left counted for them."""
+    from implc.voxelization import Voxels
     depth = 5
     fine = np.array([[4 + a, 6 + b, 2 + c, 4] for a in (0, 1) for b in (0, 1) for c in (0, 1)], np.int32)
     grand = np.array([[8 + a, 8 + b, 8 + c, 5] for a in range(4) for b in range(4) for c in range(4)], np.int32)
     lone = np.array([[0, 0, 0, 5]], np.int32)
-    merged = merge_inside(np.concatenate([fine, grand, lone]), depth)
-    assert sorted(map(tuple, merged.tolist())) == [(0, 0, 0, 5), (2, 2, 2, 3), (2, 3, 1, 3)]
-    rows = np.concatenate([fine, grand, lone])
-    assert np.array_equal(_cells_of(merged[:, 3], merged[:, :3], depth), _cells_of(rows[:, 3], rows[:, :3], depth))
+    rows = np.concatenate([fine, grand, lone])[np.random.default_rng(5).permutation(73)]
+    voxels = Voxels(np.array([[31, 31, 31]], np.uint32), np.array([[0, 0, 1]], np.float32), depth, ((-1, 1),) * 3,
+                    stats=None, inside=rows)
+    tree = voxels.octree
+    levels, coords = tree.inside_nodes()
+    found = sorted(zip(levels.tolist(), map(tuple, coords.tolist())))
+    assert found == [(3, (2, 2, 2)), (3, (2, 3, 1)), (5, (0, 0, 0))]
+    assert np.array_equal(_cells_of(levels, coords, depth), _cells_of(rows[:, 3], rows[:, :3], depth))
+    for level in range(depth + 1):  # the counts match what a traversal finds
+        assert len(tree.traverse(level)[0]) == tree.level_counts[level]
+
+
+def test_a_tree_grows_while_recording_the_inside():
+    """Octants needing more nodes than the tree has room for: the native call stops, the tree grows, and
+    the call resumes where it stopped."""
+    from implc.voxelization import Voxels
+    rows = np.array([[i, j, k, 6] for i in (1, 9, 17, 40) for j in (3, 30) for k in (0, 63)], np.int32)
+    voxels = Voxels(np.array([[0, 0, 0]], np.uint32), np.array([[0, 0, 1]], np.float32), 6, ((-1, 1),) * 3,
+                    stats=None, inside=rows)
+    levels, coords = voxels.octree.inside_nodes()
+    assert sorted(map(tuple, coords.tolist())) == sorted(map(tuple, rows[:, :3].tolist()))
+    assert np.all(levels == 6)
 
 
 def test_inside_away_from_the_boundary_creates_its_nodes_and_saves(tmp_path):

@@ -5,6 +5,9 @@
   the node array may be reserved uninitialised. Its state words are laid out in :mod:`implc.abi`.
 - ``implc_octree_traverse``: depth-first traversal yielding the nodes of one level in order (the
   boundary's: entries below zero, a solid's inside octants, are neither visited nor yielded).
+- ``implc_octree_mark_inside``: records inside octants (rows i, j, k, level) as entries −1, creating the
+  nodes above one that no boundary node holds, and merging upward every node whose eight entries are
+  inside (it becomes an inside entry of its parent).
 """
 
 from __future__ import annotations
@@ -148,3 +151,96 @@ def emit_octree_traverse(module: ir.Module):
     b.ret(count.get())
 
 
+
+
+def emit_octree_mark_inside(module: ir.Module):
+    fn, b = define(module, abi.OCTREE_MARK_INSIDE)
+    nodes, node_cap, state, rows, n = fn.args
+    for arg in (nodes, state, rows):
+        arg.add_attribute("noalias")
+    node_count = Local(b, I64, load_at(b, state, abi.NODE_COUNT), "node_count")
+    levels = abi.MAX_DEPTH + 2
+    path = local_array(b, I64, levels, "path")  # the node at each level of the current row's descent
+    counts = local_array(b, I64, levels, "counts")
+    copy_words(b, state, abi.LEVEL_COUNTS, counts, 0, levels)
+    done = Local(b, I64, 0, "done")
+    aborted = Local(b, ir.IntType(1), const(ir.IntType(1), 0), "aborted")
+    inside = const(I32, -1)
+    ctlz = module.globals.get("llvm.ctlz.i32") or ir.Function(
+        module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.ctlz.i32")
+    depth = load_at(b, state, abi.DEPTH)
+    # the previous row's first cell (at the grid's depth) and how deep its path is valid (0: only the root)
+    prev = [Local(b, I32, const(I32, 0), f"prev{a}") for a in range(3)]
+    prev_valid = Local(b, I64, 0, "prev_valid")
+    store_at(b, const(I64, 0), path, 0)
+    with while_true(b) as rows_loop:
+        r = done.get()
+        rows_loop.break_if(b.icmp_signed(">=", r, n))
+        base = b.mul(r, const(I64, 4))
+        xyz = [load_at(b, rows, b.add(base, const(I64, a))) for a in range(3)]
+        level = b.sext(load_at(b, rows, b.add(base, const(I64, 3))), I64)
+        # start from the deepest node shared with the previous row (rows in Morton order share long paths;
+        # a node a previous row merged away is never on a later disjoint row's path)
+        to_depth = b.trunc(b.sub(depth, level), I32)
+        first = [b.shl(xyz[a], to_depth) for a in range(3)]
+        diff = b.xor(first[0], prev[0].get())
+        for a in (1, 2):
+            diff = b.or_(diff, b.xor(first[a], prev[a].get()))
+        top_bit = b.sub(const(I32, 31), b.call(ctlz, [diff, const(ir.IntType(1), 0)]))
+        shared = b.select(b.icmp_signed("==", diff, const(I32, 0)), depth,
+                          b.sext(b.sub(b.sub(b.trunc(depth, I32), const(I32, 1)), top_bit), I64))
+        start = b.select(b.icmp_signed("<", shared, prev_valid.get()), shared, prev_valid.get())
+        start = b.select(b.icmp_signed("<", start, b.sub(level, const(I64, 1))), start, b.sub(level, const(I64, 1)))
+        node = Local(b, I64, load_at(b, path, start), "node")
+        lv = Local(b, I64, start, "lv")
+        # descend to the octant's parent, creating missing nodes; stop under an inside entry
+        with while_true(b) as descend:
+            here = lv.get()
+            descend.break_if(b.icmp_signed(">=", b.add(here, const(I64, 1)), level))
+            descend.break_if(b.icmp_signed("<", node.get(), const(I64, 0)))
+            bit = b.trunc(b.sub(b.sub(level, const(I64, 1)), here), I32)
+            slot = b.add(b.mul(node.get(), const(I64, 8)), _child_index(b, xyz, bit))
+            entry = Local(b, I32, load_at(b, nodes, slot), "entry")
+            with if_(b, b.icmp_signed("==", entry.get(), const(I32, 0))):
+                full = b.icmp_signed(">=", node_count.get(), node_cap)
+                aborted.set(full)
+                descend.break_if(full)
+                fresh = node_count.get()
+                row = b.bitcast(at(b, nodes, b.mul(fresh, const(I64, 8))), ir.PointerType(ir.VectorType(I32, 8)))
+                b.store(ir.Constant(ir.VectorType(I32, 8), [0] * 8), row, align=4)
+                entry.set(b.trunc(fresh, I32))
+                store_at(b, entry.get(), nodes, slot)
+                node_count.set(b.add(fresh, const(I64, 1)))
+                bump(b, counts, b.add(here, const(I64, 1)))
+            node.set(b.sext(entry.get(), I64))
+            lv.set(b.add(here, const(I64, 1)))
+            store_at(b, node.get(), path, lv.get())
+        rows_loop.break_if(aborted.get())
+        for a in range(3):
+            prev[a].set(first[a])
+        prev_valid.set(lv.get())
+        with if_(b, b.icmp_signed(">=", node.get(), const(I64, 0))):
+            store_at(b, inside, nodes, b.add(b.mul(node.get(), const(I64, 8)), _child_index(b, xyz, const(I32, 0))))
+            # a node whose eight entries are all inside becomes an inside entry of its parent
+            p = Local(b, I64, b.sub(level, const(I64, 1)), "p")
+            with while_true(b) as merge:
+                merge.break_if(b.icmp_signed("<", p.get(), const(I64, 1)))
+                row = b.bitcast(at(b, nodes, b.mul(load_at(b, path, p.get()), const(I64, 8))),
+                                ir.PointerType(ir.VectorType(I32, 8)))
+                entries = b.load(row, align=4)
+                every = entries
+                for width in (4, 2, 1):  # AND of the eight entries: -1 only if each is -1
+                    lo = b.shuffle_vector(every, every, ir.Constant(ir.VectorType(I32, width), list(range(width))))
+                    hi = b.shuffle_vector(every, every, ir.Constant(ir.VectorType(I32, width),
+                                                                   list(range(width, 2 * width))))
+                    every = b.and_(lo, hi)
+                merge.break_if(b.icmp_signed("!=", b.extract_element(every, const(I32, 0)), inside))
+                parent = load_at(b, path, b.sub(p.get(), const(I64, 1)))
+                bit = b.trunc(b.sub(level, p.get()), I32)
+                store_at(b, inside, nodes, b.add(b.mul(parent, const(I64, 8)), _child_index(b, xyz, bit)))
+                bump(b, counts, p.get(), -1)
+                p.set(b.sub(p.get(), const(I64, 1)))
+        done.set(b.add(r, const(I64, 1)))
+    store_at(b, node_count.get(), state, abi.NODE_COUNT)
+    copy_words(b, counts, 0, state, abi.LEVEL_COUNTS, levels)
+    b.ret(done.get())

@@ -7,47 +7,21 @@ traversal run natively (:mod:`implc.codegen.octree_index`).
 
 A solid's tree also records its inside: an entry :data:`INSIDE` (−1) says the child's whole box lies where
 F < 0, and nothing is stored below it. So each node is in one of three states, in the entry that points
-at it: boundary (a node: it holds boundary voxels), inside (−1) or outside (0). Inside octants are merged
-upward first (eight inside siblings make an inside parent), so an inside entry is the largest octant the
-voxelization proved inside.
+at it: boundary (a node: it holds boundary voxels), inside (−1) or outside (0). Eight inside siblings
+become an inside parent, so an inside entry is the largest octant the voxelization proved inside.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .. import abi
 from ..abi import DEPTH, LEVEL_COUNTS, NODE_COUNT, OCTREE_STATE_WORDS
 from ..morton import morton_codes
 from ..runtime import Runtime
 
 INSIDE = -1
 """A child entry: the child's whole box is inside (F < 0 in all of it); nothing is stored below it."""
-
-
-def merge_inside(inside: np.ndarray, depth: int) -> np.ndarray:
-    """Inside octants (n, 4) rows (i, j, k, level), distinct and disjoint, with every eight siblings
-    replaced by their parent, repeatedly: the same cells in the fewest octants. Morton order of first
-    cells within each level, levels from the coarsest."""
-    by_level = {level: inside[inside[:, 3] == level][:, :3].astype(np.int64) for level in np.unique(inside[:, 3])}
-    for level in range(depth, 0, -1):
-        cells = by_level.get(level)
-        if cells is None or not len(cells):
-            continue
-        parents = cells >> 1
-        keys = morton_codes(parents)
-        unique, first, counts = np.unique(keys, return_index=True, return_counts=True)
-        full = counts == 8
-        if not np.any(full):
-            continue
-        by_level[level] = cells[~np.isin(keys, unique[full])]
-        merged = parents[first[full]]
-        by_level[level - 1] = np.concatenate([by_level[level - 1], merged]) if level - 1 in by_level else merged
-    rows = []
-    for level in sorted(by_level):
-        cells = by_level[level]
-        cells = cells[np.argsort(morton_codes(cells), kind="stable")]
-        rows.append(np.column_stack([cells, np.full(len(cells), level)]).astype(np.int32))
-    return np.concatenate(rows) if rows else np.empty((0, 4), dtype=np.int32)
 
 
 class Octree:
@@ -128,33 +102,26 @@ class Octree:
         return all_coords[order], all_normals[order], is_inside[order]
 
     # -- a solid's inside ------------------------------------------------------------------------
-    def _node_ids(self, level: int, cells: np.ndarray) -> np.ndarray:
-        """The node index of each boundary node at ``level`` (< depth) with coordinates ``cells``, creating
-        the missing ones (with their parents)."""
-        if level == 0:
-            return np.zeros(len(cells), dtype=np.int64)
-        coords, ids = self.traverse(level)
-        keys, wanted = morton_codes(coords), morton_codes(cells)
-        at = np.minimum(np.searchsorted(keys, wanted), max(len(keys) - 1, 0))
-        found = (at < len(keys)) & (keys[at] == wanted) if len(keys) else np.zeros(len(cells), bool)
-        if np.all(found):
-            return ids[at]
-        _, first = np.unique(wanted[~found], return_index=True)
-        missing = cells[~found][first].astype(np.int64)
-        parents = self._node_ids(level - 1, missing >> 1)
-        fresh = np.arange(len(self.nodes), len(self.nodes) + len(missing))
-        self.nodes = np.concatenate([self.nodes, np.zeros((len(missing), 8), np.int32)])
-        self.nodes[parents, _slots(missing)] = fresh
-        self.level_counts[level] += len(missing)
-        return self._node_ids(level, cells)
-
     def add_inside(self, inside: np.ndarray) -> None:
-        """Record a solid's inside octants, (n, 4) rows (i, j, k, level), merged (:func:`merge_inside`)."""
-        merged = merge_inside(np.asarray(inside), self.depth)
-        for level in np.unique(merged[:, 3]):
-            cells = merged[merged[:, 3] == level][:, :3].astype(np.int64)
-            parents = self._node_ids(int(level) - 1, cells >> 1)
-            self.nodes[parents, _slots(cells)] = INSIDE
+        """Record a solid's inside octants, (n, 4) int rows (i, j, k, level), disjoint from each other and
+        from the voxels (natively: a node is created above an octant only where no boundary node holds
+        it, and a node whose eight entries are inside becomes an inside entry of its parent)."""
+        rows = np.ascontiguousarray(inside, dtype=np.int32)
+        state = np.zeros(OCTREE_STATE_WORDS, dtype=np.int64)
+        state[NODE_COUNT], state[DEPTH] = len(self.nodes), self.depth
+        state[LEVEL_COUNTS: LEVEL_COUNTS + len(self.level_counts)] = self.level_counts
+        nodes, done = np.ascontiguousarray(self.nodes, dtype=np.int32), 0
+        runtime = Runtime.shared()
+        while True:
+            done += runtime.octree_mark_inside(nodes.ctypes.data, len(nodes), state.ctypes.data,
+                                               rows[done:].ctypes.data, len(rows) - done)
+            if done == len(rows):
+                break
+            grown = np.empty((2 * len(nodes) + abi.MAX_DEPTH, 8), dtype=np.int32)  # out of nodes: room, go on
+            grown[:len(nodes)] = nodes
+            nodes = grown
+        self.nodes = nodes[:int(state[NODE_COUNT])]
+        self.level_counts = state[LEVEL_COUNTS: LEVEL_COUNTS + len(self.level_counts)].copy()
 
     def inside_nodes(self) -> tuple[np.ndarray, np.ndarray]:
         """The inside entries as (levels (n,) int32, coords (n, 3) uint32 at each one's level), coarsest
