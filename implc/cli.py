@@ -213,6 +213,57 @@ def cmd_render(args) -> int:
     return 0
 
 
+def cmd_view(args) -> int:
+    from . import voxel_files
+    from .view_server import DEFAULT_PORT, ViewServer
+    from .viewer import export, lod_chunks
+    if args.port is not None:
+        _check_range(args.port, "--port", 0, 65535)
+    if args.budget is not None:
+        _check_range(args.budget, "--budget", 1000, 1_000_000_000)
+    budget = args.budget or 1_000_000
+    if args.export:
+        _check_folder_writable(Path(args.export))
+    suffix = Path(args.scene).suffix.lower() if args.scene else ""
+    if suffix == ".npz":
+        given = [flag for flag, value in (("--expr", args.expr), ("--depth", args.depth), ("--bounds", args.bounds),
+                                          ("--workers", args.workers)) if value is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)} cannot apply to a voxel file ({args.scene}): it is shown as saved")
+        voxels, name, view = voxel_files.load_npz(args.scene), Path(args.scene).stem, None
+    elif suffix in (".ply", ".npy"):
+        raise UsageError(f"{args.scene} is a {suffix} file: 'implc view' shows scenes, formulas, .vm models and "
+                         "the .npz voxel files implc writes")
+    else:
+        _check_surface_options(args)
+        name, surface, sc = _surface_from_args(args)
+        depth = args.depth if args.depth is not None else (sc.depth if sc else 9)
+        voxels, _ = _voxelize(surface, depth, args.workers, args.quiet)
+        view = sc.view if sc else None
+    chunks = lod_chunks(voxels, name=name, view=view)
+    if args.export:
+        export(chunks, args.export, budget=budget)
+        if not args.quiet:
+            print(f"wrote a static viewer of {name} ({len(voxels)} voxels at {1 << voxels.depth}³) to {args.export}: "
+                  f"any static file server shows it, e.g. python3 -m http.server -d {args.export}")
+        return 0
+    try:
+        server = ViewServer(chunks, port=args.port, budget=budget)
+    except OSError as exc:
+        raise UsageError(f"cannot listen on 127.0.0.1:{args.port if args.port is not None else DEFAULT_PORT}: "
+                         f"{exc.strerror or exc}") from None
+    try:
+        print(f"implc view: {name}, {len(voxels)} voxels at {1 << voxels.depth}³\n{server.url}\n"
+              "(Ctrl-C stops the server)", flush=True)
+        if not args.no_browser:
+            import webbrowser
+            webbrowser.open(server.url)
+        server.serve_forever()
+    finally:
+        server.close()
+    return 0
+
+
 def _cut(text, voxels) -> tuple[int, float]:
     """--cut AXIS=VALUE (x, y or z, a number inside the bounds) as (axis, value)."""
     axis, sep, value = text.partition("=")
@@ -349,6 +400,14 @@ def _parser():
     v.add_argument("--slices", choices=("png", "tiff"),
                    help="write one 1-bit image per z layer into the folder -o names (with --solid: the solid)")
     v.set_defaults(run=cmd_voxelize)
+
+    w = sub.add_parser("view", help="view a scene, formula, .vm model or .npz in the browser (levels of detail)")
+    surface_args(w)
+    w.add_argument("--port", type=int, help="port on 127.0.0.1 (default: 8765 or the next free one; 0: any)")
+    w.add_argument("--no-browser", action="store_true", help="print the URL only; open no browser")
+    w.add_argument("--budget", type=int, help="points the page draws at most per frame (default 1000000)")
+    w.add_argument("--export", metavar="DIR", help="write a static viewer folder (page, script, chunks) instead")
+    w.set_defaults(run=cmd_view)
 
     r = sub.add_parser("render", help="render a scene, formula or .npz to a PNG")
     surface_args(r)

@@ -93,6 +93,18 @@ class Voxels:
             paint_cubes(grid, inside[:, :3].astype(np.int64) * sizes[:, None], sizes)
         return grid
 
+    def show(self, *, height: int = 480, budget: int = 1_000_000, max_bytes: int | None = None):
+        """The interactive viewer for a notebook (Jupyter displays what this returns): the page and the
+        coarsest levels of detail up to ``max_bytes`` (default 24 MiB) inlined in one document, so no
+        server or second process is involved. ``.save("x.html")`` writes it as a file."""
+        from .viewer import EMBED_BYTES, NotebookView, lod_chunks
+        return NotebookView(lod_chunks(self), height=height, budget=budget,
+                            max_bytes=EMBED_BYTES if max_bytes is None else max_bytes)
+
+    def _repr_html_(self) -> str:
+        """A notebook shows voxels as the viewer (with up to 4 MiB of levels of detail)."""
+        return self.show(max_bytes=4 << 20)._repr_html_()
+
     def inside_voxels(self) -> int:
         """How many voxels the inside octants cover."""
         levels = self._solid()[:, 3].astype(np.int64)

@@ -1,0 +1,140 @@
+"""Levels of detail for viewing: the octree cut into chunks that a viewer fetches by id, coarse first.
+
+Chunk (L, i, j, k) is the octree node at level L with those coordinates; it holds the surface's nodes
+:data:`CHUNK_LEVELS` levels below it (its *point level* m = min(L + CHUNK_LEVELS, depth)), each with the
+mean normal of the voxels below it, as :meth:`implc.storage.octree.Octree.level` computes. A chunk's
+children (L + 1, 2i + a, 2j + b, 2k + c) hold the same surface at twice the resolution, so a viewer shows
+a cut of the chunk tree and replaces a chunk by its children where the camera needs more detail. Chunks
+exist from level 0 to ``depth − CHUNK_LEVELS`` (the last ones hold the voxels themselves).
+
+A chunk's bytes (little-endian): a 64-byte header of uint32 (magic, format, L, i, j, k, m, point count,
+then the point counts of its eight children, 0 where a child holds no surface), then each point's cell
+within the chunk (3 × uint8: coordinates at level m minus the chunk's first cell there, below 2^6), then
+each point's normal octahedron-encoded in 2 × uint8.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from .morton import morton_codes
+
+CHUNK_LEVELS = 6
+"""Levels from a chunk to its points: at most 64³ cells per chunk; a surface puts a few thousand there."""
+MAGIC = 0x43504D49  # "IMPC"
+FORMAT = 1
+HEADER_BYTES = 64
+
+
+def encode_normals(normals: np.ndarray) -> np.ndarray:
+    """Octahedral encoding of (n, 3) vectors (any length; zero gives +z) as (n, 2) uint8."""
+    n = np.asarray(normals, dtype=np.float64)
+    length = np.abs(n).sum(axis=1, keepdims=True)
+    n = np.where(length > 0, n / np.where(length > 0, length, 1), [0.0, 0.0, 1.0])
+    x, y, z = n[:, 0], n[:, 1], n[:, 2]
+    fold = z < 0
+    x, y = (np.where(fold, (1 - np.abs(y)) * np.where(x >= 0, 1, -1), x),
+            np.where(fold, (1 - np.abs(x)) * np.where(y >= 0, 1, -1), y))
+    return np.clip(np.rint((np.stack([x, y], axis=1) * 0.5 + 0.5) * 255), 0, 255).astype(np.uint8)
+
+
+def decode_normals(encoded: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`encode_normals` (unit vectors), as the viewer's shader computes it."""
+    f = encoded.astype(np.float64) / 255 * 2 - 1
+    n = np.column_stack([f, 1 - np.abs(f[:, 0]) - np.abs(f[:, 1])])
+    t = np.maximum(-n[:, 2], 0)
+    n[:, 0] += np.where(n[:, 0] >= 0, -t, t)
+    n[:, 1] += np.where(n[:, 1] >= 0, -t, t)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+class LodChunks:
+    """The chunks of one voxelization (anything with Morton-ordered ``coords``, ``normals``, ``depth``,
+    ``bounds``): a pyramid of levels computed once, chunks cut from it on request."""
+
+    def __init__(self, voxels, name: str = "", view: tuple[float, float] | None = None):
+        """``view``: the camera's (azimuth, elevation) in degrees, as implc render's (default 35, 25)."""
+        self.depth, self.bounds, self.name = int(voxels.depth), voxels.bounds, name
+        self.view = tuple(map(float, view)) if view is not None else (35.0, 25.0)
+        self.voxels = len(voxels.coords)
+        self.max_chunk_level = max(self.depth - CHUNK_LEVELS, 0)
+        first_level = min(CHUNK_LEVELS, self.depth)
+        coords = np.asarray(voxels.coords, dtype=np.uint32)
+        order = np.argsort(morton_codes(coords), kind="stable") if len(coords) else np.empty(0, np.int64)
+        if len(order) and not np.all(order[1:] > order[:-1]):  # voxels from elsewhere: put them in order
+            coords = coords[order]
+            sums = np.asarray(voxels.normals, dtype=np.float32)[order]
+        else:
+            sums = np.asarray(voxels.normals, dtype=np.float32)
+        self.levels: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        for level in range(self.depth, first_level - 1, -1):
+            if level < self.depth:  # the parents of the level below, with the sums of their normals
+                prefix = coords >> np.uint32(1)
+                starts = np.flatnonzero(np.r_[True, np.any(prefix[1:] != prefix[:-1], axis=1)]) if len(prefix) \
+                    else np.empty(0, np.int64)
+                coords = prefix[starts]
+                sums = np.add.reduceat(sums, starts, axis=0) if len(starts) else sums[:0]
+            self.levels[level] = (morton_codes(coords), coords, encode_normals(sums))
+
+    def point_level(self, level: int) -> int:
+        return min(level + CHUNK_LEVELS, self.depth)
+
+    def _range(self, level: int, cell, point_level: int) -> tuple[int, int]:
+        keys = self.levels[point_level][0]
+        shift = np.uint64(3 * (point_level - level))
+        code = morton_codes(np.array([cell], dtype=np.int64))[0]
+        lo, hi = code << shift, (code + np.uint64(1)) << shift
+        return tuple(int(v) for v in np.searchsorted(keys, np.array([lo, hi], dtype=np.uint64)))
+
+    def count(self, level: int, cell) -> int:
+        if not 0 <= level <= self.max_chunk_level or any(not 0 <= c < (1 << level) for c in cell):
+            return 0
+        a, b = self._range(level, cell, self.point_level(level))
+        return b - a
+
+    def chunk(self, level: int, i: int, j: int, k: int) -> bytes | None:
+        """The bytes of chunk (level, i, j, k), or None where it does not exist (no surface there, or
+        outside the chunk tree)."""
+        cell = (int(i), int(j), int(k))
+        if not 0 <= level <= self.max_chunk_level or any(not 0 <= c < (1 << level) for c in cell):
+            return None
+        m = self.point_level(level)
+        a, b = self._range(level, cell, m)
+        if b == a and level > 0:
+            return None
+        _, coords, normals = self.levels[m]
+        local = (coords[a:b] - (np.array(cell, dtype=np.uint32) << np.uint32(m - level))).astype(np.uint8)
+        children = [self.count(level + 1, (2 * cell[0] + (c & 1), 2 * cell[1] + (c >> 1 & 1), 2 * cell[2] + (c >> 2)))
+                    for c in range(8)] if level < self.max_chunk_level else [0] * 8
+        header = np.zeros(HEADER_BYTES // 4, dtype=np.uint32)
+        header[:8] = (MAGIC, FORMAT, level, *cell, m, b - a)
+        header[8:16] = children
+        return header.tobytes() + local.tobytes() + normals[a:b].tobytes()
+
+    def chunk_ids(self, max_bytes: int | None = None):
+        """Every chunk id (level, i, j, k), coarse levels first (Morton order within a level), stopping
+        before ``max_bytes`` of chunks would be passed (for an embedded, self-contained viewer)."""
+        total = 0
+        for level in range(self.max_chunk_level + 1):
+            m = self.point_level(level)
+            keys, coords, _ = self.levels[m]
+            cells = np.unique(coords >> np.uint32(m - level), axis=0) if len(coords) else np.zeros((1, 3), np.uint32)
+            cells = cells[np.argsort(morton_codes(cells), kind="stable")]
+            level_bytes = HEADER_BYTES * len(cells) + 5 * len(keys)
+            if max_bytes is not None and total + level_bytes > max_bytes and level > 0:
+                return
+            total += level_bytes
+            for cell in cells:
+                yield (level, *map(int, cell))
+
+    def meta(self, budget: int = 1_000_000) -> dict:
+        """What the viewer needs before its first chunk; ``budget``: points it draws at most per frame."""
+        return {"format": FORMAT, "name": self.name, "depth": self.depth,
+                "bounds": [list(map(float, b)) for b in self.bounds], "chunk_levels": CHUNK_LEVELS,
+                "max_chunk_level": self.max_chunk_level, "voxels": self.voxels, "view": list(self.view),
+                "budget": int(budget)}
+
+    def meta_json(self, budget: int = 1_000_000) -> bytes:
+        return json.dumps(self.meta(budget)).encode()

@@ -1,0 +1,134 @@
+"""``implc view``'s local HTTP server: the viewer page and its chunks, to this machine only.
+
+It binds 127.0.0.1, answers only requests whose Host header names that address (or localhost) with its
+port (against DNS rebinding), and only under a random token that starts every path, as Jupyter's does
+(``http://127.0.0.1:PORT/TOKEN/``). Its routes are the page's files, ``meta.json`` and
+``chunks/<level>-<i>-<j>-<k>.bin``, all served from memory: no file system path is ever read, anything
+else is 404 (a path with ``..`` or ``.`` segments, encoded or not, included), a missing or wrong token
+403, a foreign Host 403.
+"""
+
+from __future__ import annotations
+
+import re
+import secrets
+import threading
+from http import HTTPStatus
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from urllib.parse import unquote, urlsplit
+
+from .lod_chunks import LodChunks
+from .viewer import ASSET_TYPES, asset
+
+DEFAULT_PORT = 8765
+PORT_TRIES = 20
+CHUNK_PATH = re.compile(r"chunks/(\d{1,2})-(\d{1,7})-(\d{1,7})-(\d{1,7})\.bin")
+
+
+class ViewServer:
+    """Serves one voxelization's viewer; ``url`` carries the token. ``port=None`` takes the first free
+    port from :data:`DEFAULT_PORT` on, ``0`` any free port; a given port that is taken raises OSError."""
+
+    def __init__(self, chunks: LodChunks, *, port: int | None = None, budget: int = 1_000_000):
+        self.chunks, self.token = chunks, secrets.token_urlsafe(24)
+        self.meta = chunks.meta_json(budget)
+        self.assets = {name: asset(name) for name in ASSET_TYPES}
+        handler = type("Handler", (_Handler,), {"owner": self})
+        candidates = [port] if port is not None else [DEFAULT_PORT + i for i in range(PORT_TRIES)] + [0]
+        for i, candidate in enumerate(candidates):
+            try:
+                self.httpd = ThreadingHTTPServer(("127.0.0.1", candidate), handler)
+                break
+            except OSError:
+                if i == len(candidates) - 1:
+                    raise
+        self.httpd.daemon_threads = True
+        self.port = self.httpd.server_address[1]
+        self.hosts = {f"127.0.0.1:{self.port}", f"localhost:{self.port}"}
+        self._thread = None
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}/{self.token}/"
+
+    def serve_forever(self):
+        """Serve until :meth:`close` (from another thread) or Ctrl-C in this one."""
+        self.httpd.serve_forever(poll_interval=0.1)
+
+    def start(self) -> ViewServer:
+        """Serve from a daemon thread (notebooks, tests)."""
+        self._thread = threading.Thread(target=self.serve_forever, name="implc-view-server", daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self):
+        if self._thread is not None:
+            self.httpd.shutdown()
+            self._thread.join()
+            self._thread = None
+        self.httpd.server_close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def resource(self, rest: str) -> tuple[bytes, str] | None:
+        """The body and content type of a route below the token, or None (404)."""
+        if rest in ("", "index.html"):
+            return self.assets["index.html"], ASSET_TYPES["index.html"]
+        if rest in ASSET_TYPES:
+            return self.assets[rest], ASSET_TYPES[rest]
+        if rest == "meta.json":
+            return self.meta, "application/json"
+        match = CHUNK_PATH.fullmatch(rest)
+        if match:
+            body = self.chunks.chunk(*map(int, match.groups()))
+            return (body, "application/octet-stream") if body is not None else None
+        return None
+
+
+class _Handler(BaseHTTPRequestHandler):
+    owner: ViewServer
+    server_version = "implc-view"
+    sys_version = ""
+    protocol_version = "HTTP/1.1"
+
+    def log_message(self, format, *args):  # noqa: A002 - the base class's name
+        pass
+
+    def _send(self, status: HTTPStatus, body: bytes, content_type: str = "text/plain; charset=utf-8"):
+        self.send_response(status)
+        self.send_header("Content-Type", content_type)
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("X-Content-Type-Options", "nosniff")
+        self.send_header("Referrer-Policy", "no-referrer")
+        self.send_header("Cache-Control", "no-store")
+        self.send_header("Content-Security-Policy", "default-src 'self'; img-src 'self' data:; frame-ancestors 'none'")
+        self.end_headers()
+        if self.command != "HEAD":
+            self.wfile.write(body)
+
+    def do_GET(self):
+        owner = self.owner
+        if self.headers.get("Host", "") not in owner.hosts:
+            return self._send(HTTPStatus.FORBIDDEN, b"this server answers only to 127.0.0.1\n")
+        path = unquote(urlsplit(self.path).path)
+        segments = path.split("/")
+        if any(s in (".", "..") for s in segments) or "\\" in path or "\x00" in path:
+            return self._send(HTTPStatus.NOT_FOUND, b"not found\n")
+        if len(segments) < 2 or not secrets.compare_digest(segments[1].encode(), owner.token.encode()):
+            return self._send(HTTPStatus.FORBIDDEN, b"open the URL that 'implc view' printed: it carries a token\n")
+        if len(segments) == 2:  # /TOKEN: the page is at /TOKEN/
+            self.send_response(HTTPStatus.MOVED_PERMANENTLY)
+            self.send_header("Location", f"/{owner.token}/")
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+            return None
+        found = owner.resource("/".join(segments[2:]))
+        if found is None:
+            return self._send(HTTPStatus.NOT_FOUND, b"not found\n")
+        return self._send(HTTPStatus.OK, *found)
+
+    do_HEAD = do_GET

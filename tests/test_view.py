@@ -1,0 +1,342 @@
+"""``implc view``: levels-of-detail chunks against the octree, the server's safety rules over raw HTTP, and
+the page in a real browser (Debian's Chromium, headless with SwiftShader's WebGL2, driven by Playwright
+for Python with the system browser; never a downloaded one): it loads without errors, shows the surface
+where the PNG renderer does, turns under a drag, fetches deeper chunks when zoomed, and works as a static
+export and inlined in a notebook's iframe."""
+
+import http.client
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from functools import partial
+from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+
+import numpy as np
+import pytest
+
+import implc
+from implc.lod_chunks import CHUNK_LEVELS, HEADER_BYTES, LodChunks, decode_normals, encode_normals
+from implc.morton import morton_codes
+from implc.render import View, render_voxels
+from implc.scene import load as load_scene
+from implc.view_server import ViewServer
+from implc.viewer import NotebookView, export, lod_chunks
+
+CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run"]
+BACKGROUND = np.array([20, 23, 28])  # Style().background, as the page clears to it
+
+
+def _scene_voxels(name, depth):
+    sc = load_scene(name)
+    return implc.voxelize(implc.compile(sc.surface, bounds=sc.bounds), depth), sc
+
+
+@pytest.fixture(scope="module")
+def flower():
+    voxels, sc = _scene_voxels("paper_sin4_sin8", 8)
+    return voxels, lod_chunks(voxels, name="paper_sin4_sin8", view=sc.view)
+
+
+# -- chunks ----------------------------------------------------------------------------------------
+def _parse(data: bytes):
+    header = np.frombuffer(data[:HEADER_BYTES], dtype=np.uint32)
+    n = int(header[7])
+    cells = np.frombuffer(data[HEADER_BYTES:HEADER_BYTES + 3 * n], dtype=np.uint8).reshape(n, 3)
+    normals = np.frombuffer(data[HEADER_BYTES + 3 * n:HEADER_BYTES + 5 * n], dtype=np.uint8).reshape(n, 2)
+    return header, cells, normals
+
+
+def test_chunks_hold_the_octree_levels_with_their_mean_normals(flower):
+    """Every chunk's points are the octree's nodes at its point level inside it, with the level's mean
+    normals (octahedral, within 1.5 degrees); each level's chunks hold each node exactly once; the child
+    counts a chunk announces are its children's."""
+    voxels, chunks = flower
+    tree = voxels.octree
+    for level in range(chunks.max_chunk_level + 1):
+        m = min(level + CHUNK_LEVELS, voxels.depth)
+        coords, normals = tree.level(m)
+        got_cells, got_normals = [], []
+        for chunk_level, i, j, k in (c for c in chunks.chunk_ids() if c[0] == level):
+            header, cells, encoded = _parse(chunks.chunk(chunk_level, i, j, k))
+            assert tuple(header[2:7]) == (level, i, j, k, m)
+            got_cells.append(cells.astype(np.uint32) + (np.array([i, j, k], np.uint32) << np.uint32(m - level)))
+            got_normals.append(decode_normals(encoded))
+            for c in range(8):
+                child = (level + 1, 2 * i + (c & 1), 2 * j + (c >> 1 & 1), 2 * k + (c >> 2))
+                data = chunks.chunk(*child) if level < chunks.max_chunk_level else None
+                assert header[8 + c] == (_parse(data)[0][7] if data is not None else 0)
+        cells = np.concatenate(got_cells)
+        order = np.argsort(morton_codes(cells))
+        assert np.array_equal(cells[order], coords)
+        angle = np.degrees(np.arccos(np.clip(np.sum(np.concatenate(got_normals)[order] * normals, axis=1), -1, 1)))
+        assert angle.max() < 1.5
+    assert chunks.chunk(0, 1, 0, 0) is None and chunks.chunk(chunks.max_chunk_level + 1, 0, 0, 0) is None
+
+
+def test_octahedral_normals_round_trip():
+    rng = np.random.default_rng(1)
+    n = rng.normal(size=(5000, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.concatenate([n, np.eye(3), -np.eye(3)])
+    angle = np.degrees(np.arccos(np.clip(np.sum(decode_normals(encode_normals(n)) * n, axis=1), -1, 1)))
+    assert angle.max() < 1.5
+
+
+def test_a_grid_shallower_than_a_chunk_is_one_chunk():
+    voxels, _ = _scene_voxels("torus", 4)
+    chunks = LodChunks(voxels)
+    assert chunks.max_chunk_level == 0 and list(chunks.chunk_ids()) == [(0, 0, 0, 0)]
+    header, cells, _ = _parse(chunks.chunk(0, 0, 0, 0))
+    assert header[6] == 4 and np.array_equal(np.sort(morton_codes(cells)), np.sort(morton_codes(voxels.coords)))
+
+
+# -- the server over raw HTTP ------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def server(flower):
+    with ViewServer(flower[1], port=0).start() as s:
+        yield s
+
+
+def _get(server, path, host=None, method="GET"):
+    conn = http.client.HTTPConnection("127.0.0.1", server.port, timeout=10)
+    conn.putrequest(method, path, skip_host=True, skip_accept_encoding=True)
+    conn.putheader("Host", host or f"127.0.0.1:{server.port}")
+    conn.endheaders()
+    response = conn.getresponse()
+    body = response.read()
+    conn.close()
+    return response.status, body, response
+
+
+def test_the_server_serves_its_routes_under_its_token(server, flower):
+    t = server.token
+    status, body, response = _get(server, f"/{t}/meta.json")
+    assert status == 200 and json.loads(body)["depth"] == 8
+    assert _get(server, f"/{t}/")[0] == 200 and b"viewer.js" in _get(server, f"/{t}/")[1]
+    assert _get(server, f"/{t}/viewer.js")[0] == 200
+    status, body, _ = _get(server, f"/{t}/chunks/0-0-0-0.bin")
+    assert status == 200 and body == flower[1].chunk(0, 0, 0, 0)
+    assert _get(server, f"/{t}/chunks/1-5-0-0.bin")[0] == 404
+    assert _get(server, f"/{t}")[0] == 301
+    assert _get(server, f"/{t}/", host=f"localhost:{server.port}")[0] == 200
+    assert response.getheader("X-Content-Type-Options") == "nosniff"
+
+
+def test_the_server_binds_loopback_only(server):
+    assert server.httpd.server_address[0] == "127.0.0.1" and server.url.startswith("http://127.0.0.1:")
+
+
+@pytest.mark.parametrize("path", ["/../../etc/passwd", "/%2e%2e/%2e%2e/etc/passwd", "/%2e%2e/",
+                                  "/TOKEN/../TOKEN/meta.json", "/TOKEN/%2e%2e/TOKEN/meta.json",
+                                  "/TOKEN/chunks/../meta.json", "/TOKEN/./meta.json",
+                                  "/TOKEN/..%2f..%2fetc%2fpasswd", "/TOKEN/nothing", "/TOKEN/chunks/0-0-0.bin",
+                                  "/TOKEN/%5c..%5cmeta.json"])
+def test_traversal_and_unknown_paths_are_not_found(server, path):
+    status, body, _ = _get(server, path.replace("TOKEN", server.token))
+    assert status == 404 and b"root:" not in body
+
+
+@pytest.mark.parametrize("case", ["no token", "wrong token", "token prefix", "foreign host", "no port", "rebinding"])
+def test_requests_without_the_token_or_from_a_foreign_host_are_refused(server, case):
+    t, port = server.token, server.port
+    path, host = {"no token": ("/meta.json", None), "wrong token": ("/" + "x" * len(t) + "/meta.json", None),
+                  "token prefix": (f"/{t[:-1]}/meta.json", None),
+                  "foreign host": (f"/{t}/meta.json", f"evil.example:{port}"),
+                  "no port": (f"/{t}/meta.json", "127.0.0.1"),
+                  "rebinding": (f"/{t}/meta.json", f"attacker.test:{port}")}[case]
+    status, body, _ = _get(server, path, host=host)
+    assert status == 403 and b'"depth"' not in body
+
+
+def test_other_methods_are_not_served(server):
+    assert _get(server, f"/{server.token}/meta.json", method="POST")[0] == 501
+
+
+def test_the_cli_prints_its_url_serves_and_stops_on_ctrl_c(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "implc", "view", "torus", "--depth", "6", "--no-browser",
+                             "--port", "0", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=tmp_path)
+    try:
+        url = next(line.strip() for line in proc.stdout if line.startswith("http://"))
+        host, _, rest = url[len("http://"):].partition("/")
+        conn = http.client.HTTPConnection(*host.split(":"), timeout=10)
+        conn.request("GET", "/" + rest + "meta.json")
+        assert json.loads(conn.getresponse().read())["name"] == "torus"
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=10) == 130
+    finally:
+        proc.kill()
+        proc.wait()
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["view", "torus", "--port", "70000"], "--port"),
+    (["view", "torus", "--budget", "10"], "--budget"),
+    (["view", "x.ply"], "'implc view' shows"),
+    (["view"], "name a SCENE"),
+])
+def test_bad_view_arguments_are_named(argv, words, capsys):
+    from implc.cli import main
+    assert main(argv) == 2
+    assert words in capsys.readouterr().err
+
+
+def test_a_taken_port_is_named(flower, capsys):
+    from implc.cli import main
+    with ViewServer(flower[1], port=0) as taken:
+        assert main(["view", "torus", "--depth", "5", "--quiet", "--no-browser", "--port", str(taken.port)]) == 2
+    assert "cannot listen on 127.0.0.1" in capsys.readouterr().err
+
+
+# -- the page in a real browser ------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def browser():
+    executable = shutil.which("chromium") or shutil.which("chromium-browser")
+    if executable is None:
+        pytest.skip("no Chromium here (Debian: apt-get install chromium); the page cannot be tested in a browser")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        pytest.skip("Playwright for Python is not installed (pip install playwright); the page cannot be driven")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+def _open(browser, url, size=512):
+    page = browser.new_page(viewport={"width": size, "height": size})
+    errors = []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(url)
+    page.evaluate("window.implcViewer.ready")
+    return page, errors
+
+
+def _settle(page, timeout=60.0):
+    """Wait until the page has drawn what it wants and fetches nothing more (polled: the server's CSP
+    forbids the string evaluation Playwright's wait_for_function uses)."""
+    deadline = time.monotonic() + timeout
+    while not page.evaluate("window.implcViewer.stats().settled"):
+        assert time.monotonic() < deadline, page.evaluate("window.implcViewer.stats()")
+        time.sleep(0.05)
+
+
+def _mask(page):
+    """The pixels that are not background, with the overlay and buttons hidden."""
+    page.evaluate("document.querySelectorAll('#overlay, #controls, #help').forEach(e => { e.style.display = 'none'; })")
+    page.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
+    from io import BytesIO
+
+    from PIL import Image
+    image = np.asarray(Image.open(BytesIO(page.screenshot())).convert("RGB")).astype(int)
+    return np.abs(image - BACKGROUND).sum(axis=2) > 12
+
+
+def test_the_page_shows_the_surface_where_the_png_renderer_does(browser, server, flower):
+    voxels, _ = flower
+    page, errors = _open(browser, server.url)
+    _settle(page)
+    stats = page.evaluate("window.implcViewer.stats()")
+    assert stats["points"] > 0 and stats["frameMs"] >= 0
+    overlay = page.inner_text("#overlay")
+    assert "depth 8" in overlay and f"{len(voxels):,}" in overlay and "points drawn" in overlay and "frame" in overlay
+    shown = _mask(page)
+    az, el = load_scene("paper_sin4_sin8").view or (35.0, 25.0)
+    png = render_voxels(voxels, size=512, view=View(az, el, perspective=True))
+    expected = np.abs(png.astype(int) - BACKGROUND).sum(axis=2) > 12
+    iou = (shown & expected).sum() / (shown | expected).sum()
+    assert iou >= 0.9, iou
+    assert errors == []
+    page.close()
+
+
+def test_a_drag_turns_the_view_and_reset_brings_it_back(browser, server):
+    page, errors = _open(browser, server.url)
+    _settle(page)
+    before = _mask(page)
+    camera = page.evaluate("({...window.implcViewer.camera})")
+    page.mouse.move(256, 256)
+    page.mouse.down()
+    page.mouse.move(356, 286, steps=5)
+    page.mouse.up()
+    _settle(page)
+    after = page.evaluate("({...window.implcViewer.camera})")
+    assert after["azimuth"] != camera["azimuth"] and after["elevation"] != camera["elevation"]
+    turned = _mask(page)
+    assert (before ^ turned).sum() > 0.05 * before.sum()
+    page.keyboard.press("r")
+    _settle(page)
+    assert np.array_equal(_mask(page), before)
+    assert errors == []
+    page.close()
+
+
+def test_zooming_in_fetches_deeper_chunks(browser):
+    """At 256 pixels the 1024³ flower needs only coarse chunks; the wheel brings the camera close, and
+    the page fetches deeper ones for what is in view, within its point budget."""
+    voxels, sc = _scene_voxels("paper_sin4_sin8", 10)
+    with ViewServer(lod_chunks(voxels, view=sc.view), port=0, budget=300_000).start() as s:
+        page, errors = _open(browser, s.url, size=256)
+        _settle(page)
+        coarse = page.evaluate("window.implcViewer.stats()")
+        assert coarse["deepest"] < 4
+        page.mouse.move(128, 128)
+        for _ in range(12):
+            page.mouse.wheel(0, -400)
+        _settle(page)
+        close = page.evaluate("window.implcViewer.stats()")
+        assert close["deepest"] > coarse["deepest"] and close["requests"] > coarse["requests"]
+        assert close["points"] <= 300_000
+        assert errors == []
+        page.close()
+
+
+def _serve_folder(folder):
+    handler = partial(SimpleHTTPRequestHandler, directory=str(folder))
+    handler.log_message = lambda *a: None
+    httpd = ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    return httpd
+
+
+def test_a_static_export_shows_the_same_picture(browser, server, flower, tmp_path):
+    page, _ = _open(browser, server.url)
+    _settle(page)
+    served = _mask(page)
+    page.close()
+    folder = export(flower[1], tmp_path / "site")
+    assert {"index.html", "viewer.js", "viewer.css", "meta.json", "chunks"} <= set(os.listdir(folder))
+    httpd = _serve_folder(folder)
+    try:
+        page, errors = _open(browser, f"http://127.0.0.1:{httpd.server_address[1]}/index.html")
+        _settle(page)
+        assert np.array_equal(_mask(page), served) and errors == []
+        page.close()
+    finally:
+        httpd.shutdown()
+        httpd.server_close()
+
+
+def test_the_notebook_view_is_self_contained(browser, flower, tmp_path):
+    voxels, _ = flower
+    shown = voxels.show(height=400)
+    assert isinstance(shown, NotebookView)
+    html = shown._repr_html_()
+    assert html.startswith("<iframe srcdoc=") and "IMPLC_EMBED" in html
+    assert "http" not in shown.document.split("<body>")[1]  # nothing fetched from anywhere
+    assert voxels._repr_html_().startswith("<iframe srcdoc=")
+    path = shown.save(tmp_path / "view.html")
+    page, errors = _open(browser, path.as_uri())
+    _settle(page)
+    assert page.evaluate("window.implcViewer.stats()")["points"] > 100_000
+    assert _mask(page).sum() > 10_000 and errors == []
+    page.close()
