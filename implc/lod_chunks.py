@@ -11,19 +11,27 @@ A chunk's bytes (little-endian): a 64-byte header of uint32 (magic, format, L, i
 then the point counts of its eight children, 0 where a child holds no surface), then each point's cell
 within the chunk (3 × uint8: coordinates at level m minus the chunk's first cell there, below 2^6), then
 each point's normal octahedron-encoded in 2 × uint8.
+
+For a cut-away, :meth:`LodChunks.section` gives the cells of one layer (a plane across an axis) at a
+point level: the boundary nodes there and, for a solid, every cell of the inside octants crossing it (as
+:func:`implc.render.cross_section` at that level): a 32-byte header of uint32 (section magic, format,
+axis, layer index, level, cell count, 0, 0), then the two other coordinates of each cell as uint32.
 """
 
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 
 from .morton import morton_codes
+from .render import cross_section
 
 CHUNK_LEVELS = 6
 """Levels from a chunk to its points: at most 64³ cells per chunk; a surface puts a few thousand there."""
 MAGIC = 0x43504D49  # "IMPC"
+SECTION_MAGIC = 0x53504D49  # "IMPS"
 FORMAT = 1
 HEADER_BYTES = 64
 
@@ -77,6 +85,11 @@ class LodChunks:
                 coords = prefix[starts]
                 sums = np.add.reduceat(sums, starts, axis=0) if len(starts) else sums[:0]
             self.levels[level] = (morton_codes(coords), coords, encode_normals(sums))
+        self.solid = getattr(voxels, "inside", None) is not None
+        self.inside = np.empty((0, 4), np.int64)  # the octree's inside entries as rows (i, j, k, level)
+        if self.solid:
+            levels, cells = voxels.octree.inside_nodes()
+            self.inside = np.column_stack([cells.astype(np.int64), levels.astype(np.int64)])
 
     def point_level(self, level: int) -> int:
         return min(level + CHUNK_LEVELS, self.depth)
@@ -113,6 +126,18 @@ class LodChunks:
         header[8:16] = children
         return header.tobytes() + local.tobytes() + normals[a:b].tobytes()
 
+    def section(self, axis: int, index: int, level: int) -> bytes | None:
+        """Layer ``index`` across ``axis`` at point level ``level`` (see the module's docstring), or None
+        where there is no such layer."""
+        if axis not in (0, 1, 2) or level not in self.levels or not 0 <= index < (1 << level):
+            return None
+        layer = SimpleNamespace(coords=self.levels[level][1], depth=level,
+                                inside=self.inside[self.inside[:, 3] <= level] if self.solid else None)
+        cells = cross_section(layer, axis, index)
+        header = np.zeros(8, dtype=np.uint32)
+        header[:6] = (SECTION_MAGIC, FORMAT, axis, index, level, len(cells))
+        return header.tobytes() + np.ascontiguousarray(cells[:, [a for a in range(3) if a != axis]]).tobytes()
+
     def chunk_ids(self, max_bytes: int | None = None):
         """Every chunk id (level, i, j, k), coarse levels first (Morton order within a level), stopping
         before ``max_bytes`` of chunks would be passed (for an embedded, self-contained viewer)."""
@@ -134,7 +159,7 @@ class LodChunks:
         return {"format": FORMAT, "name": self.name, "depth": self.depth,
                 "bounds": [list(map(float, b)) for b in self.bounds], "chunk_levels": CHUNK_LEVELS,
                 "max_chunk_level": self.max_chunk_level, "voxels": self.voxels, "view": list(self.view),
-                "budget": int(budget)}
+                "budget": int(budget), "solid": self.solid, "first_level": min(self.levels)}
 
     def meta_json(self, budget: int = 1_000_000) -> bytes:
         return json.dumps(self.meta(budget)).encode()

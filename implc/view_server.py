@@ -2,8 +2,9 @@
 
 It binds 127.0.0.1, answers only requests whose Host header names that address (or localhost) with its
 port (against DNS rebinding), and only under a random token that starts every path, as Jupyter's does
-(``http://127.0.0.1:PORT/TOKEN/``). Its routes are the page's files, ``meta.json`` and
-``chunks/<level>-<i>-<j>-<k>.bin``, all served from memory: no file system path is ever read, anything
+(``http://127.0.0.1:PORT/TOKEN/``). Its routes are the page's files, ``meta.json``,
+``chunks/<level>-<i>-<j>-<k>.bin`` and ``sections/<axis>-<index>-<level>.bin``, all served from memory:
+no file system path is ever read, anything
 else is 404 (a path with ``..`` or ``.`` segments, encoded or not, included), a missing or wrong token
 403, a foreign Host 403.
 """
@@ -23,6 +24,7 @@ from .viewer import ASSET_TYPES, asset
 DEFAULT_PORT = 8765
 PORT_TRIES = 20
 CHUNK_PATH = re.compile(r"chunks/(\d{1,2})-(\d{1,7})-(\d{1,7})-(\d{1,7})\.bin")
+SECTION_PATH = re.compile(r"sections/(\d)-(\d{1,7})-(\d{1,2})\.bin")
 
 
 class ViewServer:
@@ -82,10 +84,11 @@ class ViewServer:
             return self.assets[rest], ASSET_TYPES[rest]
         if rest == "meta.json":
             return self.meta, "application/json"
-        match = CHUNK_PATH.fullmatch(rest)
-        if match:
-            body = self.chunks.chunk(*map(int, match.groups()))
-            return (body, "application/octet-stream") if body is not None else None
+        for pattern, make in ((CHUNK_PATH, self.chunks.chunk), (SECTION_PATH, self.chunks.section)):
+            match = pattern.fullmatch(rest)
+            if match:
+                body = make(*map(int, match.groups()))
+                return (body, "application/octet-stream") if body is not None else None
         return None
 
 

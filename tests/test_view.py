@@ -88,6 +88,30 @@ def test_octahedral_normals_round_trip():
     assert angle.max() < 1.5
 
 
+def test_sections_are_the_solid_layers_at_each_level():
+    """A section at the grid's depth is render.cross_section's layer (the cut-away PNG's); at a coarser
+    level, the layer of the octree's nodes and inside entries there."""
+    from implc.render import cross_section
+    voxels, _ = _solid_torus()
+    chunks = LodChunks(voxels)
+    for axis, index in ((2, 64), (0, 40), (1, 100)):
+        header = np.frombuffer(chunks.section(axis, index, 7)[:32], np.uint32)
+        uv = np.frombuffer(chunks.section(axis, index, 7)[32:], np.uint32).reshape(-1, 2)
+        cells = np.insert(uv, axis, index, axis=1)
+        expected = cross_section(voxels, axis, index)
+        assert tuple(header[2:6]) == (axis, index, 7, len(expected))
+        assert np.array_equal(np.sort(morton_codes(cells)), np.sort(morton_codes(expected)))
+        coarse = np.frombuffer(chunks.section(axis, index // 2, 6)[32:], np.uint32).reshape(-1, 2)
+        both = np.concatenate([cross_section(voxels, axis, index // 2 * 2 + d) for d in (0, 1)])  # its two layers
+        assert {tuple(c) for c in np.delete(both >> 1, axis, axis=1).tolist()} == set(map(tuple, coarse.tolist()))
+    assert chunks.section(3, 0, 7) is None and chunks.section(2, 128, 7) is None and chunks.section(2, 0, 3) is None
+
+
+def _solid_torus():
+    sc = load_scene("torus")
+    return implc.voxelize(implc.compile(sc.surface, bounds=sc.bounds), 7, solid=True), sc
+
+
 def test_a_grid_shallower_than_a_chunk_is_one_chunk():
     voxels, _ = _scene_voxels("torus", 4)
     chunks = LodChunks(voxels)
@@ -230,15 +254,22 @@ def _settle(page, timeout=60.0):
         time.sleep(0.05)
 
 
-def _mask(page):
-    """The pixels that are not background, with the overlay and buttons hidden."""
-    page.evaluate("document.querySelectorAll('#overlay, #controls, #help').forEach(e => { e.style.display = 'none'; })")
+def _pixels(page):
+    """The canvas as shown, with the overlay and controls hidden for the screenshot, (H, W, 3) int."""
+    hide = "document.querySelectorAll('#overlay, #controls, #help').forEach(e => { e.style.display = '%s'; })"
+    page.evaluate(hide % "none")
     page.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
     from io import BytesIO
 
     from PIL import Image
     image = np.asarray(Image.open(BytesIO(page.screenshot())).convert("RGB")).astype(int)
-    return np.abs(image - BACKGROUND).sum(axis=2) > 12
+    page.evaluate(hide % "")
+    return image
+
+
+def _mask(page):
+    """The pixels that are not background."""
+    return np.abs(_pixels(page) - BACKGROUND).sum(axis=2) > 12
 
 
 def test_the_page_shows_the_surface_where_the_png_renderer_does(browser, server, flower):
@@ -298,6 +329,28 @@ def test_zooming_in_fetches_deeper_chunks(browser):
         assert close["points"] <= 300_000
         assert errors == []
         page.close()
+
+
+def test_a_cut_away_of_a_solid_matches_the_png_renderers(browser):
+    """The cut control hides what lies beyond the plane and draws the solid's section there, as
+    'implc render --cut z=0.1 --solid' does."""
+    voxels, sc = _solid_torus()
+    with ViewServer(lod_chunks(voxels, view=sc.view), port=0).start() as s:
+        page, errors = _open(browser, s.url)
+        _settle(page)
+        whole = _pixels(page)
+        page.select_option("#cut-axis", "2")  # the control, as a user picks it
+        page.evaluate("window.implcViewer.setCut(2, 0.1)")
+        _settle(page)
+        cut = _pixels(page)
+        assert errors == []
+        page.close()
+    shown = np.abs(cut - BACKGROUND).sum(axis=2) > 12
+    png = render_voxels(voxels, size=512, view=View(*sc.view, perspective=True), cut=(2, 0.1))
+    expected = np.abs(png.astype(int) - BACKGROUND).sum(axis=2) > 12
+    assert (shown & expected).sum() / (shown | expected).sum() >= 0.9
+    changed = np.abs(cut - whole).sum(axis=2) > 24  # the top removed, the flat section in its place
+    assert changed.sum() > 0.3 * shown.sum()
 
 
 def _serve_folder(folder):

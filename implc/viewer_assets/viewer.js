@@ -28,11 +28,20 @@
   const VERTEX = `#version 300 es
     layout(location = 0) in vec3 cell;
     layout(location = 1) in vec2 oct;
-    uniform vec3 origin, cellSize, eye, right, up, forward;
-    uniform float aspect, near, far, pixelsPerUnit, splat;
+    uniform vec3 origin, cellSize, eye, right, up, forward, fixedNormal;
+    uniform float aspect, near, far, pixelsPerUnit, splat, clipLimit;
+    uniform int clipAxis;  // -1: no cut; else points whose centre lies beyond clipLimit on that axis vanish
+    uniform bool fixedNormals;
     out vec3 normal;
     void main() {
-      vec3 p = origin + cell * cellSize - eye;
+      vec3 world = origin + cell * cellSize;
+      if (clipAxis >= 0 && world[clipAxis] > clipLimit) {
+        gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
+        gl_PointSize = 0.0;
+        normal = vec3(0.0, 0.0, 1.0);
+        return;
+      }
+      vec3 p = world - eye;
       float x = dot(p, right), y = dot(p, up), z = dot(p, forward);
       gl_Position = vec4(x * ${FOCAL.toFixed(9)} / aspect, y * ${FOCAL.toFixed(9)},
                          (z - near) / (far - near) * 2.0 * z - z, z);
@@ -42,7 +51,7 @@
       float t = max(-n.z, 0.0);
       n.x += n.x >= 0.0 ? -t : t;
       n.y += n.y >= 0.0 ? -t : t;
-      normal = normalize(n);
+      normal = fixedNormals ? fixedNormal : normalize(n);
     }`;
   const FRAGMENT = `#version 300 es
     precision highp float;
@@ -74,7 +83,9 @@
   if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(program));
   const uniform = {};
   for (const name of ["origin", "cellSize", "eye", "right", "up", "forward", "aspect", "near", "far",
-                      "pixelsPerUnit", "splat"]) uniform[name] = gl.getUniformLocation(program, name);
+                      "pixelsPerUnit", "splat", "clipAxis", "clipLimit", "fixedNormal", "fixedNormals"]) {
+    uniform[name] = gl.getUniformLocation(program, name);
+  }
 
   // ---- camera: orbit around a target, azimuth around +z from +x, elevation above the xy plane ----
   let meta = null, radius = 1, center = [0, 0, 0], home = null;
@@ -190,6 +201,48 @@
     api.deepest = Math.max(api.deepest, node.level);
   }
 
+  // ---- a cut-away: the plane's axis and where it lies (a fraction of the bounds), the section drawn ----
+  const plane = { axis: -1, fraction: 0.5 };
+  const sections = new Map();  // "axis-index-level" -> {state, vao, count, level, axis, index}
+
+  function wantSection(axis, index, level) {
+    const id = `${axis}-${index}-${level}`;
+    if (sections.has(id)) return sections.get(id);
+    const entry = { id, axis, index, level, state: "loading", count: 0 };
+    sections.set(id, entry);
+    if (embed) { entry.state = "missing"; return entry; }  // an embedded page has no server to cut for it
+    inFlight++;
+    api.requests++;
+    fetch(`sections/${id}.bin`).then((r) => (r.ok ? r.arrayBuffer() : null)).then((bytes) => {
+      inFlight--;
+      if (bytes === null) { entry.state = "missing"; changed(); return; }
+      const header = new Uint32Array(bytes, 0, 8), count = header[5];
+      const uv = new Uint32Array(bytes, 32, 2 * count), cells = new Float32Array(3 * count);
+      const [u, v] = [0, 1, 2].filter((a) => a !== axis);
+      for (let i = 0; i < count; i++) {
+        cells[3 * i + axis] = index; cells[3 * i + u] = uv[2 * i]; cells[3 * i + v] = uv[2 * i + 1];
+      }
+      entry.vao = gl.createVertexArray();
+      gl.bindVertexArray(entry.vao);
+      entry.buffer = gl.createBuffer();
+      gl.bindBuffer(gl.ARRAY_BUFFER, entry.buffer);
+      gl.bufferData(gl.ARRAY_BUFFER, cells, gl.STATIC_DRAW);
+      gl.enableVertexAttribArray(0);
+      gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
+      gl.disableVertexAttribArray(1);
+      gl.bindVertexArray(null);
+      entry.count = count;
+      entry.state = "ready";
+      for (const [other, old] of sections) {  // keep the latest only
+        if (other !== id && old.state === "ready" && old.axis === axis) {
+          gl.deleteBuffer(old.buffer); gl.deleteVertexArray(old.vao); sections.delete(other);
+        }
+      }
+      changed();
+    }).catch((error) => { inFlight--; entry.state = "missing"; api.errors.push(String(error)); });
+    return entry;
+  }
+
   function childCells(node) {
     const out = [];
     for (let c = 0; c < 8; c++) {
@@ -271,7 +324,7 @@
     const view = basis(), aspect = width / height, pixelsPerUnit = FOCAL * height / 2;
     const near = Math.max(camera.distance - 2 * radius, radius * 1e-3), far = camera.distance + 2 * radius;
     requestedThisFrame = 0;
-    const cut = selectCut(view, pixelsPerUnit, aspect);
+    const chunksDrawn = selectCut(view, pixelsPerUnit, aspect);
     lastRequested = requestedThisFrame;
     gl.useProgram(program);
     gl.uniform3fv(uniform.eye, view.eye);
@@ -282,8 +335,23 @@
     gl.uniform1f(uniform.near, near);
     gl.uniform1f(uniform.far, far);
     gl.uniform1f(uniform.pixelsPerUnit, pixelsPerUnit);
+    // the cut-away: at the finest point level drawn, the layer the plane falls in, cells beyond it hidden
+    let section = null, clipLimit = 0;
+    if (plane.axis >= 0 && chunksDrawn.length) {
+      const level = Math.max(...chunksDrawn.map((c) => c.m)), [lo, hi] = meta.bounds[plane.axis];
+      const index = Math.min(Math.floor(plane.fraction * 2 ** level), 2 ** level - 1);
+      clipLimit = lo + index * (hi - lo) / 2 ** level;
+      const wanted = wantSection(plane.axis, index, level);
+      section = wanted.state === "ready" ? wanted : null;
+      if (!section) {  // until it comes, the latest section on this axis
+        for (const other of sections.values()) if (other.state === "ready" && other.axis === plane.axis) section = other;
+      }
+    }
+    gl.uniform1i(uniform.clipAxis, plane.axis);
+    gl.uniform1f(uniform.clipLimit, clipLimit);
+    gl.uniform1i(uniform.fixedNormals, 0);
     let points = 0;
-    for (const node of cut) {
+    for (const node of chunksDrawn) {
       gl.uniform3fv(uniform.origin, node.origin);
       gl.uniform3fv(uniform.cellSize, node.cellSize);
       gl.uniform1f(uniform.splat, SPLAT * Math.max(...node.cellSize));
@@ -291,16 +359,28 @@
       gl.drawArrays(gl.POINTS, 0, node.count);
       points += node.count;
     }
+    if (section) {
+      const n = 2 ** section.level, cellSize = meta.bounds.map(([lo, hi]) => (hi - lo) / n);
+      gl.uniform1i(uniform.clipAxis, -1);
+      gl.uniform1i(uniform.fixedNormals, 1);
+      gl.uniform3fv(uniform.fixedNormal, [0, 1, 2].map((a) => (a === section.axis ? 1 : 0)));
+      gl.uniform3fv(uniform.origin, meta.bounds.map(([lo], a) => lo + 0.5 * cellSize[a]));
+      gl.uniform3fv(uniform.cellSize, cellSize);
+      gl.uniform1f(uniform.splat, SPLAT * Math.max(...cellSize));
+      gl.bindVertexArray(section.vao);
+      gl.drawArrays(gl.POINTS, 0, section.count);
+      points += section.count;
+    }
     gl.bindVertexArray(null);
     lastFrame = performance.now() - started;
     lastDrawn = points;
-    lastChunks = cut.length;
-    const levels = cut.length ? `${Math.min(...cut.map((c) => c.m))}-${Math.max(...cut.map((c) => c.m))}` : "-";
+    lastChunks = chunksDrawn.length;
+    const levels = chunksDrawn.length ? `${Math.min(...chunksDrawn.map((c) => c.m))}-${Math.max(...chunksDrawn.map((c) => c.m))}` : "-";
     overlay.textContent = `${meta.name ? meta.name + "\n" : ""}depth ${meta.depth} (${2 ** meta.depth}³), ` +
       `${meta.voxels.toLocaleString("en")} voxels in the model\n` +
       `points drawn ${points.toLocaleString("en")} of budget ${budget.toLocaleString("en")}, levels ${levels}, ` +
-      `${cut.length} chunks\nframe ${lastFrame.toFixed(1)} ms`;
-    if (cut.length && firstDrawn) { firstDrawn(); firstDrawn = null; }
+      `${chunksDrawn.length} chunks${plane.axis >= 0 ? ", cut " + "xyz"[plane.axis] : ""}\nframe ${lastFrame.toFixed(1)} ms`;
+    if (chunksDrawn.length && firstDrawn) { firstDrawn(); firstDrawn = null; }
   }
 
   // settled: the last frame asked for nothing new and nothing is on its way
@@ -313,6 +393,20 @@
     changed();
   };
   api.zoom = (factor) => { camera.distance *= factor; changed(); };
+  // a cut-away across axis 0, 1 or 2 (-1: none) at a world coordinate, as 'implc render --cut'
+  api.setCut = (axis, value) => {
+    plane.axis = axis;
+    if (axis >= 0) {
+      const [lo, hi] = meta.bounds[axis];
+      plane.fraction = Math.min(Math.max((value - lo) / (hi - lo), 0), 1);
+      cutValue.value = String(Math.round(plane.fraction * 1000));
+    }
+    cutAxis.value = String(axis);
+    changed();
+  };
+  const cutAxis = document.getElementById("cut-axis"), cutValue = document.getElementById("cut-value");
+  cutAxis.addEventListener("change", () => { plane.axis = Number(cutAxis.value); changed(); });
+  cutValue.addEventListener("input", () => { plane.fraction = Number(cutValue.value) / 1000; changed(); });
 
   // ---- input: pointer events cover mouse, pen and touch ----
   const pointers = new Map();
