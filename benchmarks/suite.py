@@ -449,8 +449,8 @@ def _folder_bytes(path: Path) -> int:
 
 def solids(args, out):
     """Solid voxelization (inside octants kept whole) against the shell, all cores, at --solid-depths:
-    medians of interleaved runs, the extra cost, inside octants, the width of the guaranteed volume bounds, and the exports:
-    .vdb from the voxels in memory, .zarr voxelized straight into the store (voxelization included)."""
+    medians of interleaved runs, the extra cost, inside octants, the width of the guaranteed volume bounds,
+    and the exports: .vdb from the voxels in memory, .zarr voxelized straight into the store (voxelization included)."""
     from implc.vdb_file import save_vdb
     from implc.zarr_store import write_zarr
     rows = []
@@ -489,8 +489,66 @@ def solids(args, out):
     return md
 
 
+def viewer(args, out):
+    """implc view at --viewer-depths: building the levels of detail, a chunk's cost, and in headless
+    Chromium (SwiftShader: software WebGL2, so frames are far slower than on a GPU) the first picture
+    after navigation starts and the time until the page has fetched what the camera needs."""
+    import shutil
+
+    from implc.view_server import ViewServer
+    from implc.viewer import lod_chunks
+    chromium = shutil.which("chromium")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        sync_playwright = None
+    rows = []
+    for name in args.viewer_scenes.split(","):
+        sc = scene.load(name)
+        s = implc.compile(sc.surface, sc.bounds)
+        for depth in args.viewer_depths:
+            v = implc.voxelize(s, depth)
+            build_s, chunks = median_time(lambda: lod_chunks(v, name=name, view=sc.view), 1)
+            ids = list(chunks.chunk_ids())
+            chunk_s, _ = median_time(lambda: [chunks.chunk(*c) for c in ids[:500]], args.repeats)
+            row = {"scene": name, "depth": depth, "voxels": len(v), "build_s": build_s, "chunks": len(ids),
+                   "chunk_ms": 1e3 * chunk_s / min(len(ids), 500), "first_ms": None, "script_first_ms": None,
+                   "settled_s": None, "points": None}
+            if chromium and sync_playwright:
+                with sync_playwright() as p, ViewServer(chunks, port=0).start() as server:
+                    browser = p.chromium.launch(executable_path=chromium, args=[
+                        "--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                        "--disable-background-networking", "--disable-component-update", "--no-first-run"])
+                    page = browser.new_page(viewport={"width": 1024, "height": 768})
+                    t0 = time.perf_counter()
+                    page.goto(server.url)
+                    timings = page.evaluate("window.implcViewer.ready.then(() => window.implcViewer.timings)")
+                    row["first_ms"] = timings["firstFrame"]
+                    row["script_first_ms"] = timings["firstFrame"] - timings["script"]
+                    while not page.evaluate("window.implcViewer.stats().settled"):
+                        time.sleep(0.02)
+                    row["settled_s"] = time.perf_counter() - t0
+                    row["points"] = page.evaluate("window.implcViewer.stats().points")
+                    browser.close()
+            rows.append(row)
+    out["viewer"] = rows
+    md = ["### implc view: levels of detail and the page in headless Chromium (1024x768, software WebGL2)", "",
+          "| scene | grid | voxels | build LOD s | chunks | ms per chunk | first picture ms (from the script) "
+          "| settled s | points drawn |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    fmt = lambda v, f: "n/a" if v is None else format(v, f)  # noqa: E731
+    md += [f"| {r['scene']} | {1 << r['depth']}³ | {r['voxels']} | {r['build_s']:.2f} | {r['chunks']} | "
+           f"{r['chunk_ms']:.2f} | {fmt(r['first_ms'], '.0f')} ({fmt(r['script_first_ms'], '.0f')}) | "
+           f"{fmt(r['settled_s'], '.2f')} | "
+           f"{fmt(r['points'], 'd')} |" for r in rows]
+    md += ["", "First picture: milliseconds from navigation start to the first frame with the root chunk drawn "
+           "(`performance.now()` in the page), and in brackets from the moment the viewer's script starts; settled: "
+           "until the page fetches nothing more for the camera; n/a where no Chromium and Playwright are installed."]
+    return md
+
+
 SECTIONS = {"table1": table1, "techniques": techniques, "baselines": baselines, "growth": growth,
-            "tightness": tightness, "kernels": kernels, "models": models, "solids": solids}
+            "tightness": tightness, "kernels": kernels, "models": models, "solids": solids, "viewer": viewer}
 
 
 def parser():
@@ -512,6 +570,9 @@ def parser():
     p.add_argument("--models-skip", default="", help="comma list of model names to leave out")
     p.add_argument("--models-depths", default="8,9", help="grid depths for the models (default 8,9: 256³, 512³)")
     p.add_argument("--solid-scenes", default="paper_blobs,torus", help="scenes for the 'solids' section")
+    p.add_argument("--viewer-scenes", default="paper_blobs,paper_sin4_sin8,paper_sin3_sin4",
+                   help="scenes for the 'viewer' section")
+    p.add_argument("--viewer-depths", default="9,11", help="grid depths for the 'viewer' section (512³, 2048³)")
     p.add_argument("--solid-depths", default="9,10", help="grid depths for the 'solids' section (default 512³, 1024³)")
     p.add_argument("--out", default="implc-bench", help="folder for latest.md/.json (default ./implc-bench)")
     return p
@@ -527,6 +588,7 @@ def main(argv=None) -> int:
     args.growth_depths = [int(d) for d in args.growth_depths.split(",")]
     args.models_depths = [int(d) for d in args.models_depths.split(",")]
     args.solid_depths = [int(d) for d in args.solid_depths.split(",")]
+    args.viewer_depths = [int(d) for d in args.viewer_depths.split(",")]
     args.tightness_scenes = args.tightness_scenes.split(",") if args.tightness_scenes else scene.available()
     sections = args.sections.split(",")
     unknown = [s for s in sections if s not in SECTIONS]

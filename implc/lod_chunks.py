@@ -38,14 +38,17 @@ HEADER_BYTES = 64
 
 def encode_normals(normals: np.ndarray) -> np.ndarray:
     """Octahedral encoding of (n, 3) vectors (any length; zero gives +z) as (n, 2) uint8."""
-    n = np.asarray(normals, dtype=np.float64)
-    length = np.abs(n).sum(axis=1, keepdims=True)
-    n = np.where(length > 0, n / np.where(length > 0, length, 1), [0.0, 0.0, 1.0])
-    x, y, z = n[:, 0], n[:, 1], n[:, 2]
-    fold = z < 0
-    x, y = (np.where(fold, (1 - np.abs(y)) * np.where(x >= 0, 1, -1), x),
-            np.where(fold, (1 - np.abs(x)) * np.where(y >= 0, 1, -1), y))
-    return np.clip(np.rint((np.stack([x, y], axis=1) * 0.5 + 0.5) * 255), 0, 255).astype(np.uint8)
+    n = np.asarray(normals, dtype=np.float32)
+    length = np.abs(n).sum(axis=1)
+    inverse = np.divide(1, length, out=np.zeros_like(length), where=length > 0)
+    x, y = n[:, 0] * inverse, n[:, 1] * inverse
+    below = n[:, 2] < 0  # the lower half folds over the diagonals
+    folded_x = np.where(below, np.copysign(1 - np.abs(y), x), x)
+    folded_y = np.where(below, np.copysign(1 - np.abs(x), y), y)
+    out = np.empty((len(n), 2), dtype=np.uint8)
+    out[:, 0] = np.clip(np.rint(folded_x * 127.5 + 127.5), 0, 255)
+    out[:, 1] = np.clip(np.rint(folded_y * 127.5 + 127.5), 0, 255)
+    return out
 
 
 def decode_normals(encoded: np.ndarray) -> np.ndarray:
@@ -60,7 +63,8 @@ def decode_normals(encoded: np.ndarray) -> np.ndarray:
 
 class LodChunks:
     """The chunks of one voxelization (anything with Morton-ordered ``coords``, ``normals``, ``depth``,
-    ``bounds``): a pyramid of levels computed once, chunks cut from it on request."""
+    ``bounds``): a pyramid of levels (Morton codes, cells, sums of normals) computed once, chunks cut
+    from it on request."""
 
     def __init__(self, voxels, name: str = "", view: tuple[float, float] | None = None):
         """``view``: the camera's (azimuth, elevation) in degrees, as implc render's (default 35, 25)."""
@@ -70,21 +74,20 @@ class LodChunks:
         self.max_chunk_level = max(self.depth - CHUNK_LEVELS, 0)
         first_level = min(CHUNK_LEVELS, self.depth)
         coords = np.asarray(voxels.coords, dtype=np.uint32)
-        order = np.argsort(morton_codes(coords), kind="stable") if len(coords) else np.empty(0, np.int64)
-        if len(order) and not np.all(order[1:] > order[:-1]):  # voxels from elsewhere: put them in order
-            coords = coords[order]
-            sums = np.asarray(voxels.normals, dtype=np.float32)[order]
-        else:
-            sums = np.asarray(voxels.normals, dtype=np.float32)
+        sums = np.asarray(voxels.normals, dtype=np.float32)
+        codes = morton_codes(coords)
+        if len(codes) and np.any(codes[1:] < codes[:-1]):  # voxels from elsewhere: put them in order
+            order = np.argsort(codes, kind="stable")
+            codes, coords, sums = codes[order], coords[order], sums[order]
         self.levels: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         for level in range(self.depth, first_level - 1, -1):
-            if level < self.depth:  # the parents of the level below, with the sums of their normals
-                prefix = coords >> np.uint32(1)
-                starts = np.flatnonzero(np.r_[True, np.any(prefix[1:] != prefix[:-1], axis=1)]) if len(prefix) \
-                    else np.empty(0, np.int64)
-                coords = prefix[starts]
+            if level < self.depth:  # the parents of the level below (a Morton code shifted by 3), their normal sums
+                parents = codes >> np.uint64(3)
+                starts = np.flatnonzero(np.r_[True, parents[1:] != parents[:-1]]) if len(parents) else \
+                    np.empty(0, np.int64)
+                codes, coords = parents[starts], coords[starts] >> np.uint32(1)
                 sums = np.add.reduceat(sums, starts, axis=0) if len(starts) else sums[:0]
-            self.levels[level] = (morton_codes(coords), coords, encode_normals(sums))
+            self.levels[level] = (codes, coords, sums)  # normals encoded per chunk, when asked for
         self.solid = getattr(voxels, "inside", None) is not None
         self.inside = np.empty((0, 4), np.int64)  # the octree's inside entries as rows (i, j, k, level)
         if self.solid:
@@ -117,14 +120,14 @@ class LodChunks:
         a, b = self._range(level, cell, m)
         if b == a and level > 0:
             return None
-        _, coords, normals = self.levels[m]
+        _, coords, sums = self.levels[m]
         local = (coords[a:b] - (np.array(cell, dtype=np.uint32) << np.uint32(m - level))).astype(np.uint8)
         children = [self.count(level + 1, (2 * cell[0] + (c & 1), 2 * cell[1] + (c >> 1 & 1), 2 * cell[2] + (c >> 2)))
                     for c in range(8)] if level < self.max_chunk_level else [0] * 8
         header = np.zeros(HEADER_BYTES // 4, dtype=np.uint32)
         header[:8] = (MAGIC, FORMAT, level, *cell, m, b - a)
         header[8:16] = children
-        return header.tobytes() + local.tobytes() + normals[a:b].tobytes()
+        return header.tobytes() + local.tobytes() + encode_normals(sums[a:b]).tobytes()
 
     def section(self, axis: int, index: int, level: int) -> bytes | None:
         """Layer ``index`` across ``axis`` at point level ``level`` (see the module's docstring), or None

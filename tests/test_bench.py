@@ -21,7 +21,8 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
                                                   "r const 2.25\nout sub t r\n")
     status = main(["bench", "--depth", "5", "--workers", "1,2", "--repeats", "1", "--baseline-depths", "5",
                    "--growth-depths", "5,6", "--tightness-scenes", "torus,paper_blobs", "--tightness-depth", "6",
-                   "--models-dir", str(tmp_path / "models"), "--models-depths", "5,6", "--solid-depths", "5,6"])
+                   "--models-dir", str(tmp_path / "models"), "--models-depths", "5,6", "--solid-depths", "5,6",
+                   "--viewer-scenes", "torus", "--viewer-depths", "7"])
     assert status == 0
     assert "Table 1 at 32³" in capsys.readouterr().out
     assert {p.name: p.read_bytes() for p in results.iterdir()} == quoted
@@ -47,6 +48,8 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
         assert 0 < r["volume_lo"] < r["volume_hi"] and r["inside_octants"] > 0
     torus = [r for r in data["solids"] if r["scene"] == "torus"]
     assert torus[1]["volume_hi"] - torus[1]["volume_lo"] < torus[0]["volume_hi"] - torus[0]["volume_lo"]
+    (view,) = data["viewer"]
+    assert view["chunks"] >= 1 and view["voxels"] > 0 and (view["points"] is None or view["points"] > 0)
     growth = data["growth"]
     assert growth[1]["voxels"] > growth[0]["voxels"]
     assert (tmp_path / "latest.md").read_text().startswith("## implc benchmarks")

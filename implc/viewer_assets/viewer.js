@@ -17,7 +17,9 @@
   const canvas = document.getElementById("view");
   const overlay = document.getElementById("overlay");
   const gl = canvas.getContext("webgl2", { antialias: false, preserveDrawingBuffer: true });
-  const api = { ready: null, requests: 0, deepest: -1, stats: null, setView: null, camera: null, errors: [] };
+  // timings (ms, performance.now()): when this script started, and its first frame
+  const api = { ready: null, requests: 0, deepest: -1, stats: null, setView: null, camera: null, errors: [],
+                timings: { script: performance.now(), firstFrame: null } };
   window.implcViewer = api;
   if (!gl) {
     overlay.textContent = "this browser has no WebGL2";
@@ -380,7 +382,11 @@
       `${meta.voxels.toLocaleString("en")} voxels in the model\n` +
       `points drawn ${points.toLocaleString("en")} of budget ${budget.toLocaleString("en")}, levels ${levels}, ` +
       `${chunksDrawn.length} chunks${plane.axis >= 0 ? ", cut " + "xyz"[plane.axis] : ""}\nframe ${lastFrame.toFixed(1)} ms`;
-    if (chunksDrawn.length && firstDrawn) { firstDrawn(); firstDrawn = null; }
+    if (chunksDrawn.length && firstDrawn) {
+      api.timings.firstFrame = performance.now();
+      firstDrawn();
+      firstDrawn = null;
+    }
   }
 
   // settled: the last frame asked for nothing new and nothing is on its way
