@@ -393,3 +393,16 @@ def test_the_notebook_view_is_self_contained(browser, flower, tmp_path):
     assert page.evaluate("window.implcViewer.stats()")["points"] > 100_000
     assert _mask(page).sum() > 10_000 and errors == []
     page.close()
+
+
+@pytest.mark.slow
+def test_a_wheel_carries_the_page(tmp_path):
+    """The page's files are package data: a built wheel holds them (and the viewer reads them there)."""
+    import zipfile
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    done = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w",
+                           str(tmp_path), root], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    (wheel,) = tmp_path.glob("implc-*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    assert {f"implc/viewer_assets/{n}" for n in ("index.html", "viewer.js", "viewer.css")} <= names
