@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import abi
+from . import abi, big_arrays
 from .abi import GEOMETRY_DOUBLES, MAX_DEPTH, STACK_ENTRIES
 from .runtime import Runtime
 from .tape_program import slot_scratch
@@ -116,9 +116,9 @@ class _TaskResult:
         return self.inside.ctypes.data + 4 * abi.INSIDE_WORDS * self.inside_count, room
 
     def _allocate(self, size):
-        self.coords = np.empty((size, 3), dtype=np.uint32)
-        self.masks = np.empty(size, dtype=np.int64)  # each voxel's live-term mask
-        self.normals = np.empty((size, 3), dtype=np.float32)
+        self.coords = big_arrays.empty((size, 3), np.uint32)
+        self.masks = big_arrays.empty(size, np.int64)  # each voxel's live-term mask
+        self.normals = big_arrays.empty((size, 3), np.float32)
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
         self.coords_ptr, self.masks_ptr = self.coords.ctypes.data, self.masks.ctypes.data
         self.normals_ptr = self.normals.ctypes.data

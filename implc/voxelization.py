@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from . import big_arrays
 from .storage import bytes_per_voxel, make_backend
 from .storage.grid import dense_bytes
 from .storage.octree import Octree, OctreeBuilder
@@ -157,15 +158,15 @@ class _Collect:
     def __init__(self, backend, capacity: int):
         self.backend = backend
         self.count = 0
-        self.coords = np.empty((max(capacity, 1024), 3), dtype=np.uint32)
-        self.normals = np.empty((max(capacity, 1024), 3), dtype=np.float32)
+        self.coords = big_arrays.empty((max(capacity, 1024), 3), np.uint32)
+        self.normals = big_arrays.empty((max(capacity, 1024), 3), np.float32)
 
     def __call__(self, coords, normals):
         end = self.count + len(coords)
         if end > len(self.coords):
             size = max(end, 2 * len(self.coords))
-            self.coords = np.resize(self.coords, (size, 3))
-            self.normals = np.resize(self.normals, (size, 3))
+            self.coords = big_arrays.grown(self.coords, size, self.count)
+            self.normals = big_arrays.grown(self.normals, size, self.count)
         self.coords[self.count:end] = coords
         self.normals[self.count:end] = normals
         self.count = end

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import abi
+from .. import abi, big_arrays
 from ..abi import DEPTH, LEVEL_COUNTS, NODE_COUNT, OCTREE_STATE_WORDS
 from ..morton import morton_codes
 from ..runtime import Runtime
@@ -192,10 +192,7 @@ class OctreeBuilder:
         """Room for ``rows`` nodes; rows past the node count are left uninitialised (the native insertion
         clears each node it creates), so that rows reserved but never used cost nothing."""
         if rows > len(self.nodes):
-            grown = np.empty((rows, 8), dtype=np.int32)
-            used = int(self.state[NODE_COUNT])
-            grown[:used] = self.nodes[:used]
-            self.nodes = grown
+            self.nodes = big_arrays.grown(self.nodes, rows, int(self.state[NODE_COUNT]))
 
     def add(self, coords, normals):
         coords = np.ascontiguousarray(coords, dtype=np.uint32)
