@@ -26,6 +26,11 @@ from .abi import GEOMETRY_DOUBLES, MAX_DEPTH, STACK_ENTRIES
 from .runtime import Runtime
 from .tape_program import slot_scratch
 
+TASK_SPAN = 9
+"""Levels from a task's cell to its voxels at most, where the plan allows (a surface puts about 4^9 =
+262,144 voxels below a cell nine levels up)."""
+MAX_TASK_LEVEL = 5
+"""The deepest level a plan goes to (32³ cells: cheap whatever the grid)."""
 OUTPUT_CHUNK = 1 << 16
 """Free rows a task's result has before each native call (it returns when they are full, and the
 result grows)."""
@@ -36,8 +41,9 @@ class SubdivisionStats:
     """What a voxelization did: work, per-level survivors, stage times, per-worker busy time.
 
     ``seconds``: wall time of each stage (plan, subdivide — the parallel phase, normals included —,
-    storage — time the calling thread spent in the backend —, finish, total). ``worker_busy``: seconds
-    each worker spent in native work, of which ``worker_normals`` computing normals.
+    storage — the time one task at a time spent storing, the serial part —, finish, total).
+    ``worker_busy``: seconds each worker spent working (its tasks, their normals, storing), of which
+    ``worker_normals`` computing normals.
     """
 
     depth: int
@@ -182,6 +188,7 @@ class Subdivider:
         self.solid = bool(solid)
         self._inside_parts: list[np.ndarray] = []  # a solid's inside octants: the plan's, then each task's
         self._emit_inside = None  # run()'s receiver of each task's inside octants, if any
+        self._placement = None  # run()'s placement of each task's voxels, if any
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
         # the tape engine runs the surface where it is the surface's engine (the mean-value form is compiled only)
@@ -261,8 +268,12 @@ class Subdivider:
     # -- orchestration ---------------------------------------------------------------------------
     def plan(self) -> tuple[np.ndarray, int]:
         """Tasks: the cells at a coarse level that may meet the surface (and that level)."""
-        # enough tasks to balance the workers (~25 per worker), few enough that per-task overhead stays small
-        level = min(self.depth, 2 if self.workers <= 2 else 3 if self.workers <= 16 else 4)
+        # enough tasks to balance the workers (~25 per worker), few enough that per-task overhead stays small,
+        # and no more than TASK_SPAN levels below a task where the plan stays cheap (level 5 at most): a
+        # task's voxels (about 4^span) sit in buffers that stay allocated, so on fine grids smaller tasks
+        # keep the peak memory low
+        balance = 2 if self.workers <= 2 else 3 if self.workers <= 16 else 4
+        level = min(self.depth, max(balance, min(self.depth - TASK_SPAN, MAX_TASK_LEVEL)))
         w = self._new_worker(level)
         t0 = time.perf_counter()
         result = _TaskResult()
@@ -287,12 +298,20 @@ class Subdivider:
                 self.stats.octants_per_level[level] += int(w.stats[2 * abi.TAPE_LEVELS + level])
         w.stats[:] = 0
 
-    def run(self, emit, progress=None, plan=None, emit_inside=None) -> SubdivisionStats:
+    def run(self, emit, progress=None, plan=None, emit_inside=None, placement=None) -> SubdivisionStats:
         """Voxelize, handing Morton-ordered batches to ``emit``; ``plan``: the result of :meth:`plan` when
         the caller already made it. A solid's inside octants are kept (:attr:`inside`), or with
         ``emit_inside`` handed to it task by task, each task's after its voxels (the plan's stay in
-        :attr:`inside`)."""
+        :attr:`inside`).
+
+        ``placement`` (for a plan that stops above the leaves) replaces ``emit`` with a protocol that
+        leaves one thread only the bookkeeping: ``placement.prepare(result, cell)`` in the worker once a
+        task is done; ``placement.claim(result)`` in task order, one task at a time (it assigns the
+        task's place in the output); ``placement.fill(result, cell, ticket)`` right after, in the worker
+        that claimed it, in parallel with other claims and fills (the task's buffers are reused after).
+        ``result.count``, ``result.coords`` and ``result.normals`` are the task's voxels."""
         self._emit_inside = emit_inside
+        self._placement = placement
         cells, level = plan if plan is not None else self.plan()
         if level == self.depth:  # the plan already reached the leaves
             if self.max_voxels is not None and len(cells) > self.max_voxels:
@@ -309,6 +328,8 @@ class Subdivider:
             self.stats.worker_normals = [t1 - t0]
             self.stats.worker_tasks = [len(cells)]
             return self.stats
+        if placement is not None and level == self.depth:
+            raise ValueError("a placement needs tasks above the leaves (plan level < depth)")
         self._parallel(cells, level, emit, progress)
         return self.stats
 
@@ -324,9 +345,14 @@ class Subdivider:
         workers = [self._new_worker(self.depth) for _ in range(self.workers)]
         pool: list[_TaskResult] = []
 
-        def commit_ready():
-            """Hand finished tasks to the backend in task order; whichever worker finds the next one ready
-            does it, so storage needs no extra thread competing for the cores."""
+        placement = self._placement
+        filled = [0]
+
+        def commit_ready(w: _Worker):
+            """Hand finished tasks to the backend (or claim their place) in task order; whichever worker
+            finds the next one ready does it, so storage needs no extra thread competing for the cores.
+            With a placement, the claim is all that runs one task at a time: the claimer then fills the
+            task's place while the next task can be claimed."""
             while True:
                 with lock:
                     t = next_emit[0]
@@ -334,23 +360,35 @@ class Subdivider:
                         return
                     committing[0] = True
                     result = results.pop(t)
+                ticket = None
+                t0 = time.perf_counter()
                 try:
-                    t0 = time.perf_counter()
-                    emit(result.coords[: result.count], result.normals[: result.count])
-                    if self.solid and self._emit_inside is not None:
-                        self._emit_inside(result.inside[: result.inside_count])
-                    elif self.solid:
-                        self._inside_parts.append(result.inside[: result.inside_count].copy())
-                    storage_seconds[0] += time.perf_counter() - t0
-                    if progress is not None:
-                        progress.update(1)
+                    try:
+                        if placement is not None:
+                            ticket = placement.claim(result)
+                        else:
+                            emit(result.coords[: result.count], result.normals[: result.count])
+                        if self.solid and self._emit_inside is not None:
+                            self._emit_inside(result.inside[: result.inside_count])
+                        elif self.solid:
+                            self._inside_parts.append(result.inside[: result.inside_count].copy())
+                        storage_seconds[0] += time.perf_counter() - t0
+                        if progress is not None:
+                            progress.update(1)
+                    finally:
+                        with lock:
+                            next_emit[0] = t + 1
+                            committing[0] = False
+                    if placement is not None:
+                        placement.fill(result, cells[t], ticket)
                 finally:
+                    w.busy += time.perf_counter() - t0  # storing is work a single worker would do too
                     in_flight.release()
                     with lock:
                         pool.append(result)
-                        next_emit[0] = t + 1
-                        committing[0] = False
-                    if t + 1 == n_tasks:
+                        filled[0] += 1
+                        done = filled[0] == n_tasks
+                    if done:
                         finished.set()
 
         def work(w: _Worker):
@@ -373,7 +411,9 @@ class Subdivider:
                         self._normals(result.coords[: result.count], result.normals[: result.count],
                                       result.masks[: result.count])
                     t2 = time.perf_counter()
-                    w.busy += t2 - t0
+                    if placement is not None:
+                        placement.prepare(result, cells[t])
+                    w.busy += time.perf_counter() - t0
                     w.normals += t2 - t1
                     w.tasks += 1
                     with lock:
@@ -381,7 +421,7 @@ class Subdivider:
                         if self.max_voxels is not None and produced[0] > self.max_voxels:
                             raise MemoryError(f"more than max_voxels={self.max_voxels} voxels at depth {self.depth}")
                         results[t] = result
-                    commit_ready()
+                    commit_ready(w)
             except BaseException as exc:  # noqa: BLE001 - any failure must reach the caller
                 self.cancel[0] = 1
                 with lock:

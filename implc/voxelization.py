@@ -7,6 +7,7 @@ rounding of its corners) contains 0: no cell where F changes sign is ever missed
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 
@@ -15,7 +16,7 @@ import numpy as np
 from . import big_arrays
 from .storage import bytes_per_voxel, make_backend
 from .storage.grid import dense_bytes
-from .storage.octree import Octree, OctreeBuilder
+from .storage.octree import Octree, OctreeAssembly, OctreeBuilder
 from .subdivide import Subdivider, SubdivisionStats, default_workers
 from .surface import Surface
 
@@ -40,7 +41,11 @@ class Voxels:
     (n, 4) int32 rows (i, j, k, level), each a cube of 2^(depth − level) voxels per axis, never expanded."""
 
     def __init__(self, coords, normals, depth, bounds, stats: SubdivisionStats, storage=None, inside=None):
-        self.coords = coords
+        """``coords`` may be None when ``storage`` is an :class:`Octree`: they are read from the tree on
+        first use (the octree holds them; the default voxelization stores no other copy)."""
+        if coords is None and not isinstance(storage, Octree):
+            raise ValueError("Voxels without coords need their octree as storage")
+        self._coords = coords
         self.normals = normals
         self.depth = depth
         self.bounds = bounds
@@ -49,8 +54,18 @@ class Voxels:
         self.inside = inside  # None: a shell (solid=False)
         self._octree = storage if isinstance(storage, Octree) else None
 
+    @property
+    def coords(self) -> np.ndarray:
+        """(N, 3) uint32 cell indices in Morton order (from the octree on first use where not stored)."""
+        if self._coords is None:
+            coords, payload = self._octree.traverse(self.depth)
+            if len(payload) != len(self.normals) or np.any(payload != np.arange(len(payload))):
+                raise AssertionError("the octree's voxels are not its payload in order")
+            self._coords = coords
+        return self._coords
+
     def __len__(self) -> int:
-        return len(self.coords)
+        return len(self.normals)
 
     def __repr__(self) -> str:
         n = 1 << self.depth
@@ -235,30 +250,25 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
         max_voxels = int(available * 0.8 / bytes_per_voxel(storage))
 
     t_start = time.perf_counter()
-    backend = OctreeBuilder(keep_normals=False) if storage == "octree" else make_backend(storage)
     subdivider = Subdivider(surface, depth, workers, surface.runtime, max_voxels=max_voxels,
                             mean_value_levels=min(mean_value_levels, depth), prune=prune,
                             refine_leaves=refine_leaves, solid=solid)
     cells, level = subdivider.plan()
     estimate = _estimate_voxels(len(cells), level, depth)
     _check_memory(depth, storage, estimate, available)
+    # reserve generously: the pages of a reserved array that stay untouched cost nothing, a growth costs a copy
+    capacity = min(2 * estimate, max_voxels)
+    if storage == "octree" and level < depth:  # the default: the tree assembled from the tasks' subtrees
+        return _voxelize_into_octree(surface, depth, subdivider, (cells, level), capacity, progress, t_start)
+    backend = OctreeBuilder(keep_normals=False) if storage == "octree" else make_backend(storage)
 
     t0 = time.perf_counter()
     backend.begin(depth, surface.bounds)
-    # reserve generously: the pages of a reserved array that stay untouched cost nothing, a growth costs a copy
-    capacity = min(2 * estimate, max_voxels)
     if hasattr(backend, "reserve"):
         backend.reserve(capacity)
     collect = _Collect(backend, capacity)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=len(cells), unit="octant", desc=f"voxelize {1 << depth}³", leave=False)
-    try:
+    with _progress_bar(progress, len(cells), depth) as bar:
         stats = subdivider.run(collect, progress=bar, plan=(cells, level))
-    finally:
-        if bar is not None:
-            bar.close()
     t1 = time.perf_counter()
     result = backend.finish()
     coords, normals = collect.arrays()
@@ -271,3 +281,35 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     stats.seconds["setup"] = t0 - t_start - stats.seconds["plan"]
     stats.seconds["total"] = time.perf_counter() - t_start
     return Voxels(coords, normals, depth, surface.bounds, stats, storage=result, inside=inside)
+
+
+@contextlib.contextmanager
+def _progress_bar(progress: bool, tasks: int, depth: int):
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=tasks, unit="octant", desc=f"voxelize {1 << depth}³", leave=False)
+    try:
+        yield bar
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _voxelize_into_octree(surface, depth, subdivider, plan, capacity, progress, t_start) -> Voxels:
+    """The default voxelization: the octree assembled from the tasks' subtrees in parallel, each voxel's
+    normal written once and its coordinates kept by the tree only."""
+    cells, level = plan
+    t0 = time.perf_counter()
+    assembly = OctreeAssembly(depth, surface.bounds, level, capacity)
+    with _progress_bar(progress, len(cells), depth) as bar:
+        stats = subdivider.run(None, progress=bar, plan=plan, placement=assembly)
+    t1 = time.perf_counter()
+    tree = assembly.finish()
+    inside = subdivider.inside if subdivider.solid else None
+    if inside is not None:
+        tree.add_inside(inside)
+    stats.seconds["finish"] = time.perf_counter() - t1
+    stats.seconds["setup"] = t0 - t_start - stats.seconds["plan"]
+    stats.seconds["total"] = time.perf_counter() - t_start
+    return Voxels(None, tree.normals, depth, surface.bounds, stats, storage=tree, inside=inside)

@@ -13,6 +13,8 @@ become an inside parent, so an inside entry is the largest octant the voxelizati
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from .. import abi, big_arrays
@@ -215,3 +217,109 @@ class OctreeBuilder:
         tree = Octree(self.depth, self.bounds, self.nodes[:used], normals, counts)
         self.nodes = self._normals = None
         return tree
+
+
+class OctreeAssembly:
+    """The octree built from per-task subtrees, in parallel (a :class:`implc.subdivide.Subdivider`
+    placement): each task's voxels get their place in task order (a voxel offset and a row offset, the
+    only serial step), then the worker that finished the task writes its normals there and inserts its
+    voxels natively into its own rows below the task's node (Fig. 2's insertion, rooted at the task cell),
+    while other tasks are placed. The nodes above the tasks are linked at the end. Each voxel's normal is
+    written once; no coordinates are stored (the tree holds them). Row indices differ from the serial
+    builder's; the tree, its traversals and levels are the same for every worker count.
+    """
+
+    def __init__(self, depth: int, bounds, task_level: int, capacity: int):
+        self.depth, self.bounds, self.task_level = depth, bounds, task_level
+        self.below = depth - task_level  # levels from a task's node to its voxels
+        capacity = max(int(capacity), 1024)
+        self.normals = big_arrays.empty((capacity, 3), np.float32)
+        self.nodes = big_arrays.empty((int(capacity * 0.45) + 1024, 8), np.int32)
+        self.nodes[0] = 0  # the root; the rows after it are the tasks'
+        self.voxel_count, self.node_count = 0, 1
+        self.level_counts = np.zeros(depth + 1, dtype=np.int64)
+        self.level_counts[0] = 1
+        self.roots: list[tuple[tuple, int]] = []  # (task cell, its node's row) of the tasks with voxels
+        self._filling = threading.Condition()
+        self._active = 0  # fills in progress: the arrays may only be replaced when there are none
+        self.runtime = Runtime.shared()
+
+    def prepare(self, result, cell) -> None:
+        """How many rows the task's subtree needs below its node (from its Morton-ordered voxels: each
+        voxel adds a node at every level below the one it shares with the previous voxel)."""
+        n, below = result.count, self.below
+        result.subtree_rows = 0
+        if n == 0 or below == 1:
+            return
+        c = result.coords[:n]
+        diff = (c[1:, 0] ^ c[:-1, 0]) | (c[1:, 1] ^ c[:-1, 1]) | (c[1:, 2] ^ c[:-1, 2])
+        top = np.frexp(diff.astype(np.float64))[1].astype(np.int64) - 1  # highest differing bit
+        result.subtree_rows = (below - 1) + int(np.sum(below - np.maximum(1, below - top)))
+
+    def claim(self, result):
+        """Place a task (in task order): its voxel offset and its node's row."""
+        if result.count == 0:
+            return None
+        rows = 1 + result.subtree_rows
+        with self._filling:
+            if self.voxel_count + result.count > len(self.normals) or self.node_count + rows > len(self.nodes):
+                while self._active:  # fills write into the arrays: wait for them before moving them
+                    self._filling.wait()
+                voxels = max(self.voxel_count + result.count, 2 * len(self.normals))
+                self.normals = big_arrays.grown(self.normals, voxels, self.voxel_count)
+                self.nodes = big_arrays.grown(self.nodes, max(self.node_count + rows, 2 * len(self.nodes)),
+                                              self.node_count)
+            ticket = (self.voxel_count, self.node_count, rows)
+            self.voxel_count += result.count
+            self.node_count += rows
+            self._active += 1
+        return ticket
+
+    def fill(self, result, cell, ticket) -> None:
+        """Write a placed task's normals and subtree (in the worker, in parallel with other tasks)."""
+        if ticket is None:
+            return
+        try:
+            first_voxel, row, rows = ticket
+            n = result.count
+            self.normals[first_voxel:first_voxel + n] = result.normals[:n]
+            local = result.coords[:n] - (np.asarray(cell, dtype=np.uint32) << np.uint32(self.below))
+            self.nodes[row] = 0
+            state = np.zeros(OCTREE_STATE_WORDS, dtype=np.int64)
+            state[NODE_COUNT], state[DEPTH], state[abi.PATH], state[LEVEL_COUNTS] = row + 1, self.below, row, 1
+            inserted = self.runtime.octree_insert(self.nodes.ctypes.data, row + rows, state.ctypes.data,
+                                                  local.ctypes.data, n, first_voxel)
+            if inserted != n or state[NODE_COUNT] != row + rows:
+                raise AssertionError(f"a task's subtree took {state[NODE_COUNT] - row} rows for {inserted} of {n} "
+                                     f"voxels, {rows} planned")
+            counts = state[LEVEL_COUNTS: LEVEL_COUNTS + self.below + 1]
+        finally:
+            with self._filling:
+                self._active -= 1
+                self._filling.notify_all()
+        with self._filling:
+            self.level_counts[self.task_level:] += counts
+            self.roots.append((tuple(int(v) for v in cell), row))
+
+    def finish(self) -> Octree:
+        """Link the tasks' nodes to the root through the levels between (rows after the tasks')."""
+        rows = {(0, (0, 0, 0)): 0}
+
+        def row_of(level, cell):
+            key = (level, cell)
+            if key not in rows:
+                parent = row_of(level - 1, tuple(v >> 1 for v in cell))
+                if self.node_count == len(self.nodes):
+                    self.nodes = big_arrays.grown(self.nodes, 2 * len(self.nodes), self.node_count)
+                rows[key] = self.node_count
+                self.nodes[self.node_count] = 0
+                self.nodes[parent, _slots(np.array([cell]))[0]] = self.node_count
+                self.node_count += 1
+                self.level_counts[level] += 1
+            return rows[key]
+
+        for cell, row in self.roots:
+            parent = row_of(self.task_level - 1, tuple(v >> 1 for v in cell))
+            self.nodes[parent, _slots(np.array([cell]))[0]] = row
+        return Octree(self.depth, self.bounds, self.nodes[:self.node_count], self.normals[:self.voxel_count],
+                      self.level_counts.copy())
