@@ -489,6 +489,60 @@ def solids(args, out):
     return md
 
 
+SCALE_RUN = """
+import json, resource, sys, time
+import implc
+from implc.scene import load
+sc = load(sys.argv[1])
+surface = implc.compile(sc.surface, bounds=sc.bounds)
+import implc.subdivide
+implc.subdivide.Subdivider(surface, 4, 1, surface.runtime)  # its kernels built before the clock starts
+t0 = time.perf_counter()
+v = implc.voxelize(surface, int(sys.argv[2]), workers=int(sys.argv[3]))
+wall = time.perf_counter() - t0
+st = v.stats
+print(json.dumps({"voxels": len(v), "wall_s": wall, "storage_s": st.seconds["storage"],
+                  "subdivide_s": st.seconds["subdivide"], "yield": st.parallel_yield,
+                  "peak_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+                  "estimated_bytes": st.estimated_bytes, "tasks": st.tasks}))
+"""
+
+
+def scale(args, out):
+    """Each grid voxelized in a fresh process (as a user's first run: fresh memory from the kernel),
+    medians of --repeats processes: wall time, the serial part (one task at a time storing), peak RSS and
+    bytes per voxel, the up-front estimate against that peak, the parallel yield."""
+    rows = []
+    for name in args.scale_scenes.split(","):
+        for depth in args.scale_depths:
+            runs = []
+            for _ in range(args.repeats):
+                done = subprocess.run([sys.executable, "-c", SCALE_RUN, name, str(depth), str(args.scale_workers)],
+                                      capture_output=True, text=True, check=True)
+                runs.append(json.loads(done.stdout.strip().splitlines()[-1]))
+            row = {"scene": name, "depth": depth, "workers": args.scale_workers, "voxels": runs[0]["voxels"]}
+            for key in ("wall_s", "storage_s", "subdivide_s", "yield", "peak_bytes", "estimated_bytes"):
+                row[key] = statistics.median(r[key] for r in runs)
+            row["yields"] = [r["yield"] for r in runs]
+            rows.append(row)
+    out["scale"] = rows
+    md = [f"### Scale: fresh processes, {args.scale_workers} workers (medians of {args.repeats})", "",
+          "| scene | grid | voxels | wall s | x per doubling | serial s (share) | peak RSS GiB | bytes/voxel "
+          "| estimate GiB (/ peak) | yield |", "|---|---|---|---|---|---|---|---|---|---|"]
+    previous = {}
+    for r in rows:
+        before = previous.get(r["scene"])
+        growth = f"{r['wall_s'] / before['wall_s']:.1f}" if before and before["depth"] == r["depth"] - 1 else ""
+        previous[r["scene"]] = r
+        md.append(f"| {r['scene']} | {1 << r['depth']}³ | {r['voxels']} | {r['wall_s']:.2f} | {growth} | "
+                  f"{r['storage_s']:.3f} ({r['storage_s'] / r['wall_s']:.1%}) | {r['peak_bytes'] / 2**30:.2f} | "
+                  f"{r['peak_bytes'] / r['voxels']:.1f} | {r['estimated_bytes'] / 2**30:.2f} "
+                  f"({r['estimated_bytes'] / r['peak_bytes']:.2f}) | {r['yield']:.0%} |")
+    md += ["", "Peak RSS is the whole process's (Python, NumPy, LLVM and the kernels included); serial: the time "
+           "tasks spent one at a time claiming their place in the output (the rest of storing runs in parallel)."]
+    return md
+
+
 def viewer(args, out):
     """implc view at --viewer-depths: building the levels of detail, a chunk's cost, and in headless
     Chromium (SwiftShader: software WebGL2, so frames are far slower than on a GPU) the first picture
@@ -548,7 +602,8 @@ def viewer(args, out):
 
 
 SECTIONS = {"table1": table1, "techniques": techniques, "baselines": baselines, "growth": growth,
-            "tightness": tightness, "kernels": kernels, "models": models, "solids": solids, "viewer": viewer}
+            "tightness": tightness, "kernels": kernels, "models": models, "solids": solids, "viewer": viewer,
+            "scale": scale}
 
 
 def parser():
@@ -570,6 +625,9 @@ def parser():
     p.add_argument("--models-skip", default="", help="comma list of model names to leave out")
     p.add_argument("--models-depths", default="8,9", help="grid depths for the models (default 8,9: 256³, 512³)")
     p.add_argument("--solid-scenes", default="paper_blobs,torus", help="scenes for the 'solids' section")
+    p.add_argument("--scale-scenes", default="paper_blobs", help="scenes for the 'scale' section")
+    p.add_argument("--scale-depths", default="10,11,12", help="grid depths for the 'scale' section (1024³-4096³)")
+    p.add_argument("--scale-workers", type=int, default=2, help="workers for the 'scale' section")
     p.add_argument("--viewer-scenes", default="paper_blobs,paper_sin4_sin8,paper_sin3_sin4",
                    help="scenes for the 'viewer' section")
     p.add_argument("--viewer-depths", default="9,11", help="grid depths for the 'viewer' section (512³, 2048³)")
@@ -589,6 +647,7 @@ def main(argv=None) -> int:
     args.models_depths = [int(d) for d in args.models_depths.split(",")]
     args.solid_depths = [int(d) for d in args.solid_depths.split(",")]
     args.viewer_depths = [int(d) for d in args.viewer_depths.split(",")]
+    args.scale_depths = [int(d) for d in args.scale_depths.split(",")]
     args.tightness_scenes = args.tightness_scenes.split(",") if args.tightness_scenes else scene.available()
     sections = args.sections.split(",")
     unknown = [s for s in sections if s not in SECTIONS]

@@ -57,6 +57,8 @@ class SubdivisionStats:
     worker_normals: list = field(default_factory=list)
     worker_tasks: list = field(default_factory=list)
     program_length: int = 0
+    estimated_voxels: int = 0  # the up-front estimate voxelize() checks memory with
+    estimated_bytes: int = 0
     live_ops_per_level: list = field(default_factory=list)
     octants_per_level: list = field(default_factory=list)
 

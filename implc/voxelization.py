@@ -213,11 +213,14 @@ def _estimate_voxels(planned_cells, plan_level, depth):
     return planned_cells * 4 ** (depth - plan_level)
 
 
+def _estimated_bytes(depth, storage, estimate_voxels) -> float:
+    """The memory a voxelization is expected to take (before the check's margin)."""
+    return estimate_voxels * bytes_per_voxel(storage) + (dense_bytes(depth) if storage == "grid" else 0)
+
+
 def _check_memory(depth, storage, estimate_voxels, available):
     """Refuse before starting when the result cannot fit."""
-    estimate = estimate_voxels * bytes_per_voxel(storage) * ESTIMATE_MARGIN
-    if storage == "grid":
-        estimate += dense_bytes(depth)
+    estimate = _estimated_bytes(depth, storage, estimate_voxels * ESTIMATE_MARGIN)  # the margin on the voxels only
     if estimate > available:
         raise MemoryError(f"depth {depth} needs an estimated {estimate / 2**30:.1f} GiB "
                           f"(~{estimate_voxels:.3g} voxels{' plus a dense grid' if storage == 'grid' else ''}) "
@@ -256,6 +259,8 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     cells, level = subdivider.plan()
     estimate = _estimate_voxels(len(cells), level, depth)
     _check_memory(depth, storage, estimate, available)
+    subdivider.stats.estimated_voxels = int(estimate)
+    subdivider.stats.estimated_bytes = int(_estimated_bytes(depth, storage, estimate))
     # reserve generously: the pages of a reserved array that stay untouched cost nothing, a growth costs a copy
     capacity = min(2 * estimate, max_voxels)
     if storage == "octree" and level < depth:  # the default: the tree assembled from the tasks' subtrees

@@ -22,7 +22,8 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
     status = main(["bench", "--depth", "5", "--workers", "1,2", "--repeats", "1", "--baseline-depths", "5",
                    "--growth-depths", "5,6", "--tightness-scenes", "torus,paper_blobs", "--tightness-depth", "6",
                    "--models-dir", str(tmp_path / "models"), "--models-depths", "5,6", "--solid-depths", "5,6",
-                   "--viewer-scenes", "torus", "--viewer-depths", "7"])
+                   "--viewer-scenes", "torus", "--viewer-depths", "7", "--scale-scenes", "torus",
+                   "--scale-depths", "6,7"])
     assert status == 0
     assert "Table 1 at 32³" in capsys.readouterr().out
     assert {p.name: p.read_bytes() for p in results.iterdir()} == quoted
@@ -48,6 +49,9 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
         assert 0 < r["volume_lo"] < r["volume_hi"] and r["inside_octants"] > 0
     torus = [r for r in data["solids"] if r["scene"] == "torus"]
     assert torus[1]["volume_hi"] - torus[1]["volume_lo"] < torus[0]["volume_hi"] - torus[0]["volume_lo"]
+    small, large = data["scale"]  # fresh processes: voxels grow, the peak is the process's, storing is a sliver
+    assert large["voxels"] > small["voxels"] > 0 and small["peak_bytes"] > 0 and large["estimated_bytes"] > 0
+    assert 0 <= large["storage_s"] < large["wall_s"] and 0 < large["yield"] <= 1.5
     (view,) = data["viewer"]
     assert view["chunks"] >= 1 and view["voxels"] > 0 and (view["points"] is None or view["points"] > 0)
     growth = data["growth"]
