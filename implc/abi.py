@@ -79,10 +79,12 @@ NORMALS = _entry("implc_normals", "gradient_live:fn* point:fn* leaf_geom:f64* co
 OCTREE_INSERT = _entry("implc_octree_insert", "nodes:i32* node_capacity:i64 state:i64* coords:i32* n:i64 "
                                               "first_index:i64", "i64")
 OCTREE_TRAVERSE = _entry("implc_octree_traverse", "nodes:i32* depth:i64 level:i64 out:i32* payload:i64*", "i64")
+OCTREE_SUBTREE_ROWS = _entry("implc_octree_subtree_rows", "coords:i32* n:i64 below:i64", "i64")
 OCTREE_MARK_INSIDE = _entry("implc_octree_mark_inside", "nodes:i32* node_capacity:i64 state:i64* rows:i32* n:i64",
                             "i64")
 SPLAT = _entry("implc_splat", "px:i64* py:i64* sizes:i64* depth:f64* n:i64 size:i64 zbuf:f64* winner:i64*")
-RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, SPLAT)
+RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS,
+                   SPLAT)
 
 # -- the tape engine (implc.codegen.tape_engine_module): one interpreter for every program -----------------
 # (``program``: a program header, implc.tape_program; ``slots``: TAPE_SLOT_DOUBLES per slot of the full

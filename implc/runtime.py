@@ -32,7 +32,8 @@ class TapeEngine:
 
 class Runtime:
     """The runtime module's entry points: ``subdivide``, ``normals``, ``octree_insert``,
-    ``octree_traverse``, ``octree_mark_inside`` and ``splat`` (signatures in :mod:`implc.abi`)."""
+    ``octree_traverse``, ``octree_mark_inside``, ``octree_subtree_rows`` and ``splat`` (signatures in
+    :mod:`implc.abi`)."""
 
     _shared: Runtime | None = None
     _lock = threading.Lock()
@@ -44,6 +45,7 @@ class Runtime:
         self.octree_insert = self.native.bind(abi.OCTREE_INSERT)
         self.octree_traverse = self.native.bind(abi.OCTREE_TRAVERSE)
         self.octree_mark_inside = self.native.bind(abi.OCTREE_MARK_INSIDE)
+        self.octree_subtree_rows = self.native.bind(abi.OCTREE_SUBTREE_ROWS)
         self.splat = self.native.bind(abi.SPLAT)
         self._tape_engines: dict[bool, TapeEngine] = {}
 

@@ -5,6 +5,8 @@
   the node array may be reserved uninitialised. Its state words are laid out in :mod:`implc.abi`.
 - ``implc_octree_traverse``: depth-first traversal yielding the nodes of one level in order (the
   boundary's: entries below zero, a solid's inside octants, are neither visited nor yielded).
+- ``implc_octree_subtree_rows``: how many nodes Morton-ordered voxels need below their common root
+  ``below`` levels up (what ``implc_octree_insert`` will create for them from an empty root).
 - ``implc_octree_mark_inside``: records inside octants (rows i, j, k, level) as entries −1, creating the
   nodes above one that no boundary node holds, and merging upward every node whose eight entries are
   inside (it becomes an inside entry of its parent).
@@ -244,3 +246,27 @@ def emit_octree_mark_inside(module: ir.Module):
     store_at(b, node_count.get(), state, abi.NODE_COUNT)
     copy_words(b, counts, 0, state, abi.LEVEL_COUNTS, levels)
     b.ret(done.get())
+
+
+def emit_octree_subtree_rows(module: ir.Module):
+    fn, b = define(module, abi.OCTREE_SUBTREE_ROWS)
+    coords, n, below = fn.args
+    ctlz = module.globals.get("llvm.ctlz.i32") or ir.Function(
+        module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.ctlz.i32")
+    below32 = b.trunc(below, I32)
+    # the first voxel creates a node at every level between the root and the voxels
+    rows = Local(b, I64, b.select(b.icmp_signed(">", n, const(I64, 0)), b.sub(below, const(I64, 1)), const(I64, 0)),
+                 "rows")
+    with for_range(b, n, start=const(I64, 1)) as v:
+        diff = const(I32, 0)
+        for a in range(3):
+            here = load_at(b, coords, b.add(b.mul(v, const(I64, 3)), const(I64, a)))
+            before = load_at(b, coords, b.add(b.mul(b.sub(v, const(I64, 1)), const(I64, 3)), const(I64, a)))
+            diff = b.or_(diff, b.xor(here, before))
+        # a voxel differing from the previous one first at bit t adds a node at each of the t levels
+        # above the voxels that it does not share (t = 0: the same leaf parent), capped at below - 1
+        top = b.sub(const(I32, 31), b.call(ctlz, [diff, const(ir.IntType(1), 0)]))
+        top = b.select(b.icmp_signed("<", top, b.sub(below32, const(I32, 1))), top, b.sub(below32, const(I32, 1)))
+        top = b.select(b.icmp_signed("<", top, const(I32, 0)), const(I32, 0), top)
+        rows.set(b.add(rows.get(), b.sext(top, I64)))
+    b.ret(rows.get())

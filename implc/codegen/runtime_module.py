@@ -9,7 +9,12 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .normals import emit_normals
-from .octree_index import emit_octree_insert, emit_octree_mark_inside, emit_octree_traverse
+from .octree_index import (
+    emit_octree_insert,
+    emit_octree_mark_inside,
+    emit_octree_subtree_rows,
+    emit_octree_traverse,
+)
 from .splat import emit_splat
 from .subdivision import emit_subdivide
 
@@ -22,5 +27,6 @@ def build_runtime() -> str:
     emit_octree_insert(module)
     emit_octree_traverse(module)
     emit_octree_mark_inside(module)
+    emit_octree_subtree_rows(module)
     emit_splat(module)
     return str(module)

@@ -247,14 +247,7 @@ class OctreeAssembly:
     def prepare(self, result, cell) -> None:
         """How many rows the task's subtree needs below its node (from its Morton-ordered voxels: each
         voxel adds a node at every level below the one it shares with the previous voxel)."""
-        n, below = result.count, self.below
-        result.subtree_rows = 0
-        if n == 0 or below == 1:
-            return
-        c = result.coords[:n]
-        diff = (c[1:, 0] ^ c[:-1, 0]) | (c[1:, 1] ^ c[:-1, 1]) | (c[1:, 2] ^ c[:-1, 2])
-        top = np.frexp(diff.astype(np.float64))[1].astype(np.int64) - 1  # highest differing bit
-        result.subtree_rows = (below - 1) + int(np.sum(below - np.maximum(1, below - top)))
+        result.subtree_rows = self.runtime.octree_subtree_rows(result.coords.ctypes.data, result.count, self.below)
 
     def claim(self, result):
         """Place a task (in task order): its voxel offset and its node's row."""
@@ -283,7 +276,8 @@ class OctreeAssembly:
             first_voxel, row, rows = ticket
             n = result.count
             self.normals[first_voxel:first_voxel + n] = result.normals[:n]
-            local = result.coords[:n] - (np.asarray(cell, dtype=np.uint32) << np.uint32(self.below))
+            local = result.coords[:n]
+            local -= np.asarray(cell, dtype=np.uint32) << np.uint32(self.below)  # in place: the buffer is the task's
             self.nodes[row] = 0
             state = np.zeros(OCTREE_STATE_WORDS, dtype=np.int64)
             state[NODE_COUNT], state[DEPTH], state[abi.PATH], state[LEVEL_COUNTS] = row + 1, self.below, row, 1
