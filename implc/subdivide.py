@@ -6,7 +6,9 @@ and keeps the octants that may meet the surface; those become tasks, handed to w
 on its task with the GIL released, then the native normal kernel. Finished tasks reach the storage
 backend strictly in task order (the paper's master's role, taken by whichever worker finds the next task
 ready, so that no extra thread competes for the cores): the voxels arrive in Morton order and the result
-is identical for every worker count. The calling thread only waits.
+is identical for every worker count. With a *placement* (the default octree's), that serial step shrinks
+to claiming each task's place in the output; the worker then stores the task there while the next task
+is claimed. The calling thread only waits.
 
 Ctrl-C or an error in a worker raises a cancel flag that native code polls every octant; every thread is
 joined before the exception reaches the caller.
