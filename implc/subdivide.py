@@ -317,6 +317,8 @@ class Subdivider:
         self._emit_inside = emit_inside
         self._placement = placement
         cells, level = plan if plan is not None else self.plan()
+        if placement is not None and level == self.depth:
+            raise ValueError("a placement needs tasks above the leaves (plan level < depth)")
         if level == self.depth:  # the plan already reached the leaves
             if self.max_voxels is not None and len(cells) > self.max_voxels:
                 raise MemoryError(f"more than max_voxels={self.max_voxels} voxels at depth {self.depth}")
@@ -332,8 +334,6 @@ class Subdivider:
             self.stats.worker_normals = [t1 - t0]
             self.stats.worker_tasks = [len(cells)]
             return self.stats
-        if placement is not None and level == self.depth:
-            raise ValueError("a placement needs tasks above the leaves (plan level < depth)")
         self._parallel(cells, level, emit, progress)
         return self.stats
 

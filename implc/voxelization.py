@@ -130,7 +130,7 @@ class Voxels:
         """(lo, hi) with lo <= the exact volume of {F < 0} within the bounds <= hi: the inside octants'
         volume, and that plus the boundary voxels' (every other cell's enclosure lies above 0). Computed
         exactly in rationals from the float bounds, then rounded outward."""
-        return volume_bounds(self.bounds, self.depth, self.inside_voxels(), len(self.coords))
+        return volume_bounds(self.bounds, self.depth, self.inside_voxels(), len(self))
 
 
 def volume_bounds(bounds, depth: int, inside_voxels: int, boundary_voxels: int) -> tuple[float, float]:
