@@ -149,8 +149,9 @@ def table1(args, out):
         md.append(f"| {r['scene']} | {r['workers']} | {r['seconds']:.3f} | {yld} | {r['compile_s']:.3f} "
                   f"| {r['subdivision_busy_s']:.3f} | {r['normals_busy_s']:.3f} | {r['octree_build_s']:.3f} "
                   f"| {r['voxels']} | {r['interval_evaluations']} | {paper} | {ratio} |")
-    md += ["", "subdivision and normals: summed worker busy time; octree: time the calling thread spent "
-           "inserting and finishing; yield = t1 / (n · tn) from the wall times in this table."]
+    md += ["", "subdivision and normals: summed worker busy time (subdivision includes building each task's part "
+           "of the octree); octree: the serial part, tasks claiming their place one at a time, and linking the "
+           "tasks' subtrees; yield = t1 / (n · tn) from the wall times in this table."]
     return md
 
 
