@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import implc
+from benchmarks import vm_sampling
 from implc import CompileError
 from implc.cli import main
 from implc.regions import plan_regions
@@ -106,31 +107,10 @@ _10 const 10.0
 _out add _s4 _10
 """
 
-NUMPY_OPS = {
-    "add": np.add, "sub": np.subtract, "mul": np.multiply, "div": np.divide, "min": np.minimum,
-    "max": np.maximum, "neg": np.negative, "square": np.square, "sqrt": np.sqrt, "exp": np.exp, "ln": np.log,
-    "sin": np.sin, "cos": np.cos, "abs": np.abs,
-}
-
-
 def interpret(text, x, y, z):
-    """F of the .vm text at numpy arrays x, y, z: the independent truth of these tests."""
-    values = {}
-    last = None
-    with np.errstate(all="ignore"):
-        for line in text.splitlines():
-            words = line.split("#")[0].split()
-            if not words:
-                continue
-            name, op, args = words[0], words[1], words[2:]
-            if op.startswith("var-"):
-                v = {"x": x, "y": y, "z": z}[op[4:]]
-            elif op == "const":
-                v = np.full_like(x, float(args[0]))
-            else:
-                v = NUMPY_OPS[op](*[values[a] for a in args])
-            values[name] = last = v
-    return last
+    """F of the .vm text at numpy arrays x, y, z (the benchmarks' numpy interpreter of the text, not
+    implc's compiler): the independent truth of these tests."""
+    return vm_sampling.evaluate(vm_sampling.parse(text), x, y, z)
 
 
 def sign_change_cells(text, bounds, depth):

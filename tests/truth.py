@@ -9,6 +9,7 @@ import mpmath
 import numpy as np
 import sympy
 
+from benchmarks import vm_sampling
 from implc.symbols import cartesian_form, x, y, z
 
 DPS = 40
@@ -144,14 +145,6 @@ def assert_encloses(surface, expr, lo, hi, rng, per_box=6, mean_value=False):
 
 def corner_sign_changes(f: np.ndarray) -> np.ndarray:
     """The cells of a grid whose eight corner values ``f`` ((n + 1)³, computed by the caller without
-    implc's compiler) change sign, touch 0 or include NaN: the cells a sound voxelization must keep."""
-    n = f.shape[0] - 1
-    lo, hi = np.full((n,) * 3, np.inf), np.full((n,) * 3, -np.inf)
-    undefined = np.zeros((n,) * 3, dtype=bool)
-    for dx in (0, 1):
-        for dy in (0, 1):
-            for dz in (0, 1):
-                c = f[dx:dx + n, dy:dy + n, dz:dz + n]
-                lo, hi = np.minimum(lo, c), np.maximum(hi, c)
-                undefined |= np.isnan(c)
-    return ((lo <= 0) & (hi >= 0)) | undefined
+    implc's compiler) change sign, touch 0 or include NaN: the cells a sound voxelization must keep (the
+    same rule the benchmarks count peer models' cells with)."""
+    return vm_sampling.sign_change_cells(f)
