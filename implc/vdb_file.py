@@ -70,12 +70,12 @@ def _string_meta(name, text):
     return name, "string", text.encode()
 
 
-def _bits(offsets: np.ndarray, groups: np.ndarray, n_groups: int, size: int) -> np.ndarray:
-    """Node masks: (n_groups, size / 8) bytes, bit ``offsets[e]`` set in mask ``groups[e]`` (OpenVDB's
-    layout: little-endian 64-bit words, bit n in word n / 64)."""
-    flat = np.zeros(n_groups * size, dtype=bool)
-    flat[groups.astype(np.int64) * size + offsets] = True
-    return np.packbits(flat, bitorder="little").reshape(n_groups, size // 8)
+def _mask(offsets: np.ndarray, size: int) -> bytes:
+    """A node mask of ``size`` bits with bits ``offsets`` set (OpenVDB's layout: little-endian 64-bit
+    words, bit n in word n / 64)."""
+    bits = np.zeros(size, dtype=bool)
+    bits[offsets] = True
+    return np.packbits(bits, bitorder="little").tobytes()
 
 
 def _offset(coords: np.ndarray, child_log2: int, log2dim: int) -> np.ndarray:
@@ -198,8 +198,8 @@ class _Grid:
 
     def _internal(self, w: _Writer, child_offsets, tile_offsets, log2dim: int):
         size = 1 << (3 * log2dim)
-        w.raw(_bits(child_offsets, np.zeros(len(child_offsets), np.int64), 1, size).tobytes())
-        w.raw(_bits(tile_offsets, np.zeros(len(tile_offsets), np.int64), 1, size).tobytes())
+        w.raw(_mask(child_offsets, size))
+        w.raw(_mask(tile_offsets, size))
         w.pack("b", NO_MASK_OR_INACTIVE_VALS)
         w.raw(self.tile_value * len(tile_offsets))
 

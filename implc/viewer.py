@@ -14,7 +14,7 @@ import html
 import json
 from pathlib import Path
 
-from .atomic_file import replacing_folder
+from .atomic_file import replacing, replacing_folder
 from .lod_chunks import LodChunks
 
 ASSETS = Path(__file__).resolve().parent / "viewer_assets"
@@ -81,7 +81,6 @@ class NotebookView:
 
     def save(self, path) -> Path:
         """Write the self-contained document to ``path`` (an .html any browser opens)."""
-        from .atomic_file import replacing
         path = Path(path)
         with replacing(path) as tmp:
             tmp.write_text(self.document, encoding="utf-8")

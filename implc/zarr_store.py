@@ -62,13 +62,11 @@ class ShardWriter:
         sizes = np.left_shift(np.int64(1), self.depth - inside[:, 3].astype(np.int64))
         firsts = inside[:, :3].astype(np.int64) * sizes[:, None]
         big = sizes > self.shard
+        full = np.ones((self.shard,) * 3, dtype=bool) if np.any(big) else None
         for first, size in zip(firsts[big], sizes[big]):
             per = int(size) >> self.shift
-            for a in range(per):
-                for b in range(per):
-                    for c in range(per):
-                        lo = first + np.array([a, b, c]) * self.shard
-                        self._write(lo, np.ones((self.shard,) * 3, dtype=bool))
+            for step in np.ndindex(per, per, per):  # the whole shards the octant covers
+                self._write(first + np.array(step) * self.shard, full)
         if not np.all(big):
             self.cubes.append((firsts[~big], sizes[~big]))
 

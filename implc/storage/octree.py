@@ -119,9 +119,7 @@ class Octree:
                                                rows[done:].ctypes.data, len(rows) - done)
             if done == len(rows):
                 break
-            grown = np.empty((2 * len(nodes) + abi.MAX_DEPTH, 8), dtype=np.int32)  # out of nodes: room, go on
-            grown[:len(nodes)] = nodes
-            nodes = grown
+            nodes = big_arrays.grown(nodes, 2 * len(nodes) + abi.MAX_DEPTH, len(nodes))  # out of nodes: room, go on
         self.nodes = nodes[:int(state[NODE_COUNT])]
         self.level_counts = state[LEVEL_COUNTS: LEVEL_COUNTS + len(self.level_counts)].copy()
 
