@@ -6,6 +6,9 @@ before the issue "tighter and faster" against now::
 
     python benchmarks/against_revision.py ee2b892 --depth 9 --repeats 5
 
+With ``--workers 1,2`` each process times every worker count in turn, and the table adds the parallel
+yield t1 / (n · tn) of each revision (the wall-time yield of the paper's Table 1).
+
 A case is a scene name, "union of 50 spheres" or the path of a ``.vm`` model (read with ``implc.load_vm``
 where the revision has it, else converted to SymPy with ``evaluate=False``, keeping the DAG).
 """
@@ -28,6 +31,7 @@ import json, random, statistics, sys, time
 import sympy, implc
 from implc import scene, shapes
 case, depth, repeats = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+workers = [int(w) for w in sys.argv[4].split(",")]
 if case == "union of 50 spheres":
     rng = random.Random(7)
     centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
@@ -72,19 +76,22 @@ else:
     sc = scene.load(case)
     s = implc.compile(sc.surface, sc.bounds)
 implc.voxelize(s, depth, workers=1)  # warm: runtime module, memory
-times = []
+times = {w: [] for w in workers}
 for _ in range(repeats):
-    t0 = time.perf_counter(); v = implc.voxelize(s, depth, workers=1); times.append(time.perf_counter() - t0)
-print(json.dumps({"seconds": statistics.median(times), "voxels": len(v)}))
+    for w in workers:  # interleaved, so that drift hits every worker count alike
+        t0 = time.perf_counter(); v = implc.voxelize(s, depth, workers=w); times[w].append(time.perf_counter() - t0)
+        n = len(v)
+        del v
+print(json.dumps({"seconds": {w: statistics.median(t) for w, t in times.items()}, "voxels": n}))
 """
 
 CASES = ("paper_blobs", "union of 50 spheres", "paper_sin4_sin8", "paper_sin3_sin4")
 
 
-def run(tree: Path, case: str, depth: int, repeats: int, cache: Path) -> dict:
+def run(tree: Path, case: str, depth: int, repeats: int, workers: list, cache: Path) -> dict:
     env = dict(os.environ, PYTHONPATH=str(tree), IMPLC_CACHE_DIR=str(cache))
-    out = subprocess.run([sys.executable, "-c", PROBE, case, str(depth), str(repeats)], env=env, check=True,
-                         capture_output=True, text=True, cwd=tree)
+    out = subprocess.run([sys.executable, "-c", PROBE, case, str(depth), str(repeats), ",".join(map(str, workers))],
+                         env=env, check=True, capture_output=True, text=True, cwd=tree)
     return json.loads(out.stdout)
 
 
@@ -95,7 +102,9 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=5, help="timed voxelizations per process")
     p.add_argument("--rounds", type=int, default=3, help="processes per revision and case, interleaved")
     p.add_argument("--cases", default=",".join(CASES))
+    p.add_argument("--workers", default="1", help="worker counts, comma-separated (e.g. 1,2: adds the yield)")
     args = p.parse_args(argv)
+    workers = [int(w) for w in args.workers.split(",")]
     with tempfile.TemporaryDirectory() as tmp:
         old = Path(tmp) / "old"
         subprocess.run(["git", "worktree", "add", "--detach", str(old), args.revision], cwd=ROOT, check=True,
@@ -103,24 +112,35 @@ def main(argv=None) -> int:
         try:
             rows = []
             for case in args.cases.split(","):
-                times = {"old": [], "new": []}
+                times = {(label, w): [] for label in ("old", "new") for w in workers}
                 voxels = {}
                 for _ in range(args.rounds):
                     for label, tree in (("old", old), ("new", ROOT)):
-                        r = run(tree, case, args.depth, args.repeats, Path(tmp) / f"cache-{label}")
-                        times[label].append(r["seconds"])
+                        r = run(tree, case, args.depth, args.repeats, workers, Path(tmp) / f"cache-{label}")
+                        for w in workers:
+                            times[label, w].append(r["seconds"][str(w)])
                         voxels[label] = r["voxels"]
-                t_old, t_new = statistics.median(times["old"]), statistics.median(times["new"])
-                rows.append((case, t_old, t_new, voxels["old"], voxels["new"]))
+                medians = {key: statistics.median(t) for key, t in times.items()}
+                rows.append((case, medians, voxels["old"], voxels["new"]))
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, capture_output=True,
                            check=False)  # best effort: the temporary folder goes anyway
-    print(f"### Voxelize at {1 << args.depth}³, one worker: {args.revision} against this tree "
+    print(f"### Voxelize at {1 << args.depth}³: {args.revision} against this tree "
           f"(medians of {args.rounds} processes x {args.repeats} runs)\n")
-    print(f"| case | {args.revision} s | now s | speedup | voxels then | voxels now |")
-    print("|---|---|---|---|---|---|")
-    for case, t_old, t_new, v_old, v_new in rows:
-        print(f"| {case} | {t_old:.4f} | {t_new:.4f} | {t_old / t_new:.1f}× | {v_old} | {v_new} |")
+    header = ["case"]
+    for w in workers:
+        header += [f"{w}w {args.revision} s", f"{w}w now s", f"{w}w speedup"]
+        if w > 1 and workers[0] == 1:
+            header += [f"{w}w yield {args.revision}", f"{w}w yield now"]
+    print("| " + " | ".join(header + ["voxels then", "voxels now"]) + " |")
+    print("|" + "---|" * (len(header) + 2))
+    for case, m, v_old, v_new in rows:
+        cells = [case]
+        for w in workers:
+            cells += [f"{m['old', w]:.4f}", f"{m['new', w]:.4f}", f"{m['old', w] / m['new', w]:.2f}×"]
+            if w > 1 and workers[0] == 1:
+                cells += [f"{m[label, 1] / (w * m[label, w]):.0%}" for label in ("old", "new")]
+        print("| " + " | ".join(cells + [str(v_old), str(v_new)]) + " |")
     return 0
 
 
