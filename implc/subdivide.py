@@ -299,6 +299,14 @@ class Subdivider:
         self.stats.tasks = len(cells)
         return cells, level
 
+    def count_cells(self, level: int) -> int:
+        """How many cells at ``level`` may meet the surface (a subdivision from the root, kept apart from
+        the statistics; for the memory estimate)."""
+        w = self._new_worker(level)
+        result = _TaskResult()
+        self._run_task(w, (0, 0, 0), 0, level, result)
+        return result.count
+
     def _absorb(self, w: _Worker):
         self.stats.interval_evaluations += int(w.stats[0])
         for level in range(1, self.depth + 1):
