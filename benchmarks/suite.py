@@ -229,27 +229,63 @@ def growth(args, out):
     return md
 
 
+TIGHTNESS_MODES = {"natural": implc.NATURAL, "default": {}, "tightest": implc.TIGHTEST}
+"""The settings the tightness table compares: no second look at leaves, the default, the tightest preset."""
+
+
 def tightness(args, out):
+    """Voxels per sign-change cell at the tightness depth, and CPU seconds at --depth with one worker
+    (modes interleaved in each repeat, kernels compiled before the clock starts), for every scene and the
+    peer models of --tightness-models (their cells counted by numpy on the .vm text)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import sympy
+    import vm_sampling
+
+    cases = [(name, compiled(name), None) for name in args.tightness_scenes]
+    folder = Path(args.models_dir)
+    for stem in filter(None, args.tightness_models.split(",")):
+        path = folder / f"{stem}.vm"
+        if not path.is_file():
+            continue
+        rows_vm = vm_sampling.parse(path.read_text())
+        model = implc.load_vm(path)
+        extrude = None if vm_sampling.uses_z(rows_vm) else sympy.Rational(1, 10)
+        expr = model if extrude is None else sympy.Max(model(implc.x, implc.y, implc.z), sympy.Abs(implc.z) - extrude)
+        cases.append((stem + (" (extruded)" if extrude is not None else ""), implc.compile(expr, model.bounds),
+                      (rows_vm, None if extrude is None else float(extrude))))
     rows = []
-    for name in args.tightness_scenes:
-        s = compiled(name)
-        depth = args.tightness_depth
-        natural_s, v = median_time(lambda: implc.voxelize(s, depth, storage="coords"), args.repeats)
-        implc.voxelize(s, 4, mean_value_levels=1)  # compile the mean-value kernel outside the timing
-        tight = {"mean_value_levels": 1, "refine_leaves": True}
-        mean_value_s, m = median_time(lambda: implc.voxelize(s, depth, storage="coords", **tight), args.repeats)
-        cells = dense_sign_changes(s.eval, s.bounds, depth)
-        rows.append({"scene": name, "voxels": len(v), "sign_change_cells": cells, "ratio": len(v) / cells,
-                     "mean_value_voxels": len(m), "mean_value_ratio": len(m) / cells,
-                     "natural_s": natural_s, "mean_value_s": mean_value_s})
+    depth = args.tightness_depth
+    for name, s, vm in cases:
+        if vm is None:
+            cells = dense_sign_changes(s.eval, s.bounds, depth)
+        else:
+            cells = int(vm_sampling.sign_change_cells(vm_sampling.corner_values(vm[0], s.bounds, depth, vm[1])).sum())
+        row = {"scene": name, "engine": s.engine, "sign_change_cells": cells}
+        for mode, options in TIGHTNESS_MODES.items():
+            v = implc.voxelize(s, depth, storage="coords", **options)  # also builds the kernels the mode needs
+            row[f"{mode}_ratio"] = len(v) / cells
+        cpu = {mode: [] for mode in TIGHTNESS_MODES}
+        for _ in range(args.repeats):
+            for mode, options in TIGHTNESS_MODES.items():
+                cpu[mode].append(_cpu_seconds(lambda: implc.voxelize(s, args.depth, workers=1, **options)))
+        for mode in TIGHTNESS_MODES:
+            row[f"{mode}_cpu_s"] = statistics.median(cpu[mode])
+        rows.append(row)
     out["tightness"] = rows
-    md = [f"### Tightness at {1 << args.tightness_depth}³: voxels / sign-change cells (1.00 is exact)", "",
-          "| scene | sign-change cells | natural voxels | ratio | s | tightest voxels | ratio | s |",
-          "|---|---|---|---|---|---|---|---|"]
-    md += [f"| {r['scene']} | {r['sign_change_cells']} | {r['voxels']} | {r['ratio']:.3f} | {r['natural_s']:.3f} "
-           f"| {r['mean_value_voxels']} | {r['mean_value_ratio']:.3f} | {r['mean_value_s']:.3f} |" for r in rows]
-    md += ["", "tightest: voxelize(..., mean_value_levels=1, refine_leaves=True): leaves decided by the natural "
-           "enclosure intersected with F(c) + ∇F(B)·(B − c), and kept only if one of their eighths may meet F."]
+    md = [f"### Tightness: voxels / sign-change cells at {1 << depth}³ (1.00 is exact), CPU s at "
+          f"{1 << args.depth}³ with one worker", "",
+          "| surface | engine | sign-change cells | natural | default | tightest | natural s | default s (×) "
+          "| tightest s (×) |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        n = r["natural_cpu_s"]
+        md.append(f"| {r['scene']} | {r['engine']} | {r['sign_change_cells']} | {r['natural_ratio']:.3f} "
+                  f"| {r['default_ratio']:.3f} | {r['tightest_ratio']:.3f} | {n:.3f} "
+                  f"| {r['default_cpu_s']:.3f} ({r['default_cpu_s'] / n:.2f}×) "
+                  f"| {r['tightest_cpu_s']:.3f} ({r['tightest_cpu_s'] / n:.2f}×) |")
+    md += ["", "natural: voxelize(..., **implc.NATURAL) (mean_value_levels=0, refine_leaves=False), every leaf the "
+           "natural enclosure keeps; default: refine_leaves='auto', the kept leaves the linear model at their centre "
+           "misses tested again with the monotonicity form; tightest: voxelize(..., **implc.TIGHTEST) "
+           "(mean_value_levels=1, refine_leaves=True). CPU seconds: process time, medians, the modes interleaved."]
     return md
 
 
@@ -404,10 +440,11 @@ def techniques(args, out):
         "no pruning": ({}, {"prune": False}),
         "scalar kernels": ({"vector_width": 1}, {}),
         "widened rounding": (widen, {}),
-        "all off": ({"vector_width": 1, **widen}, {"prune": False}),
-        "mean-value leaves": ({}, {"mean_value_levels": 1}),
+        "all off": ({"vector_width": 1, **widen}, {"prune": False, **implc.NATURAL}),
+        "natural leaves (no second look)": ({}, implc.NATURAL),
+        "mean-value leaves": ({}, {"mean_value_levels": 1, "refine_leaves": False}),
         "refined leaves": ({}, {"refine_leaves": True}),
-        "tightest (both)": ({}, {"mean_value_levels": 1, "refine_leaves": True}),
+        "tightest (both)": ({}, implc.TIGHTEST),
     }
     rows = []
     for name, (expr, bounds) in cases.items():
@@ -439,8 +476,10 @@ def techniques(args, out):
     md += ["", "pruning: terms dead below an octant skipped (implc/regions.py); scalar kernels: compile(..., "
            "vector_width=1) instead of 8 lanes; widened rounding: compile(..., rounding='widen'), bounds rounded "
            "to nearest and then widened instead of rounded outward by AVX-512 instructions (the default where the "
-           "CPU has them; elsewhere the default widens too); mean-value leaves: voxelize(..., mean_value_levels=1); "
-           "refined leaves: voxelize(..., refine_leaves=True), a leaf kept only if one of its eighths may meet F."]
+           "CPU has them; elsewhere the default widens too); natural leaves: voxelize(..., **implc.NATURAL), no second "
+           "look at the leaves the linear model misses; mean-value leaves: voxelize(..., mean_value_levels=1, "
+           "refine_leaves=False); refined leaves: voxelize(..., refine_leaves=True), a leaf kept only if one of its "
+           "eighths may meet F; tightest: voxelize(..., **implc.TIGHTEST)."]
     return md
 
 
@@ -621,6 +660,8 @@ def parser():
     p.add_argument("--growth-depths", default="7,8,9,10,11")
     p.add_argument("--tightness-scenes", default=None, help="default: every scene")
     p.add_argument("--tightness-depth", type=int, default=8)
+    p.add_argument("--tightness-models", default="tanglecube,bear,colonnade",
+                   help="peer models (in --models-dir) for the tightness table, comma-separated")
     p.add_argument("--models-dir", default=str(Path(__file__).resolve().parent.parent.parent / "shared" / "models"),
                    help="folder of .vm models for the 'models' section (default: ../shared/models of the checkout)")
     p.add_argument("--models-skip", default="", help="comma list of model names to leave out")

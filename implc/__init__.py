@@ -9,10 +9,11 @@ from importlib import import_module
 _EXPORTS = {
     "CompileError": "errors", "Surface": "surface", "compile": "surface", "Voxels": "voxelization",
     "voxelize": "voxelization", "x": "symbols", "y": "symbols", "z": "symbols", "r": "symbols", "theta": "symbols",
-    "phi": "symbols", "load_vm": "vm",
+    "phi": "symbols", "load_vm": "vm", "NATURAL": "voxelization", "TIGHTEST": "voxelization",
 }
 
-__all__ = ["CompileError", "Surface", "Voxels", "compile", "load_vm", "phi", "r", "shapes", "theta", "voxelize",
+__all__ = ["NATURAL", "TIGHTEST", "CompileError", "Surface", "Voxels", "compile", "load_vm", "phi", "r", "shapes",
+           "theta", "voxelize",
            "x", "y", "z"]
 __version__ = "0.1.0"
 

@@ -68,14 +68,21 @@ SURFACE_ENTRIES = (POINT, GRADIENT, GRADIENT_LIVE, INTERVAL, OCTANT)
 # ... and the mean-value module, compiled on first use
 INTERVAL_MVF = Entry("implc_interval_mvf", INTERVAL.params)
 OCTANT_MVF = Entry("implc_octant_mvf", OCTANT.params, OCTANT.returns)
-MEAN_VALUE_ENTRIES = (INTERVAL_MVF, OCTANT_MVF)
+INTERVAL_MONOTONE = Entry("implc_interval_monotone", INTERVAL.params)
+BOUND_MONOTONE = _entry("implc_bound_monotone", "lo:f64* hi:f64* side:f64* out:f64* n:i64 live_in:i64*")
+MEAN_VALUE_ENTRIES = (INTERVAL_MVF, OCTANT_MVF, INTERVAL_MONOTONE)
+BOUND_ENTRIES = (BOUND_MONOTONE,)
+"""... and the voxelizer's monotonicity bound, in a small module compiled on first use."""
 
 # -- the generic runtime module (implc.codegen.runtime_module), one per process ------------------------
 SUBDIVIDE = _entry("implc_subdivide",
                    "octant:fn* fine_octant:fn* fine_level:i64 prune:i64 refine:i64 geom:f64* stack:i32* "
                    "masks:i64* state:i64* out:i32* out_masks:i64* capacity:i64 inside:i32* inside_capacity:i64 "
                    "stats:i64* cancel:i32*", "i64")
-NORMALS = _entry("implc_normals", "gradient_live:fn* point:fn* leaf_geom:f64* coords:i32* masks:i64* n:i64 out:f32*")
+NORMALS = _entry("implc_normals", "gradient_live:fn* point:fn* leaf_geom:f64* coords:i32* masks:i64* n:i64 out:f32* "
+                                  "flags:i8*")
+TIGHTEN = _entry("implc_tighten", "bound:fn* geom:f64* depth:i64 coords:i32* masks:i64* normals:f32* flags:i8* "
+                                  "n:i64 inside:i32* inside_count:i64* stats:i64*", "i64")
 OCTREE_INSERT = _entry("implc_octree_insert", "nodes:i32* node_capacity:i64 state:i64* coords:i32* n:i64 "
                                               "first_index:i64", "i64")
 OCTREE_TRAVERSE = _entry("implc_octree_traverse", "nodes:i32* depth:i64 level:i64 out:i32* payload:i64*", "i64")
@@ -83,7 +90,7 @@ OCTREE_SUBTREE_ROWS = _entry("implc_octree_subtree_rows", "coords:i32* n:i64 bel
 OCTREE_MARK_INSIDE = _entry("implc_octree_mark_inside", "nodes:i32* node_capacity:i64 state:i64* rows:i32* n:i64",
                             "i64")
 SPLAT = _entry("implc_splat", "px:i64* py:i64* sizes:i64* depth:f64* n:i64 size:i64 zbuf:f64* winner:i64*")
-RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS,
+RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, TIGHTEN, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS,
                    SPLAT)
 
 # -- the tape engine (implc.codegen.tape_engine_module): one interpreter for every program -----------------
@@ -94,8 +101,8 @@ TAPE_INTERVAL = _entry("implc_tape_interval", "program:i64* slots:f64* choices:i
 TAPE_GRADIENT = _entry("implc_tape_gradient", "program:i64* slots:f64* pts:f64* out_value:f64* out_grad:f64* n:i64")
 TAPE_SUBDIVIDE = _entry("implc_tape_subdivide",
                         "program:i64* prune:i64 refine:i64 geom:f64* state:i64* frames:i32* tapes:i32* choices:i8* "
-                        "slots:f64* need:i32* marks:i8* remap:i32* out:i32* out_normals:f32* capacity:i64 inside:i32* "
-                        "inside_capacity:i64 stats:i64* cancel:i32*", "i64")
+                        "slots:f64* need:i32* marks:i8* remap:i32* out:i32* out_normals:f32* out_flags:i8* "
+                        "capacity:i64 inside:i32* inside_capacity:i64 stats:i64* cancel:i32*", "i64")
 TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE)
 
 # -- layouts shared by native code and Python ------------------------------------------------------
@@ -110,6 +117,11 @@ GEOMETRY_DOUBLES = 6 + 3 * (MAX_DEPTH + 2)
 """Subdivision geometry (``geom``): origin (3), outward pad (3), then cell size per level (3 per level,
 one level past the deepest grid for leaf refinement)."""
 
+TIGHTEN_STATS_WORDS = 2
+"""``implc_tighten``'s counts (int64, added to): leaves tested, leaves dropped."""
+TIGHTEN_ABOVE, TIGHTEN_BELOW = 1, 4
+"""The normals' flags for tightening (:data:`TIGHTEN_ABOVE`: F(c) above the linear model's reach over the
+cell, so the test is whether F > 0 on all of it; :data:`TIGHTEN_BELOW`: below, F < 0); 0: kept as is."""
 SUBDIVIDE_STATE_WORDS = 3
 """``implc_subdivide``'s resumable state (int64): stack size, grid depth, and the inside octants it wrote in
 its last call."""

@@ -442,6 +442,55 @@ def eval_interval_mean_value(tape: Tape, lo, hi) -> tuple[np.ndarray, np.ndarray
     return _whole_line_if_undefined(out_lo, out_hi)
 
 
+def eval_interval_monotone(tape: Tape, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """The natural enclosure intersected with the monotonicity form (:func:`monotone_bounds`), dropped
+    where the form is NaN."""
+    nat_lo, nat_hi = eval_interval_natural_nan(tape, lo, hi)
+    form_lo, form_hi = monotone_bounds(tape, lo, hi)
+    usable = ~(np.isnan(form_lo) | np.isnan(form_hi))
+    out_lo = np.where(usable, np.maximum(nat_lo, form_lo), nat_lo)
+    out_hi = np.where(usable, np.minimum(nat_hi, form_hi), nat_hi)
+    return _whole_line_if_undefined(out_lo, out_hi)
+
+
+def eval_interval_natural_nan(tape: Tape, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """The natural enclosure of the first output over the boxes, NaN kept (as the gradient tape's first
+    output gives it)."""
+    return _interval_outputs(with_gradient(tape), _columns(lo), _columns(hi))[0]
+
+
+def monotone_bounds(tape: Tape, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """The monotonicity form's two bounds over each box (NaN where it is undefined): per axis where
+    ∇ₐF(B) ≥ 0 the lower bound is taken on the box's low face and the upper on its high face (where
+    ∇ₐF(B) ≤ 0 the other way round), the axis adding nothing; the other axes add ∇ₐF(B)·(Bₐ − cₐ) from the
+    centre, as the mean-value form. So lower = F(c⁻) + Σ lowₐ, upper = F(c⁺) + Σ highₐ, c⁻ and c⁺ the
+    corners (or centre coordinates) that choice gives. Sound under the mean-value form's conditions (F
+    continuous on the box, its gradient's enclosure NaN wherever that is in doubt), and only where every
+    partial's enclosure is finite (F Lipschitz on the box: a pole inside it makes the form NaN)."""
+    lo_cols, hi_cols = _columns(lo), _columns(hi)
+    _, *grad = _interval_outputs(with_gradient(tape), lo_cols, hi_cols)
+    centre = [(a + b) * 0.5 for a, b in zip(lo_cols, hi_cols)]
+    least, most, lower, upper = [], [], [], []
+    with np.errstate(all="ignore"):
+        for axis in range(3):
+            rising, falling = grad[axis][0] >= 0, grad[axis][1] <= 0
+            monotone = rising | falling
+            bounded = (np.abs(grad[axis][0]) < np.inf) & (np.abs(grad[axis][1]) < np.inf)  # F Lipschitz on B
+            least.append(np.where(rising, lo_cols[axis], np.where(falling, hi_cols[axis], centre[axis])))
+            most.append(np.where(rising, hi_cols[axis], np.where(falling, lo_cols[axis], centre[axis])))
+            offset = (widen_down(lo_cols[axis] - centre[axis], R.ARITH),
+                      widen_up(hi_cols[axis] - centre[axis], R.ARITH))
+            term_lo, term_hi = i_mul([grad[axis], offset], None)
+            lower.append(np.where(bounded, np.where(monotone, 0.0, term_lo), np.nan))
+            upper.append(np.where(bounded, np.where(monotone, 0.0, term_hi), np.nan))
+        acc_lo = _interval_outputs(tape, least, least)[0][0]
+        acc_hi = _interval_outputs(tape, most, most)[0][1]
+        for axis in range(3):
+            acc_lo = widen_down(acc_lo + lower[axis], R.ARITH)
+            acc_hi = widen_up(acc_hi + upper[axis], R.ARITH)
+    return acc_lo, acc_hi
+
+
 def eval_gradient(tape: Tape, points) -> tuple[np.ndarray, np.ndarray]:
     """(values (N,), gradients (N, 3)) of the single output of a value tape."""
     f, gx, gy, gz = eval_point(with_gradient(tape), points)

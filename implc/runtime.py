@@ -31,7 +31,7 @@ class TapeEngine:
 
 
 class Runtime:
-    """The runtime module's entry points: ``subdivide``, ``normals``, ``octree_insert``,
+    """The runtime module's entry points: ``subdivide``, ``normals``, ``tighten``, ``octree_insert``,
     ``octree_traverse``, ``octree_mark_inside``, ``octree_subtree_rows`` and ``splat`` (signatures in
     :mod:`implc.abi`)."""
 
@@ -42,6 +42,7 @@ class Runtime:
         self.native = NativeModule(build_runtime, source_key="implc-runtime")
         self.subdivide = self.native.bind(abi.SUBDIVIDE)
         self.normals = self.native.bind(abi.NORMALS)
+        self.tighten = self.native.bind(abi.TIGHTEN)
         self.octree_insert = self.native.bind(abi.OCTREE_INSERT)
         self.octree_traverse = self.native.bind(abi.OCTREE_TRAVERSE)
         self.octree_mark_inside = self.native.bind(abi.OCTREE_MARK_INSIDE)

@@ -36,6 +36,10 @@ faults with two workers, and at 4096³ Scene 1 a 10% lower peak (1176 tasks inst
 wall time)."""
 MAX_TASK_LEVEL = 5
 """The deepest level a plan goes to (32³ cells: cheap whatever the grid)."""
+TIGHTEN_TAPE_OPS = 200
+"""The largest tape the tape engine's voxelizations tighten by default: the one compiled kernel it needs
+takes about a second to build at this size (a few for the peer models of hundreds of ops, which the
+engine voxelizes untightened)."""
 OUTPUT_CHUNK = 1 << 16
 """Free rows a task's result has before each native call (it returns when they are full, and the
 result grows)."""
@@ -66,6 +70,7 @@ class SubdivisionStats:
     worker_normals: list = field(default_factory=list)
     worker_tasks: list = field(default_factory=list)
     program_length: int = 0
+    tightened: list = field(default_factory=lambda: [0] * abi.TIGHTEN_STATS_WORDS)  # leaves tested, dropped
     estimated_voxels: int = 0  # the up-front estimate voxelize() checks memory with
     estimated_bytes: int = 0
     live_ops_per_level: list = field(default_factory=list)
@@ -84,8 +89,10 @@ class SubdivisionStats:
         return [ops / n if n else None for ops, n in zip(self.live_ops_per_level, self.octants_per_level)]
 
     def summary(self) -> str:
-        return (f"{self.interval_evaluations} interval evaluations, {self.tasks} tasks at level {self.task_level}, "
-                f"{self.workers} workers, yield {self.parallel_yield:.0%}")
+        tested, dropped = self.tightened
+        second = f", {dropped} of {tested} leaves dropped at a second look" if tested else ""
+        return (f"{self.interval_evaluations} interval evaluations{second}, {self.tasks} tasks at level "
+                f"{self.task_level}, {self.workers} workers, yield {self.parallel_yield:.0%}")
 
 
 def default_workers() -> int:
@@ -133,12 +140,13 @@ class _TaskResult:
         return self.inside.ctypes.data + 4 * abi.INSIDE_WORDS * self.inside_count, room
 
     def _allocate(self, size):
+        self.flags = big_arrays.empty(size, np.uint8)  # the normals' flags for tightening (written after growth)
         self.coords = big_arrays.empty((size, 3), np.uint32)
         self.masks = big_arrays.empty(size, np.int64)  # each voxel's live-term mask
         self.normals = big_arrays.empty((size, 3), np.float32)
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
         self.coords_ptr, self.masks_ptr = self.coords.ctypes.data, self.masks.ctypes.data
-        self.normals_ptr = self.normals.ctypes.data
+        self.normals_ptr, self.flags_ptr = self.normals.ctypes.data, self.flags.ctypes.data
 
     def make_room(self, free):
         """At least ``free`` unused rows past ``count`` (doubling, keeping the rows written so far)."""
@@ -160,6 +168,8 @@ class _Worker:
         self.masks = np.full(STACK_ENTRIES, -1, dtype=np.int64)  # live-term mask of each stack entry
         self.state = np.zeros(abi.SUBDIVIDE_STATE_WORDS, dtype=np.int64)
         self.stats = np.zeros(abi.TAPE_STATS_WORDS, dtype=np.int64)
+        self.tighten_stats = np.zeros(abi.TIGHTEN_STATS_WORDS, dtype=np.int64)
+        self.inside_count = np.zeros(1, dtype=np.int64)
         self.depth = depth
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
         self.stack_ptr, self.state_ptr = self.stack.ctypes.data, self.state.ctypes.data
@@ -185,7 +195,8 @@ class Subdivider:
     """Runs one voxelization of ``surface`` to ``depth``; ``emit(coords, normals)`` receives the voxels."""
 
     def __init__(self, surface, depth: int, workers: int, runtime: Runtime, max_voxels: int | None = None,
-                 mean_value_levels: int = 0, prune: bool = True, refine_leaves: bool = False, solid: bool = False):
+                 mean_value_levels: int = 0, prune: bool = True, refine_leaves: bool | str = "auto",
+                 solid: bool = False):
         self.surface = surface
         self.depth = depth
         self.workers = workers
@@ -195,7 +206,7 @@ class Subdivider:
         leaf = self.geom[6 + 3 * depth: 9 + 3 * depth]
         self.leaf_geom = np.concatenate([self.geom[:3], leaf])
         self.prune = int(bool(prune))
-        self.refine = int(bool(refine_leaves))
+        self.refine = int(refine_leaves is True)
         self.solid = bool(solid)
         self._inside_parts: list[np.ndarray] = []  # a solid's inside octants: the plan's, then each task's
         self._emit_inside = None  # run()'s receiver of each task's inside octants, if any
@@ -209,6 +220,10 @@ class Subdivider:
             self.fine_box = surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else self.box
             self.gradient = surface.kernel_address(abi.GRADIENT_LIVE)
             self.point = surface.kernel_address(abi.POINT)
+        # the tightening pass's kernel (the monotonicity form's bound), where it runs: with compiled kernels,
+        # and on the tape engine for tapes small enough to compile that one kernel in about a second
+        tightens = refine_leaves == "auto" and (self.program is None or len(surface.tape) <= TIGHTEN_TAPE_OPS)
+        self.tighten = surface.kernel_address(abi.BOUND_MONOTONE) if tightens else None
         self.cancel = np.zeros(1, dtype=np.int32)
         self.geom_ptr, self.leaf_geom_ptr = self.geom.ctypes.data, self.leaf_geom.ctypes.data
         self.cancel_ptr = self.cancel.ctypes.data
@@ -253,9 +268,10 @@ class Subdivider:
         w.tape_state[abi.TAPE_TASK_LEVEL] = level
         while True:
             room = result.make_room(OUTPUT_CHUNK)
+            flags = result.flags_ptr + result.count if self.tighten is not None else None
             n = self.tape_engine.subdivide(*self.program_args, self.geom_ptr, *w.tape_buffers,
                                            result.coords_ptr + 12 * result.count,
-                                           result.normals_ptr + 12 * result.count, room,
+                                           result.normals_ptr + 12 * result.count, flags, room,
                                            *result.inside_args(self.solid), w.stats_ptr, self.cancel_ptr)
             result.count += n
             result.inside_count += int(w.tape_state[abi.TAPE_INSIDE_COUNT])
@@ -268,13 +284,40 @@ class Subdivider:
         parts = [p for p in self._inside_parts if len(p)]
         return np.concatenate(parts) if parts else np.empty((0, abi.INSIDE_WORDS), dtype=np.int32)
 
-    def _normals(self, coords: np.ndarray, out: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
+    def _normals(self, coords: np.ndarray, out: np.ndarray, masks: np.ndarray | None = None,
+                 flags: np.ndarray | None = None) -> np.ndarray:
         """Unit normals at the centres of ``coords``, written to ``out`` (same length); ``masks``: each
-        cell's live-term mask (None: every term live)."""
+        cell's live-term mask (None: every term live); ``flags``: receives each cell's flag for
+        :meth:`_leaves`."""
         if len(coords):
             self.runtime.normals(self.gradient, self.point, self.leaf_geom_ptr, coords.ctypes.data,
-                                 None if masks is None else masks.ctypes.data, len(coords), out.ctypes.data)
+                                 None if masks is None else masks.ctypes.data, len(coords), out.ctypes.data,
+                                 None if flags is None else flags.ctypes.data)
         return out
+
+    def _leaves(self, w: _Worker, result: _TaskResult) -> None:
+        """The pass over a task's kept leaves: their normals (the tape engine wrote them with the voxels),
+        then, where tightening, the leaves flagged by the normals tested again and the proven-empty ones
+        dropped (:mod:`implc.codegen.tighten`; a solid's proven-inside ones join the task's inside
+        octants)."""
+        n = result.count
+        if self.program is None:
+            flags = result.flags[:n] if self.tighten is not None else None
+            self._normals(result.coords[:n], result.normals[:n], result.masks[:n], flags)
+        elif self.tighten is not None:
+            result.masks[:n] = -1  # the compiled bound over every term (the engine's pruning is its own)
+        if self.tighten is None or n == 0:
+            return
+        inside = None
+        if self.solid:
+            result.make_inside_room(n)
+            inside = result.inside.ctypes.data
+            w.inside_count[0] = result.inside_count
+        result.count = self.runtime.tighten(self.tighten, self.geom_ptr, self.depth, result.coords_ptr,
+                                            result.masks_ptr, result.normals_ptr, result.flags_ptr, n, inside,
+                                            w.inside_count.ctypes.data, w.tighten_stats.ctypes.data)
+        if self.solid:
+            result.inside_count = int(w.inside_count[0])
 
     # -- orchestration ---------------------------------------------------------------------------
     def plan(self) -> tuple[np.ndarray, int]:
@@ -289,9 +332,11 @@ class Subdivider:
         t0 = time.perf_counter()
         result = _TaskResult()
         self._run_task(w, (0, 0, 0), 0, level, result)
+        if level == self.depth:  # the plan reached the leaves: their pass now
+            self._leaves(w, result)
         cells = result.coords[: result.count].copy()
         self._inside_parts = [result.inside[: result.inside_count].copy()]
-        if self.program is not None:  # the tape engine wrote their normals too
+        if self.program is not None or level == self.depth:  # their normals are written
             self._plan_normals = result.normals[: result.count].copy()
         self.stats.seconds["plan"] = time.perf_counter() - t0
         self._absorb(w)
@@ -309,6 +354,9 @@ class Subdivider:
 
     def _absorb(self, w: _Worker):
         self.stats.interval_evaluations += int(w.stats[0])
+        for i in range(abi.TIGHTEN_STATS_WORDS):
+            self.stats.tightened[i] += int(w.tighten_stats[i])
+        w.tighten_stats[:] = 0
         for level in range(1, self.depth + 1):
             self.stats.kept_per_level[level] += int(w.stats[level + 1])
         if self.program is not None:
@@ -427,9 +475,7 @@ class Subdivider:
                     t0 = time.perf_counter()
                     self._run_task(w, cells[t], level, self.depth, result)
                     t1 = time.perf_counter()
-                    if self.program is None:  # the tape engine wrote them with the voxels
-                        self._normals(result.coords[: result.count], result.normals[: result.count],
-                                      result.masks[: result.count])
+                    self._leaves(w, result)
                     t2 = time.perf_counter()
                     if placement is not None:
                         placement.prepare(result, cells[t])

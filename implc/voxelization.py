@@ -204,6 +204,12 @@ def _check_depth(depth):
     return int(depth)
 
 
+NATURAL = {"mean_value_levels": 0, "refine_leaves": False}
+"""``voxelize(s, depth, **implc.NATURAL)``: every leaf the natural enclosure keeps (no second test)."""
+TIGHTEST = {"mean_value_levels": 1, "refine_leaves": True}
+"""``voxelize(s, depth, **implc.TIGHTEST)``: every leaf decided by the mean-value form and kept only if
+one of its eighths may meet the surface (the tightest, at two to six times the default's time)."""
+
 ESTIMATE_MARGIN = 1.5
 """The memory check's allowance for the estimate running low (measured up to about 1.5x below the peak)."""
 
@@ -234,14 +240,18 @@ def _check_memory(depth, storage, estimate_voxels, available):
 
 
 def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False, max_voxels=None,
-             mean_value_levels=0, prune=True, refine_leaves=False, solid=False) -> Voxels:
+             mean_value_levels=0, prune=True, refine_leaves="auto", solid=False) -> Voxels:
     """Voxelize a compiled surface on a 2^depth grid over its bounds.
 
     ``mean_value_levels``: how many of the deepest levels also use the mean-value form (tighter on small
     boxes, about five times the work per box); 0 uses the natural enclosure everywhere. ``prune``: skip,
     below each octant, the terms of a blend sum or a Min/Max chain that its enclosure showed dead there.
-    ``refine_leaves``: keep a leaf only if one of its eight half-size sub-boxes may meet the surface
-    (tighter, about twice the interval work). The tightest: ``mean_value_levels=1, refine_leaves=True``.
+    ``refine_leaves``: "auto" (the default) tests again the kept leaves that the linear model at their
+    centre does not cross (the mean-value form over the leaf, then over its eighths) and drops those
+    proven empty; True keeps a leaf only if one of its eight half-size sub-boxes may meet the surface
+    (about twice the interval work); False keeps what the enclosures of the leaves keep (the natural
+    mode, with ``mean_value_levels=0``). The tightest: :data:`TIGHTEST`, ``mean_value_levels=1,
+    refine_leaves=True``.
     ``solid``: also classify the inside: octants whose enclosure lies below 0 are kept whole
     (``Voxels.inside``, never expanded), which gives ``Voxels.volume_bounds()`` and
     ``Voxels.to_dense(solid=True)``.
@@ -254,6 +264,9 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
         max_voxels = _check_count("max_voxels", max_voxels)
     if isinstance(mean_value_levels, bool) or not isinstance(mean_value_levels, int) or mean_value_levels < 0:
         raise ValueError(f"mean_value_levels must be a whole number >= 0, got {mean_value_levels!r}")
+    if refine_leaves not in (True, False, "auto") or isinstance(refine_leaves, (int, float)) and \
+            not isinstance(refine_leaves, bool):
+        raise ValueError(f"refine_leaves must be True, False or 'auto', got {refine_leaves!r}")
     available = available_memory()
     if max_voxels is None:
         max_voxels = int(available * 0.8 / bytes_per_voxel(storage))

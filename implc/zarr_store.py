@@ -134,14 +134,17 @@ class ZarrWrite:
         return volume_bounds(self.bounds, self.depth, self.inside_voxels, self.voxels)
 
 
-def write_zarr(surface, depth, path, *, solid: bool = True, workers=None, progress: bool = False) -> ZarrWrite:
+def write_zarr(surface, depth, path, *, solid: bool = True, workers=None, progress: bool = False,
+               mean_value_levels: int = 0, refine_leaves="auto") -> ZarrWrite:
     """Voxelize ``surface`` at ``depth`` straight into a Zarr v3 array at ``path`` (the occupancy of
-    :func:`save_zarr`), in memory bounded by the tasks in flight rather than the voxel count."""
+    :func:`save_zarr`), in memory bounded by the tasks in flight rather than the voxel count
+    (``mean_value_levels``, ``refine_leaves``: as :func:`implc.voxelize`'s)."""
     depth = _check_depth(depth)
     workers = default_workers() if workers is None else _check_count("workers", workers)
     path = Path(path)
     t0 = time.perf_counter()
-    subdivider = Subdivider(surface, depth, workers, surface.runtime, solid=solid)
+    subdivider = Subdivider(surface, depth, workers, surface.runtime, solid=solid,
+                            mean_value_levels=min(mean_value_levels, depth), refine_leaves=refine_leaves)
     cells, level = subdivider.plan()
     task_keys = morton_codes(cells.astype(np.int64) << (depth - level)) if len(cells) else np.empty(0, np.uint64)
     counts = {"voxels": 0, "inside": 0, "inside_voxels": 0, "tasks": 0}

@@ -10,7 +10,7 @@ import sympy
 
 import implc
 from implc import abi, x, y, z
-from implc.codegen.kernels import build_mean_value_module, build_module
+from implc.codegen.kernels import build_bound_module, build_mean_value_module, build_module
 from implc.codegen.runtime_module import build_runtime
 
 DEFINE = re.compile(r'^define\s+(.*?)\s*@"?([\w.]+)"?\((.*?)\)', re.M)
@@ -31,12 +31,14 @@ def surface():
     return implc.compile(sympy.Min(x**2 + y**2 - 1, sympy.exp(z) - 2) + sympy.sin(x))
 
 
-@pytest.mark.parametrize("module_entries", ["surface", "mean_value", "runtime"])
+@pytest.mark.parametrize("module_entries", ["surface", "mean_value", "bound", "runtime"])
 def test_every_entry_is_exported_with_its_declared_signature(module_entries, surface):
     if module_entries == "surface":
         text, entries = build_module(surface.tape, surface.gradient_tape), abi.SURFACE_ENTRIES
     elif module_entries == "mean_value":
         text, entries = build_mean_value_module(surface.tape, surface.gradient_tape), abi.MEAN_VALUE_ENTRIES
+    elif module_entries == "bound":
+        text, entries = build_bound_module(surface.tape, surface.gradient_tape), abi.BOUND_ENTRIES
     else:
         text, entries = build_runtime(), abi.RUNTIME_ENTRIES
     defined = exported(text)
@@ -46,7 +48,7 @@ def test_every_entry_is_exported_with_its_declared_signature(module_entries, sur
 
 
 def test_ctypes_prototypes_follow_the_declarations():
-    for entry in (*abi.SURFACE_ENTRIES, *abi.MEAN_VALUE_ENTRIES, *abi.RUNTIME_ENTRIES):
+    for entry in (*abi.SURFACE_ENTRIES, *abi.MEAN_VALUE_ENTRIES, *abi.BOUND_ENTRIES, *abi.RUNTIME_ENTRIES):
         proto = entry.ctypes_type()
         assert len(proto._argtypes_) == len(entry.params)
         for (name, kind), ctype in zip(entry.params, proto._argtypes_):
@@ -56,7 +58,7 @@ def test_ctypes_prototypes_follow_the_declarations():
 
 
 def test_every_surface_entry_binds(surface):
-    for entry in (*abi.SURFACE_ENTRIES, *abi.MEAN_VALUE_ENTRIES):
+    for entry in (*abi.SURFACE_ENTRIES, *abi.MEAN_VALUE_ENTRIES, *abi.BOUND_ENTRIES):
         assert surface.kernel_address(entry) != 0
         assert isinstance(surface.kernel(entry), ctypes._CFuncPtr)
     with pytest.raises(LookupError, match="implc_subdivide is not a surface kernel"):

@@ -21,6 +21,7 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
                                                   "r const 2.25\nout sub t r\n")
     status = main(["bench", "--depth", "5", "--workers", "1,2", "--repeats", "1", "--baseline-depths", "5",
                    "--growth-depths", "5,6", "--tightness-scenes", "torus,paper_blobs", "--tightness-depth", "6",
+                   "--tightness-models", "ball",
                    "--models-dir", str(tmp_path / "models"), "--models-depths", "5,6", "--solid-depths", "5,6",
                    "--viewer-scenes", "torus", "--viewer-depths", "7", "--scale-scenes", "torus",
                    "--scale-depths", "6,7"])
@@ -34,8 +35,9 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
     assert {r["workers"] for r in table} == {1, 2}
     for scene in {r["scene"] for r in table}:  # the same voxels whatever the worker count
         assert len({r["voxels"] for r in table if r["scene"] == scene}) == 1
-    for r in data["tightness"]:
-        assert r["ratio"] >= r["mean_value_ratio"] >= 1.0  # no sign-change cell is ever missed
+    assert [r["scene"] for r in data["tightness"]] == ["torus", "paper_blobs", "ball"]
+    for r in data["tightness"]:  # no sign-change cell is ever missed, and the default is never looser
+        assert r["natural_ratio"] >= r["default_ratio"] >= 1.0 and r["tightest_ratio"] >= 1.0
     for r in data["baselines"]:
         assert r["voxels"] >= r["numpy_cells"] > 0
         if "symengine llvm_cells" in r:

@@ -10,7 +10,8 @@ import pytest
 from PIL import Image
 from plyfile import PlyData
 
-from implc import voxel_files
+import implc
+from implc import scene, voxel_files
 from implc.cli import main
 
 
@@ -125,3 +126,21 @@ def test_demo_writes_the_three_renders(tmp_path, capsys):
 def test_console_script_is_declared():
     text = (Path(__file__).parent.parent / "pyproject.toml").read_text()
     assert 'implc = "implc.cli:main"' in text
+
+
+def test_tightness_option_spells_the_presets_and_changes_the_leaves(tmp_path):
+    """--tightness natural / default / tightest are implc.NATURAL, the default and implc.TIGHTEST: the
+    natural mode keeps the most voxels, the tightest the fewest, each file the same as the API's."""
+    from implc import cli
+    assert cli.TIGHTNESS == {"natural": implc.NATURAL, "default": {}, "tightest": implc.TIGHTEST}
+    counts = {}
+    for mode in ("natural", "default", "tightest"):
+        out = tmp_path / f"{mode}.npz"
+        assert main(["voxelize", "paper_sin3_sin4", "--depth", "6", "--quiet", "--tightness", mode,
+                     "-o", str(out)]) == 0
+        counts[mode] = len(voxel_files.load_npz(out))
+    sc = scene.load("paper_sin3_sin4")
+    s = implc.compile(sc.surface, sc.bounds)
+    assert counts["natural"] == len(implc.voxelize(s, 6, **implc.NATURAL))
+    assert counts["default"] == len(implc.voxelize(s, 6))
+    assert counts["natural"] > counts["default"] >= counts["tightest"]

@@ -238,6 +238,11 @@ MEAN_VALUE_EVALUATORS = {
     "pruned mean-value kernel, every term live": lambda s, lo, hi: _interval_with_all_live(s, lo, hi,
                                                                                            abi.INTERVAL_MVF),
 }
+MONOTONE_EVALUATORS = {
+    "monotone kernel": lambda s, lo, hi: s.interval(lo, hi, monotone=True),
+    "pruned monotone kernel, every term live": lambda s, lo, hi: _interval_with_all_live(s, lo, hi,
+                                                                                        abi.INTERVAL_MONOTONE),
+}
 WIDTHS = (8, 1, pytest.param(4, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow))
 """Every vector width runs every case; 4 and 2 (the same code as 8 on fewer lanes) only in the slow run."""
 
@@ -419,6 +424,43 @@ def test_tape_engine_encloses_true_values(name, compiled):
 
 
 @pytest.mark.parametrize("name", sorted(OP_CASES))
+def test_monotone_evaluators_conform(name, compiled):
+    """The monotonicity form's kernels against the reference, rule for rule, on boxes of every size, and
+    the voxelizer's one-sided bound against them."""
+    s = compiled(name)
+    lo, hi = _boxes(name)
+    small = np.random.default_rng(seed(name) + 7).random(len(lo)) < 0.5  # the form pays on small boxes
+    hi[small] = lo[small] + (hi[small] - lo[small]) * 1e-3
+    scale = _scale(reference.interval_nodes(s.gradient_tape, lo, hi))
+    # the gradient tape's nodes and F at a corner, each as the reference's (their budgets add up)
+    budget = (case_budget(s.gradient_tape, INTERVAL_BUDGET) + case_budget(s.tape, INTERVAL_BUDGET)) * \
+        AMPLIFICATION.get(name, 1)
+    r_lo, r_hi = reference.eval_interval_monotone(s.tape, lo, hi)
+    for label, evaluate in MONOTONE_EVALUATORS.items():
+        f_lo, f_hi = evaluate(s, lo, hi)
+        assert_conforms(f_lo, r_lo, budget, scale, f"{name} {label}: lower bounds")
+        assert_conforms(f_hi, r_hi, budget, scale, f"{name} {label}: upper bounds")
+    # the voxelizer's one-sided bound is the same form, bit for bit, where the form binds the two-sided
+    # kernel's bound (elsewhere the natural enclosure does, and the raw form is at most as tight)
+    n_lo, n_hi = s.interval(lo, hi)
+    t_lo, t_hi = s.interval(lo, hi, monotone=True)
+    lower, upper = _one_sided_bound(s, lo, hi, True), _one_sided_bound(s, lo, hi, False)
+    binds_lo, binds_hi = t_lo > n_lo, t_hi < n_hi
+    assert np.array_equal(lower[binds_lo], t_lo[binds_lo]) and np.array_equal(upper[binds_hi], t_hi[binds_hi]), name
+    assert np.all(np.isnan(lower) | (lower <= t_lo)) and np.all(np.isnan(upper) | (upper >= t_hi)), name
+
+
+def _one_sided_bound(s, lo, hi, above):
+    """``implc_bound_monotone`` over the boxes: the lower bounds (``above``) or the upper ones."""
+    (lo_p, hi_p), n = _padded([lo, hi], 8)
+    side = np.full(len(lo_p), 1.0 if above else -1.0)
+    out = np.empty(len(lo_p))
+    s.kernel(abi.BOUND_MONOTONE)(lo_p.ctypes.data, hi_p.ctypes.data, side.ctypes.data, out.ctypes.data,
+                                 len(lo_p), None)
+    return out[:n]
+
+
+@pytest.mark.parametrize("name", sorted(OP_CASES))
 def test_widened_intervals_enclose_true_values(name, widened):
     rng = np.random.default_rng(seed(name) + 2)
     lo, hi = adversarial_boxes(rng, 40)
@@ -436,6 +478,38 @@ def test_mean_value_form_encloses_and_never_loosens(name, surfaces):
     n_lo, n_hi = s.interval(lo, hi)
     m_lo, m_hi = s.interval(lo, hi, mean_value=True)
     assert np.all(m_lo >= n_lo) and np.all(m_hi <= n_hi)
+
+
+@pytest.mark.parametrize("name", sorted(OP_CASES))
+def test_monotone_form_encloses_and_is_tighter_than_the_mean_value_form(name, surfaces):
+    """Against 40-digit values at each box's corners (where the form is exact when every partial keeps its
+    sign) and inside points; never looser than the natural enclosure, and never looser than the mean-value
+    form by more than rounding."""
+    s = surfaces[name]
+    rng = np.random.default_rng(seed(name) + 3)
+    lo, hi = adversarial_boxes(rng, 60)
+    small = rng.random(60) < 0.5
+    hi[small] = lo[small] + (hi[small] - lo[small]) * 1e-3
+    assert_encloses(s, OP_CASES[name], lo, hi, rng, monotone=True)
+    n_lo, n_hi = s.interval(lo, hi)
+    f_lo, f_hi = s.interval(lo, hi, monotone=True)
+    m_lo, m_hi = s.interval(lo, hi, mean_value=True)
+    assert np.all(f_lo >= n_lo) and np.all(f_hi <= n_hi)
+    width = np.where(np.isfinite(m_hi - m_lo), m_hi - m_lo, 0.0)
+    slack = 1e-12 * (np.abs(m_lo) + np.abs(m_hi) + width)
+    assert np.all(~np.isfinite(m_lo) | (f_lo >= m_lo - slack)), name
+    assert np.all(~np.isfinite(m_hi) | (f_hi <= m_hi + slack)), name
+
+
+def test_monotone_form_is_exact_where_every_partial_keeps_its_sign():
+    """F = x + 2y − z + x³ over a box where every partial is positive or negative: the form's bounds are F
+    at two corners (within rounding), the natural enclosure is wider."""
+    s = implc.compile(x + 2 * y - z + x**3, rounding="widen")
+    lo, hi = np.array([[0.1, -0.3, 0.2]]), np.array([[0.2, -0.25, 0.3]])
+    f_lo, f_hi = s.interval(lo, hi, monotone=True)
+    exact_lo = 0.1 + 2 * -0.3 - 0.3 + 0.1**3
+    exact_hi = 0.2 + 2 * -0.25 - 0.2 + 0.2**3
+    assert exact_lo - 1e-14 <= f_lo[0] <= exact_lo and exact_hi <= f_hi[0] <= exact_hi + 1e-14
 
 
 def test_op_cases_cover_every_op():

@@ -66,17 +66,21 @@ def test_no_cell_with_a_sign_change_is_missed(name, depth, compiled, over_inclus
     over_inclusion[(name, depth)] = len(voxels) / expected.sum()
 
 
-@pytest.mark.parametrize("options", [{"mean_value_levels": 1}, {"refine_leaves": True},
-                                     {"mean_value_levels": 1, "refine_leaves": True}], ids=["mvf", "refine", "both"])
+@pytest.mark.parametrize("options", [{}, {"mean_value_levels": 1, "refine_leaves": False},
+                                     {"refine_leaves": True}, implc.TIGHTEST],
+                         ids=["default", "mvf", "refine", "tightest"])
 @pytest.mark.parametrize("name", sorted(SURFACES))
 def test_tighter_leaves_miss_nothing_and_keep_fewer(name, options, compiled):
+    """Every tighter setting, the default's second look at leaves included, keeps a subset of the natural
+    mode's voxels and every sign-change cell, the same for every worker count."""
     s = compiled[name]
-    natural = implc.voxelize(s, 7, storage="coords")
+    natural = implc.voxelize(s, 7, storage="coords", **implc.NATURAL)
     tight = implc.voxelize(s, 7, storage="coords", **options)
     expected = sign_change_cells(s, 7)
     assert not np.any(expected & ~tight.to_dense()), f"{name}: {options} lost a cell"
     assert not np.any(tight.to_dense() & ~natural.to_dense())  # a subset of the natural voxels
     np.testing.assert_array_equal(tight.coords, implc.voxelize(s, 7, workers=1, **options).coords)
+    np.testing.assert_array_equal(tight.coords, implc.voxelize(s, 7, workers=3, **options).coords)
 
 
 def test_tightest_settings_reach_the_paper_scenes_targets(compiled):
@@ -131,8 +135,9 @@ def test_worker_counts_agree_and_order_is_morton(name, compiled):
     keys = morton_keys(one.coords, 7)
     assert np.all(keys[1:] > keys[:-1])
     assert one.coords.dtype == np.uint32 and one.normals.dtype == np.float32
-    assert one.stats.kept_per_level[7] == len(one)
+    assert one.stats.kept_per_level[7] - one.stats.tightened[1] == len(one)  # kept, less the second look's drops
     assert one.stats.interval_evaluations == two.stats.interval_evaluations > 0
+    assert one.stats.tightened == two.stats.tightened
     assert one.stats.kept_per_level == two.stats.kept_per_level
 
 
@@ -344,11 +349,11 @@ def test_worker_errors_reach_the_caller_and_no_thread_is_left(monkeypatch):
     calls = {"n": 0}
     original = Subdivider._normals
 
-    def failing(self, coords, out, masks=None):
+    def failing(self, coords, out, masks=None, flags=None):
         calls["n"] += 1
         if calls["n"] > 3:
             raise RuntimeError("boom in a worker")
-        return original(self, coords, out, masks)
+        return original(self, coords, out, masks, flags)
 
     monkeypatch.setattr(Subdivider, "_normals", failing)
     before = threading.active_count()

@@ -120,10 +120,11 @@ def sample_points(rng, lo, hi, per_box):
     return np.minimum(np.maximum(pts, lo[:, None, :]), hi[:, None, :])
 
 
-def assert_encloses(surface, expr, lo, hi, rng, per_box=6, mean_value=False):
-    """Every true value of expr at sampled points of each box lies in surface.interval of that box;
-    where the true value is undefined, the enclosure must be the whole line."""
-    f_lo, f_hi = surface.interval(lo, hi, mean_value=mean_value)
+def assert_encloses(surface, expr, lo, hi, rng, per_box=6, **form):
+    """Every true value of expr at sampled points of each box lies in surface.interval of that box (with
+    ``form``: e.g. mean_value=True); where the true value is undefined, the enclosure must be the whole
+    line."""
+    f_lo, f_hi = surface.interval(lo, hi, **form)
     truth = TrueValues(expr)
     pts = sample_points(rng, lo, hi, per_box)
     for i in range(len(lo)):

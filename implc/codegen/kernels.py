@@ -15,6 +15,12 @@ Signatures are declared in :mod:`implc.abi`. Every batched kernel walks ``n`` it
   Either may be NULL: everything is live, and no mask is written.
 - ``implc_interval_mvf(lo, hi, out_lo, out_hi, n)``: the same, intersected with the mean-value form
   (tighter on small boxes, about five times the work), built by :func:`build_mean_value_module`.
+- ``implc_interval_monotone(...)``: the same, intersected with the monotonicity form (each bound from the
+  corner where F is least or greatest along the axes where the gradient's sign is known; tight on small
+  boxes the surface passes near), in the same module.
+- ``implc_bound_monotone(lo, hi, side, out, n, live_in)``: one bound of that form per box, the lower where
+  ``side`` > 0, else the upper (NaN where it is undefined), for one evaluation of F at a corner instead
+  of two; in a small module of its own (:func:`build_bound_module`), for the voxelizer.
 
 and, for the subdivider, the same enclosures over the eight children of one octant, generated in
 vector registers from the octant's cell index:
@@ -37,11 +43,11 @@ from ..regions import plan_regions
 from . import elementary
 from .control import define, for_range
 from .interval_rules import emit_interval
-from .mean_value import emit_mean_value
+from .mean_value import emit_mean_value, emit_monotone_bound, emit_monotone_form
 from .point import emit_point
 from .pruned_gradient import emit_pruned_gradient
 from .pruned_interval import emit_interval_regions
-from .pruned_mean_value import emit_pruned_mean_value
+from .pruned_mean_value import emit_pruned_mean_value, emit_pruned_monotone_bound, emit_pruned_monotone_form
 from .vector import DOUBLE, I64, VectorBuilder, broadcast
 
 WIDTH = 8
@@ -229,8 +235,8 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
 
 def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface_mvf",
                             width: int = WIDTH, directed: bool = False) -> str:
-    """The LLVM IR of the mean-value interval kernel, a module of its own: it is about three times the
-    size of the others together, so it is compiled only when first used."""
+    """The LLVM IR of the mean-value and monotonicity-form kernels, a module of its own: it is about three
+    times the size of the others together, so it is compiled only when first used."""
     module = ir.Module(name=name)
     plan = plan_regions(value_tape)
 
@@ -238,7 +244,38 @@ def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "
         if plan.fold is not None:  # over the live terms only, and each child gets its own mask
             return emit_pruned_mean_value(vb, value_tape, plan, lo, hi, live_in)
         return (*emit_mean_value(vb, value_tape, gradient_tape, lo, hi), broadcast(vb.b, live_in, vb.width))
+
+    def monotone(vb, lo, hi, live_in):
+        if plan.fold is not None:
+            return emit_pruned_monotone_form(vb, value_tape, plan, lo, hi, live_in)
+        return (*emit_monotone_form(vb, value_tape, gradient_tape, lo, hi), broadcast(vb.b, live_in, vb.width))
     outline = elementary.outlines(gradient_tape)
     _interval_kernel(module, abi.INTERVAL_MVF, width, directed, outline, enclose)
     _octant_kernel(module, abi.OCTANT_MVF, width, directed, outline, enclose)
+    _interval_kernel(module, abi.INTERVAL_MONOTONE, width, directed, outline, monotone)
+    return str(module)
+
+
+def build_bound_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface_bound", width: int = WIDTH,
+                       directed: bool = False) -> str:
+    """The LLVM IR of ``implc_bound_monotone``, the one kernel the voxelizer's second look at leaves needs,
+    in a module of its own: compiled on a surface's first voxelization (a fraction of the mean-value
+    module's time), or never where no voxelization asks for it."""
+    module = ir.Module(name=name)
+    plan = plan_regions(value_tape)
+    outline = elementary.outlines(gradient_tape)
+    fn, b, blocks = _kernel(module, abi.BOUND_MONOTONE, width)
+    lo, hi, side, out, _, live_in = fn.args
+    with for_range(b, blocks) as i:
+        vb = VectorBuilder(b, width, directed, outline)
+        sides = b.load(_vector_ptr(b, side, b.mul(i, ir.Constant(I64, width)), width), align=8)
+        lo_coords, hi_coords = load_xyz(b, lo, i, width), load_xyz(b, hi, i, width)
+        above = vb.cmp(">", sides, vb.splat(0.0))
+        if plan.fold is not None:
+            value = emit_pruned_monotone_bound(vb, value_tape, plan, lo_coords, hi_coords,
+                                               _parent_mask(b, live_in, i, width), above)
+        else:
+            value = emit_monotone_bound(vb, value_tape, gradient_tape, lo_coords, hi_coords, above)
+        store_lanes(b, out, i, value, width)
+    b.ret_void()
     return str(module)

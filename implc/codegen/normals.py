@@ -3,6 +3,11 @@
 It calls a surface's gradient kernel over the terms live in the voxels' cells (where masks are given),
 normalises in vector registers when every gradient of a block of eight is usable, and otherwise falls
 back to central differences and then to a fixed direction: a normal is never NaN, never zero.
+
+Where ``flags`` is not NULL it also marks, with the value and gradient it has anyway, each voxel whose
+cell the linear model at its centre does not cross: |F(c)| > Σ |∂F/∂xᵢ(c)|·hᵢ/2 (flag
+:data:`implc.abi.TIGHTEN_ABOVE` where F(c) > 0, :data:`implc.abi.TIGHTEN_BELOW` where F(c) < 0, else 0).
+Those are the cells :mod:`implc.codegen.tighten` tries to drop; a flag is a choice of work, never a proof.
 """
 
 from __future__ import annotations
@@ -19,19 +24,21 @@ FLOAT = ir.FloatType()
 
 def emit_normals(module: ir.Module):
     fn, b = define(module, abi.NORMALS)
-    grad_ptr, point_ptr, geom, coords, masks, n, out = fn.args
+    grad_ptr, point_ptr, geom, coords, masks, n, out, flags = fn.args
     grad_fn = b.bitcast(grad_ptr, ir.PointerType(abi.GRADIENT_LIVE.llvm_type()))
     point_fn = b.bitcast(point_ptr, ir.PointerType(abi.POINT.llvm_type()))
     emit_normals_body(b, geom, coords, masks, n, out,
                       lambda pts, values, grad, live: b.call(grad_fn, [pts, values, grad, const(I64, 8), live]),
-                      lambda probe, probe_values: b.call(point_fn, [probe, probe_values, const(I64, 48)]))
+                      lambda probe, probe_values: b.call(point_fn, [probe, probe_values, const(I64, 48)]),
+                      flags)
     b.ret_void()
 
 
-def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at, values_at):
+def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at, values_at, flags=None):
     """The normals of ``n`` voxels at ``coords`` into ``out``, emitted at ``b``: ``gradient_at(pts, values,
     grad, live)`` emits F and its gradient at eight points (24 interleaved doubles; ``live`` the union of
-    their cells' masks, all ones where ``masks`` is NULL), ``values_at(probe, probe_values)`` F at 48."""
+    their cells' masks, all ones where ``masks`` is NULL), ``values_at(probe, probe_values)`` F at 48.
+    ``flags`` (i8*, may be NULL at run time; None: not emitted): each voxel's linear-model flag."""
     module = b.module
     origin = [load_at(b, geom, a) for a in range(3)]
     h = [load_at(b, geom, 3 + a) for a in range(3)]
@@ -98,6 +105,8 @@ def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at,
                                     ir.Constant(ir.VectorType(I32, 8), [3 * j + a for j in range(8)]))
         g8 = [axis(rows, a) for a in range(3)]
         c8 = [axis(centres, a) for a in range(3)]
+        if flags is not None:
+            _store_flags(b, flags, block, n, values, g8, h)
         n2 = norm2(g8)
         good = b.and_(b.and_(b.fcmp_ordered(">", n2, ir.Constant(v8, [0.0] * 8)),
                              b.fcmp_ordered("<", n2, ir.Constant(v8, [float("inf")] * 8))),
@@ -154,3 +163,23 @@ def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at,
                             store_at(b, unit, out, b.add(b.mul(index, const(I64, 3)), const(I64, a)))
 
 
+
+
+def _store_flags(b: ir.IRBuilder, flags, block, n, values, g8, h):
+    """Flag where |F(c)| > Σ |gᵢ|·hᵢ/2 (the linear model at the centre misses the cell; NaN: no flag),
+    by F(c)'s side, for the block's voxels below ``n``."""
+    v8 = ir.VectorType(DOUBLE, 8)
+    fabs = intrinsic(b.module, "llvm.fabs.v8f64", 1, v8)
+    with if_(b, b.icmp_unsigned("!=", flags, ir.Constant(flags.type, None))):
+        value = b.load(b.bitcast(values, ir.PointerType(v8)), align=8)
+        reach = ir.Constant(v8, [0.0] * 8)
+        for a in range(3):
+            reach = b.fadd(reach, b.fmul(b.call(fabs, [g8[a]]), broadcast(b, b.fmul(h[a], const(DOUBLE, 0.5)), 8)))
+        i8x8 = ir.VectorType(ir.IntType(8), 8)
+        side = b.select(b.fcmp_ordered(">", value, ir.Constant(v8, [0.0] * 8)),
+                        ir.Constant(i8x8, [abi.TIGHTEN_ABOVE] * 8), ir.Constant(i8x8, [abi.TIGHTEN_BELOW] * 8))
+        missed = b.select(b.fcmp_ordered(">", b.call(fabs, [value]), reach), side, ir.Constant(i8x8, [0] * 8))
+        for j in range(8):
+            index = b.add(b.mul(block, const(I64, 8)), const(I64, j))
+            with if_(b, b.icmp_signed("<", index, n)):
+                store_at(b, b.extract_element(missed, const(I32, j)), flags, index)

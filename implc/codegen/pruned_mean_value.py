@@ -15,7 +15,7 @@ from __future__ import annotations
 from ..gradient import with_gradient
 from .fold import IDENTITY, fold_live_terms
 from .interval_rules import IntervalEmitter, emit_interval_outputs
-from .mean_value import box_centre, intersect_mean_value
+from .mean_value import box_centre, intersect_mean_value, intersect_monotone, monotone_bound
 from .pruned_interval import emit_interval_regions
 from .vector import VectorBuilder
 
@@ -62,10 +62,38 @@ each an interval (lo, hi)."""
 def emit_pruned_mean_value(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask):
     """(lo, hi, masks): the natural enclosure over the live terms intersected with their mean-value form,
     and each box's live mask (as :func:`implc.codegen.pruned_interval.emit_interval_regions`)."""
-    em = IntervalEmitter(vb)
     nat_lo, nat_hi, masks = emit_interval_regions(vb, tape, plan, lo_coords, hi_coords, live_mask)
     centre = box_centre(vb, lo_coords, hi_coords)
     c_lo, c_hi, _ = emit_interval_regions(vb, tape, plan, centre, centre, live_mask)
+    grad = _live_gradient(vb, tape, plan, lo_coords, hi_coords, live_mask)
+    lo, hi = intersect_mean_value(vb, (nat_lo, nat_hi), (c_lo, c_hi), grad, lo_coords, hi_coords, centre)
+    return lo, hi, masks
+
+
+def emit_pruned_monotone_form(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask):
+    """(lo, hi, masks): the natural enclosure over the live terms intersected with their monotonicity
+    form (:func:`implc.codegen.mean_value.intersect_monotone`), and each box's live mask."""
+    nat_lo, nat_hi, masks = emit_interval_regions(vb, tape, plan, lo_coords, hi_coords, live_mask)
+    grad = _live_gradient(vb, tape, plan, lo_coords, hi_coords, live_mask)
+
+    def value_at(point):
+        return emit_interval_regions(vb, tape, plan, point, point, live_mask)[:2]
+    lo, hi = intersect_monotone(vb, (nat_lo, nat_hi), grad, lo_coords, hi_coords, value_at)
+    return lo, hi, masks
+
+
+def emit_pruned_monotone_bound(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask, above):
+    """One bound of the monotonicity form over the live terms (:func:`implc.codegen.mean_value.monotone_bound`)."""
+    grad = _live_gradient(vb, tape, plan, lo_coords, hi_coords, live_mask)
+
+    def value_at(point):
+        return emit_interval_regions(vb, tape, plan, point, point, live_mask)[:2]
+    return monotone_bound(vb, grad, lo_coords, hi_coords, above, value_at)
+
+
+def _live_gradient(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask):
+    """∇F over the boxes from the fold of the live terms' interval dual numbers: three (lo, hi)."""
+    em = IntervalEmitter(vb)
 
     def dual(root, corners):  # corners: [*lo, *hi]; flat: [value lo, value hi, ∂x lo, ∂x hi, ...]
         return _flat(emit_interval_outputs(vb, with_gradient(tape.subtape(root)), corners[:3], corners[3:]))
@@ -77,6 +105,4 @@ def emit_pruned_mean_value(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, 
     none = IDENTITY[plan.fold.op]
     identity = [vb.splat(none)] * 2 + [vb.splat(0.0)] * 6
     result = fold_live_terms(vb, tape, plan, live_mask, [*lo_coords, *hi_coords], dual, combine, identity)
-    grad = _pairs(result)[1:]
-    lo, hi = intersect_mean_value(vb, (nat_lo, nat_hi), (c_lo, c_hi), grad, lo_coords, hi_coords, centre)
-    return lo, hi, masks
+    return _pairs(result)[1:]

@@ -1,7 +1,8 @@
 """The generic runtime module: the native routines shared by every surface, in one LLVM module.
 
-Subdivision (:mod:`.subdivision`), normals (:mod:`.normals`), the octree (:mod:`.octree_index`) and
-splatting (:mod:`.splat`); :class:`implc.runtime.Runtime` compiles it once per process.
+Subdivision (:mod:`.subdivision`), normals (:mod:`.normals`), tightening (:mod:`.tighten`), the octree
+(:mod:`.octree_index`) and splatting (:mod:`.splat`); :class:`implc.runtime.Runtime` compiles it once per
+process.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from .octree_index import (
 )
 from .splat import emit_splat
 from .subdivision import emit_subdivide
+from .tighten import emit_tighten
 
 
 def build_runtime() -> str:
@@ -24,6 +26,7 @@ def build_runtime() -> str:
     module = ir.Module(name="implc_runtime")
     emit_subdivide(module)
     emit_normals(module)
+    emit_tighten(module)
     emit_octree_insert(module)
     emit_octree_traverse(module)
     emit_octree_mark_inside(module)

@@ -9,7 +9,8 @@ the full program simplified down the path from the root to its octant. The child
 above the leaves are the voxels (with ``refine``, those one of whose eighths may meet the surface); their
 unit normals come eight at a time from ``tape_dual`` over the program
 two levels above the leaves (valid for every voxel below that octant, and barely longer than their
-parents'), through the normals block of :mod:`implc.codegen.normals`, before the voxels leave the call.
+parents'), through the normals block of :mod:`implc.codegen.normals`, before the voxels leave the call
+(with each voxel's flag for tightening where ``out_flags`` is not NULL).
 Where ``inside`` is not NULL (a solid), every child whose enclosure lies below 0 is written there too
 (:data:`implc.abi.INSIDE_WORDS` each). Resumable: when the output is full or the cancel flag is raised it
 returns with its frames and state intact (layouts in :mod:`implc.abi`)."""
@@ -45,12 +46,14 @@ _P = ir.PointerType
 
 
 def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
-    """``tape_normals(header, program, length, output, slots, leaf_geom, coords, n, out)`` (internal): unit
-    normals of ``n`` voxels, the gradient from ``dual`` over the program given."""
+    """``tape_normals(header, program, length, output, slots, leaf_geom, coords, n, out, flags)`` (internal):
+    unit normals of ``n`` voxels, the gradient from ``dual`` over the program given (and their flags for
+    tightening where ``flags`` is not NULL)."""
     fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE),
-                                                              _P(I32), I64, _P(FLOAT)]), name="implc.tape.normals")
+                                                              _P(I32), I64, _P(FLOAT), _P(I8)]),
+                     name="implc.tape.normals")
     fn.linkage = "internal"
-    header, program, length, output, slots, leaf_geom, coords, n, out = fn.args
+    header, program, length, output, slots, leaf_geom, coords, n, out, flags = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
     points = local_array(b, DOUBLE, 3 * LANES, "points")
     result = local_array(b, DOUBLE, 4 * LANES, "result")
@@ -74,7 +77,7 @@ def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
             b.store(b.load(vresult, align=8), b.bitcast(b.gep(probe_values, [const(I64, LANES * k)]), _P(V8)),
                     align=8)
 
-    emit_normals_body(b, leaf_geom, coords, ir.Constant(_P(I64), None), n, out, gradient_at, values_at)
+    emit_normals_body(b, leaf_geom, coords, ir.Constant(_P(I64), None), n, out, gradient_at, values_at, flags)
     b.ret_void()
     return fn
 
@@ -83,7 +86,8 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
                         normals: ir.Function):
     fn, b = define(module, abi.TAPE_SUBDIVIDE)
     (header, prune, refine, geom, state, frames, tapes, choices, slots, need, mark, remap, out, out_normals,
-     capacity, inside, inside_capacity, stats, cancel) = fn.args
+     out_flags, capacity, inside, inside_capacity, stats, cancel) = fn.args
+    has_flags = b.icmp_unsigned("!=", out_flags, ir.Constant(out_flags.type, None))
     solid = b.icmp_unsigned("!=", inside, ir.Constant(inside.type, None))
     program = b.inttoptr(load_at(b, header, abi.PROGRAM_INSTRUCTIONS), _P(I32))
     length = load_at(b, header, abi.PROGRAM_LENGTH)
@@ -196,7 +200,8 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
             offset = b.mul(first, const(I64, 3))
             b.call(normals, [header, program_of(normals_level), length_of(normals_level), output_of(normals_level),
                              slots, leaf_geom,
-                             b.gep(out, [offset]), pending, b.gep(out_normals, [offset])])
+                             b.gep(out, [offset]), pending, b.gep(out_normals, [offset]),
+                             b.select(has_flags, b.gep(out_flags, [first]), out_flags)])
             normals_done.set(b.add(first, pending))
 
     def may_meet(lo, hi):

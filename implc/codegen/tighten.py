@@ -1,0 +1,106 @@
+"""``implc_tighten``: drops, in place, the kept leaves that a tighter enclosure proves empty.
+
+The natural enclosure keeps every leaf whose box it cannot prove empty; the surface crosses most of
+them. The normals pass flags the others worth a second look, the cells the linear model at their centre
+misses (:mod:`implc.codegen.normals`), with the side F(c) lies on. For each flagged leaf one sound test:
+the bound of the monotonicity form on that side over the leaf's box (``bound``, a surface's
+``implc_bound_monotone``, eight leaves per call, their live-term masks joined). A leaf is dropped when
+the bound proves F > 0 (or F < 0) on the whole box; a NaN bound never does. Where ``inside`` is not
+NULL (a solid) the leaves proven below 0 are appended to it (:data:`implc.abi.INSIDE_WORDS` each,
+``*inside_count`` rows already there, and updated). The survivors (coordinates, masks, normals) are
+moved down in order; the new count is returned.
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from .. import abi
+from .control import I32, I64, Local, bump, const, define, for_range, if_, load_at, local_array, store_at
+
+DOUBLE = ir.DoubleType()
+I8 = ir.IntType(8)
+OUTSIDE, INSIDE = 2, 3
+"""Flags this pass sets on the leaves it drops: proven F > 0, proven F < 0 (the normals' flags are
+:data:`implc.abi.TIGHTEN_ABOVE` and :data:`implc.abi.TIGHTEN_BELOW`)."""
+
+
+def emit_tighten(module: ir.Module):
+    fn, b = define(module, abi.TIGHTEN)
+    bound_ptr, geom, depth, coords, masks, normals, flags, n, inside, inside_count, stats = fn.args
+    bound = b.bitcast(bound_ptr, ir.PointerType(abi.BOUND_MONOTONE.llvm_type()))
+    origin = [load_at(b, geom, a) for a in range(3)]
+    pad = [load_at(b, geom, 3 + a) for a in range(3)]
+    h = [load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
+    lo, hi = local_array(b, DOUBLE, 24, "lo"), local_array(b, DOUBLE, 24, "hi")
+    side, out = local_array(b, DOUBLE, 8, "side"), local_array(b, DOUBLE, 8, "out")
+    live = local_array(b, I64, 1, "live")
+    slots = local_array(b, I64, 8, "slots")
+    lanes = Local(b, I64, 0, "lanes")
+    union = Local(b, I64, 0, "union")
+    zero = const(DOUBLE, 0.0)
+
+    def test_pending():
+        """The bounds over the pending leaves' boxes (unused lanes repeat the first), and the verdicts."""
+        count = lanes.get()
+        first = load_at(b, slots, 0)
+        for j in range(8):
+            index = b.select(b.icmp_signed("<", const(I64, j), count), load_at(b, slots, j), first)
+            for a in range(3):
+                c = b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE)
+                store_at(b, b.fsub(b.fadd(origin[a], b.fmul(c, h[a])), pad[a]), lo, 3 * j + a)
+                store_at(b, b.fadd(b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 1.0)), h[a])), pad[a]), hi,
+                         3 * j + a)
+            above = b.icmp_unsigned("==", load_at(b, flags, index), const(I8, abi.TIGHTEN_ABOVE))
+            store_at(b, b.select(above, const(DOUBLE, 1.0), const(DOUBLE, -1.0)), side, j)
+        store_at(b, union.get(), live, 0)
+        b.call(bound, [lo, hi, side, out, const(I64, 8), live])
+        for j in range(8):
+            with if_(b, b.icmp_signed("<", const(I64, j), count)):
+                index = load_at(b, slots, j)
+                value = load_at(b, out, j)
+                above = b.fcmp_ordered(">", load_at(b, side, j), zero)
+                proven = b.select(above, b.fcmp_ordered(">", value, zero), b.fcmp_ordered("<", value, zero))
+                bump(b, stats, 0)
+                with if_(b, proven):
+                    store_at(b, b.select(above, const(I8, OUTSIDE), const(I8, INSIDE)), flags, index)
+                    bump(b, stats, 1)
+        lanes.set(const(I64, 0))
+        union.set(const(I64, 0))
+
+    with for_range(b, n) as i:
+        flag = load_at(b, flags, i)
+        flagged = b.or_(b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_ABOVE)),
+                        b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_BELOW)))
+        with if_(b, flagged):
+            store_at(b, i, slots, lanes.get())
+            lanes.set(b.add(lanes.get(), const(I64, 1)))
+            union.set(b.or_(union.get(), load_at(b, masks, i)))
+            with if_(b, b.icmp_signed("==", lanes.get(), const(I64, 8))):
+                test_pending()
+    with if_(b, b.icmp_signed(">", lanes.get(), const(I64, 0))):
+        test_pending()
+
+    solid = b.icmp_unsigned("!=", inside, ir.Constant(inside.type, None))
+    kept = Local(b, I64, 0, "kept")
+    with for_range(b, n) as i:
+        flag = load_at(b, flags, i)
+        with if_(b, b.and_(solid, b.icmp_unsigned("==", flag, const(I8, INSIDE)))):
+            row = b.mul(b.load(inside_count), const(I64, abi.INSIDE_WORDS))
+            for a in range(3):
+                store_at(b, load_at(b, coords, b.add(b.mul(i, const(I64, 3)), const(I64, a))), inside,
+                         b.add(row, const(I64, a)))
+            store_at(b, b.trunc(depth, I32), inside, b.add(row, const(I64, 3)))
+            b.store(b.add(b.load(inside_count), const(I64, 1)), inside_count)
+        dropped = b.or_(b.icmp_unsigned("==", flag, const(I8, OUTSIDE)), b.icmp_unsigned("==", flag, const(I8, INSIDE)))
+        with if_(b, b.not_(dropped)):
+            k = kept.get()
+            with if_(b, b.icmp_signed("!=", k, i)):
+                for a in range(3):
+                    store_at(b, load_at(b, coords, b.add(b.mul(i, const(I64, 3)), const(I64, a))), coords,
+                             b.add(b.mul(k, const(I64, 3)), const(I64, a)))
+                    store_at(b, load_at(b, normals, b.add(b.mul(i, const(I64, 3)), const(I64, a))), normals,
+                             b.add(b.mul(k, const(I64, 3)), const(I64, a)))
+                store_at(b, load_at(b, masks, i), masks, k)
+            kept.set(b.add(k, const(I64, 1)))
+    b.ret(kept.get())
