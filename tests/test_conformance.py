@@ -295,21 +295,31 @@ def test_interval_evaluators_conform(name, width, compiled):
         assert_conforms(f_hi, r_hi, budget, scale, f"{name} {label} width {width}: upper bounds")
 
 
+@pytest.mark.parametrize("form", ["mean_value", "monotone"])
 @pytest.mark.parametrize("name", sorted(OP_CASES))
-def test_mean_value_evaluators_conform(name, compiled):
+def test_mean_value_and_monotone_evaluators_conform(name, form, compiled):
+    """The mean-value and monotonicity forms' kernels against the reference, rule for rule, on boxes of
+    every size."""
     s = compiled(name)
-    lo, hi = _boxes(name)
-    small = np.random.default_rng(seed(name)).random(len(lo)) < 0.5  # the form pays on small boxes
-    hi[small] = lo[small] + (hi[small] - lo[small]) * 1e-3
+    lo, hi = _boxes_half_small(name)
     scale = _scale(reference.interval_nodes(s.gradient_tape, lo, hi))
-    # the gradient tape's nodes and the centre's value, each as the reference's (their budgets add up)
+    # the gradient tape's nodes and F at a point, each as the reference's (their budgets add up)
     budget = (case_budget(s.gradient_tape, INTERVAL_BUDGET) + case_budget(s.tape, INTERVAL_BUDGET)) * \
         AMPLIFICATION.get(name, 1)
-    r_lo, r_hi = reference.eval_interval_mean_value(s.tape, lo, hi)
-    for label, evaluate in MEAN_VALUE_EVALUATORS.items():
+    r_lo, r_hi = {"mean_value": reference.eval_interval_mean_value,
+                  "monotone": reference.eval_interval_monotone}[form](s.tape, lo, hi)
+    for label, evaluate in {"mean_value": MEAN_VALUE_EVALUATORS, "monotone": MONOTONE_EVALUATORS}[form].items():
         f_lo, f_hi = evaluate(s, lo, hi)
         assert_conforms(f_lo, r_lo, budget, scale, f"{name} {label}: lower bounds")
         assert_conforms(f_hi, r_hi, budget, scale, f"{name} {label}: upper bounds")
+
+
+def _boxes_half_small(name):
+    """The case's boxes, half of them shrunk a thousandfold (where the forms pay)."""
+    lo, hi = _boxes(name)
+    small = np.random.default_rng(seed(name)).random(len(lo)) < 0.5
+    hi[small] = lo[small] + (hi[small] - lo[small]) * 1e-3
+    return lo, hi
 
 
 @pytest.mark.parametrize("width", WIDTHS)
@@ -424,24 +434,11 @@ def test_tape_engine_encloses_true_values(name, compiled):
 
 
 @pytest.mark.parametrize("name", sorted(OP_CASES))
-def test_monotone_evaluators_conform(name, compiled):
-    """The monotonicity form's kernels against the reference, rule for rule, on boxes of every size, and
-    the voxelizer's one-sided bound against them."""
+def test_the_one_sided_bound_is_the_monotone_kernels(name, compiled):
+    """The voxelizer's one-sided bound is the monotonicity form, bit for bit, where the form binds the
+    two-sided kernel's bound (elsewhere the natural enclosure does, and the raw form is at most as tight)."""
     s = compiled(name)
-    lo, hi = _boxes(name)
-    small = np.random.default_rng(seed(name) + 7).random(len(lo)) < 0.5  # the form pays on small boxes
-    hi[small] = lo[small] + (hi[small] - lo[small]) * 1e-3
-    scale = _scale(reference.interval_nodes(s.gradient_tape, lo, hi))
-    # the gradient tape's nodes and F at a corner, each as the reference's (their budgets add up)
-    budget = (case_budget(s.gradient_tape, INTERVAL_BUDGET) + case_budget(s.tape, INTERVAL_BUDGET)) * \
-        AMPLIFICATION.get(name, 1)
-    r_lo, r_hi = reference.eval_interval_monotone(s.tape, lo, hi)
-    for label, evaluate in MONOTONE_EVALUATORS.items():
-        f_lo, f_hi = evaluate(s, lo, hi)
-        assert_conforms(f_lo, r_lo, budget, scale, f"{name} {label}: lower bounds")
-        assert_conforms(f_hi, r_hi, budget, scale, f"{name} {label}: upper bounds")
-    # the voxelizer's one-sided bound is the same form, bit for bit, where the form binds the two-sided
-    # kernel's bound (elsewhere the natural enclosure does, and the raw form is at most as tight)
+    lo, hi = _boxes_half_small(name)
     n_lo, n_hi = s.interval(lo, hi)
     t_lo, t_hi = s.interval(lo, hi, monotone=True)
     lower, upper = _one_sided_bound(s, lo, hi, True), _one_sided_bound(s, lo, hi, False)
