@@ -13,8 +13,7 @@ _EXPORTS = {
 }
 
 __all__ = ["NATURAL", "TIGHTEST", "CompileError", "Surface", "Voxels", "compile", "load_vm", "phi", "r", "shapes",
-           "theta", "voxelize",
-           "x", "y", "z"]
+           "theta", "voxelize", "x", "y", "z"]
 __version__ = "0.1.0"
 
 

@@ -163,8 +163,6 @@ def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at,
                             store_at(b, unit, out, b.add(b.mul(index, const(I64, 3)), const(I64, a)))
 
 
-
-
 def _store_flags(b: ir.IRBuilder, flags, block, n, values, g8, h):
     """Flag where |F(c)| > Σ |gᵢ|·hᵢ/2 (the linear model at the centre misses the cell; NaN: no flag),
     by F(c)'s side, for the block's voxels below ``n``."""
