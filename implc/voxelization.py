@@ -247,8 +247,7 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     boxes, about five times the work per box); 0 uses the natural enclosure everywhere. ``prune``: skip,
     below each octant, the terms of a blend sum or a Min/Max chain that its enclosure showed dead there.
     ``refine_leaves``: "auto" (the default) tests again the kept leaves that the linear model at their
-    centre does not cross (the mean-value form over the leaf, then over its eighths) and drops those
-    proven empty; True keeps a leaf only if one of its eight half-size sub-boxes may meet the surface
+    centre does not cross (the monotonicity form's bound over the leaf) and drops those proven empty; True keeps a leaf only if one of its eight half-size sub-boxes may meet the surface
     (about twice the interval work); False keeps what the enclosures of the leaves keep (the natural
     mode, with ``mean_value_levels=0``). The tightest: :data:`TIGHTEST`, ``mean_value_levels=1,
     refine_leaves=True``.

@@ -321,6 +321,9 @@ def test_bad_arguments():
     s = implc.compile(x - y)
     with pytest.raises(ValueError, match="mean_value_levels"):
         implc.voxelize(s, 5, mean_value_levels=-1)
+    for bad in ("yes", 2, None):
+        with pytest.raises(ValueError, match="refine_leaves must be True, False or 'auto'"):
+            implc.voxelize(s, 5, refine_leaves=bad)
     with pytest.raises(TypeError, match="implc.Surface"):
         implc.voxelize(x - y, 5)
     with pytest.raises(ValueError, match="unknown storage 'tree'"):
