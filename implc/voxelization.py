@@ -198,6 +198,18 @@ def _check_count(name, value) -> int:
     return int(value)
 
 
+def _check_leaf_options(mean_value_levels, refine_leaves) -> tuple[int, bool | str]:
+    """``mean_value_levels`` a whole number >= 0, ``refine_leaves`` True, False (numpy's too) or "auto"."""
+    if isinstance(mean_value_levels, bool) or not isinstance(mean_value_levels, (int, np.integer)) \
+            or mean_value_levels < 0:
+        raise ValueError(f"mean_value_levels must be a whole number >= 0, got {mean_value_levels!r}")
+    if isinstance(refine_leaves, (bool, np.bool_)):
+        return int(mean_value_levels), bool(refine_leaves)
+    if not (isinstance(refine_leaves, str) and refine_leaves == "auto"):
+        raise ValueError(f"refine_leaves must be True, False or 'auto', got {refine_leaves!r}")
+    return int(mean_value_levels), refine_leaves
+
+
 def _check_depth(depth):
     if isinstance(depth, bool) or not isinstance(depth, (int, np.integer)) or not MIN_DEPTH <= depth <= MAX_DEPTH:
         raise ValueError(f"depth must be an integer from {MIN_DEPTH} to {MAX_DEPTH}, got {depth!r}")
@@ -247,8 +259,9 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     boxes, about five times the work per box); 0 uses the natural enclosure everywhere. ``prune``: skip,
     below each octant, the terms of a blend sum or a Min/Max chain that its enclosure showed dead there.
     ``refine_leaves``: "auto" (the default) tests again the kept leaves that the linear model at their
-    centre does not cross (the monotonicity form's bound over the leaf) and drops those proven empty; True keeps a leaf only if one of its eight half-size sub-boxes may meet the surface
-    (about twice the interval work); False keeps what the enclosures of the leaves keep (the natural
+    centre does not cross (the monotonicity form's bound over the leaf) and drops those proven empty;
+    True keeps a leaf only if one of its eight half-size sub-boxes may meet the surface (about twice the
+    interval work); False keeps what the enclosures of the leaves keep (the natural
     mode, with ``mean_value_levels=0``). The tightest: :data:`TIGHTEST`, ``mean_value_levels=1,
     refine_leaves=True``.
     ``solid``: also classify the inside: octants whose enclosure lies below 0 are kept whole
@@ -261,11 +274,7 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     workers = default_workers() if workers is None else _check_count("workers", workers)
     if max_voxels is not None:
         max_voxels = _check_count("max_voxels", max_voxels)
-    if isinstance(mean_value_levels, bool) or not isinstance(mean_value_levels, int) or mean_value_levels < 0:
-        raise ValueError(f"mean_value_levels must be a whole number >= 0, got {mean_value_levels!r}")
-    if refine_leaves not in (True, False, "auto") or isinstance(refine_leaves, (int, float)) and \
-            not isinstance(refine_leaves, bool):
-        raise ValueError(f"refine_leaves must be True, False or 'auto', got {refine_leaves!r}")
+    mean_value_levels, refine_leaves = _check_leaf_options(mean_value_levels, refine_leaves)
     available = available_memory()
     if max_voxels is None:
         max_voxels = int(available * 0.8 / bytes_per_voxel(storage))

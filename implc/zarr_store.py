@@ -24,7 +24,7 @@ import numpy as np
 from .atomic_file import replacing_folder
 from .morton import morton_codes
 from .subdivide import Subdivider, SubdivisionStats, default_workers
-from .voxelization import _check_count, _check_depth, paint_cubes, volume_bounds
+from .voxelization import _check_count, _check_depth, _check_leaf_options, paint_cubes, volume_bounds
 
 CHUNK = 128  # 2 MiB of bool: zarr recommends chunks of 1 MB or more; 64³ made writing twice as slow
 SHARD = 256
@@ -141,6 +141,7 @@ def write_zarr(surface, depth, path, *, solid: bool = True, workers=None, progre
     (``mean_value_levels``, ``refine_leaves``: as :func:`implc.voxelize`'s)."""
     depth = _check_depth(depth)
     workers = default_workers() if workers is None else _check_count("workers", workers)
+    mean_value_levels, refine_leaves = _check_leaf_options(mean_value_levels, refine_leaves)
     path = Path(path)
     t0 = time.perf_counter()
     subdivider = Subdivider(surface, depth, workers, surface.runtime, solid=solid,

@@ -324,6 +324,12 @@ def test_bad_arguments():
     for bad in ("yes", 2, None):
         with pytest.raises(ValueError, match="refine_leaves must be True, False or 'auto'"):
             implc.voxelize(s, 5, refine_leaves=bad)
+    # numpy's booleans mean what Python's do (np.True_ once passed the check and refined nothing)
+    tangle = implc.compile(*SURFACES["tangle_cube"])
+    refined = implc.voxelize(tangle, 6, refine_leaves=np.True_, storage="coords")
+    expected = implc.voxelize(tangle, 6, refine_leaves=True, storage="coords")
+    np.testing.assert_array_equal(refined.coords, expected.coords)
+    assert len(refined) < len(implc.voxelize(tangle, 6, refine_leaves=np.False_))
     with pytest.raises(TypeError, match="implc.Surface"):
         implc.voxelize(x - y, 5)
     with pytest.raises(ValueError, match="unknown storage 'tree'"):
