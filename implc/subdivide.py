@@ -210,7 +210,6 @@ class Subdivider:
         self.solid = bool(solid)
         self._inside_parts: list[np.ndarray] = []  # a solid's inside octants: the plan's, then each task's
         self._emit_inside = None  # run()'s receiver of each task's inside octants, if any
-        self._placement = None  # run()'s placement of each task's voxels, if any
         # the last mean_value_levels levels use the tighter mean-value kernel
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
         # the tape engine runs the surface where it is the surface's engine (the mean-value form is compiled only)
@@ -228,7 +227,8 @@ class Subdivider:
         self.geom_ptr, self.leaf_geom_ptr = self.geom.ctypes.data, self.leaf_geom.ctypes.data
         self.cancel_ptr = self.cancel.ctypes.data
         self.stats = SubdivisionStats(depth=depth, workers=workers, kept_per_level=[1] + [0] * depth)
-        self._plan_normals = None
+        self._plan_normals = None  # where the plan reached the leaves: their normals, and the time that took
+        self._plan_leaves_seconds = 0.0
         if self.program is not None:
             self.tape_engine = surface.tape_engine
             self.program_args = (self.program.header.ctypes.data, self.prune, self.refine)
@@ -328,17 +328,16 @@ class Subdivider:
         # keep the peak memory low
         balance = 2 if self.workers <= 2 else 3 if self.workers <= 16 else 4
         level = min(self.depth, max(balance, min(self.depth - TASK_SPAN, MAX_TASK_LEVEL)))
-        w = self._new_worker(level)
         t0 = time.perf_counter()
-        result = _TaskResult()
-        self._run_task(w, (0, 0, 0), 0, level, result)
-        if level == self.depth:  # the plan reached the leaves: their pass now
+        w, result = self._from_root(level)
+        if level == self.depth:  # the plan reached the leaves: their pass now, normals included
+            t_leaves = time.perf_counter()
             self._leaves(w, result)
+            self._plan_normals = result.normals[: result.count].copy()
+            self._plan_leaves_seconds = time.perf_counter() - t_leaves
         cells = result.coords[: result.count].copy()
         self._inside_parts = [result.inside[: result.inside_count].copy()]
-        if self.program is not None or level == self.depth:  # their normals are written
-            self._plan_normals = result.normals[: result.count].copy()
-        self.stats.seconds["plan"] = time.perf_counter() - t0
+        self.stats.seconds["plan"] = time.perf_counter() - t0 - self._plan_leaves_seconds  # the leaves': run()'s
         self._absorb(w)
         self.stats.task_level = level
         self.stats.tasks = len(cells)
@@ -347,10 +346,13 @@ class Subdivider:
     def count_cells(self, level: int) -> int:
         """How many cells at ``level`` may meet the surface (a subdivision from the root, kept apart from
         the statistics; for the memory estimate)."""
-        w = self._new_worker(level)
-        result = _TaskResult()
+        return self._from_root(level)[1].count
+
+    def _from_root(self, level: int) -> tuple[_Worker, _TaskResult]:
+        """The subdivision of the root down to ``level``: its worker (with its counters) and its cells."""
+        w, result = self._new_worker(level), _TaskResult()
         self._run_task(w, (0, 0, 0), 0, level, result)
-        return result.count
+        return w, result
 
     def _absorb(self, w: _Worker):
         self.stats.interval_evaluations += int(w.stats[0])
@@ -378,7 +380,6 @@ class Subdivider:
         that claimed it, in parallel with other claims and fills (the task's buffers are reused after).
         ``result.count``, ``result.coords`` and ``result.normals`` are the task's voxels."""
         self._emit_inside = emit_inside
-        self._placement = placement
         cells, level = plan if plan is not None else self.plan()
         if placement is not None and level == self.depth:
             raise ValueError("a placement needs tasks above the leaves (plan level < depth)")
@@ -386,21 +387,17 @@ class Subdivider:
             if self.max_voxels is not None and len(cells) > self.max_voxels:
                 raise MemoryError(f"more than max_voxels={self.max_voxels} voxels at depth {self.depth}")
             t0 = time.perf_counter()
-            if self._plan_normals is not None and len(self._plan_normals) == len(cells):
-                normals = self._plan_normals
-            else:
-                normals = self._normals(cells, np.empty((len(cells), 3), dtype=np.float32))
-            t1 = time.perf_counter()
-            emit(cells, normals)
-            self.stats.seconds["subdivide"] = time.perf_counter() - t0
-            self.stats.worker_busy = [t1 - t0]
-            self.stats.worker_normals = [t1 - t0]
+            emit(cells, self._plan_normals)  # the plan's pass over its leaves wrote them
+            # the plan's pass over the leaves is this stage's work (it ran in plan(), on this thread)
+            self.stats.seconds["subdivide"] = time.perf_counter() - t0 + self._plan_leaves_seconds
+            self.stats.worker_busy = [self._plan_leaves_seconds]
+            self.stats.worker_normals = [self._plan_leaves_seconds]
             self.stats.worker_tasks = [len(cells)]
             return self.stats
-        self._parallel(cells, level, emit, progress)
+        self._parallel(cells, level, emit, progress, placement)
         return self.stats
 
-    def _parallel(self, cells, level, emit, progress):
+    def _parallel(self, cells, level, emit, progress, placement):
         n_tasks = len(cells)
         results: dict[int, tuple] = {}
         errors: list[BaseException] = []
@@ -413,7 +410,6 @@ class Subdivider:
         pool: list[_TaskResult] = []
         reserve = min(TASK_RESERVE * 4 ** (self.depth - level), 1 << 22)
 
-        placement = self._placement
         filled = [0]
 
         def commit_ready(w: _Worker):
