@@ -43,13 +43,22 @@ def _child_index(b, xyz, bit):
     return b.zext(slot, I64)
 
 
+def _top_differing_bit(b, xyz, other):
+    """The highest bit at which two cells' coordinates (three i32 each) differ: an i32, -1 where they are
+    the same cell. A voxel shares the node with the previous one at every level above that bit."""
+    ctlz = b.module.globals.get("llvm.ctlz.i32") or ir.Function(
+        b.module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.ctlz.i32")
+    diff = b.xor(xyz[0], other[0])
+    for a in (1, 2):
+        diff = b.or_(diff, b.xor(xyz[a], other[a]))
+    return b.sub(const(I32, 31), b.call(ctlz, [diff, const(ir.IntType(1), 0)]))
+
+
 def emit_octree_insert(module: ir.Module):
     fn, b = define(module, abi.OCTREE_INSERT)
     nodes, node_cap, state, coords, n, first_index = fn.args
     for arg in (nodes, state, coords):
         arg.add_attribute("noalias")
-    ctlz = module.globals.get("llvm.ctlz.i32") or ir.Function(
-        module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.ctlz.i32")
     depth = load_at(b, state, abi.DEPTH)
     depth32 = b.trunc(depth, I32)
     # the state lives in locals (registers, a stack-resident path) during the call, written back at the end
@@ -66,10 +75,9 @@ def emit_octree_insert(module: ir.Module):
         v = inserted.get()
         loop.break_if(b.icmp_signed(">=", v, n))
         xyz = [load_at(b, coords, b.add(b.mul(v, const(I64, 3)), const(I64, a))) for a in range(3)]
-        diff = b.or_(b.or_(b.xor(xyz[0], prev[0].get()), b.xor(xyz[1], prev[1].get())), b.xor(xyz[2], prev[2].get()))
         # the deepest level whose node is shared with the previous voxel (Fig. 2's ascent)
-        top_bit = b.sub(const(I32, 31), b.call(ctlz, [diff, const(ir.IntType(1), 0)]))
-        shared = b.select(b.icmp_signed("==", diff, const(I32, 0)), b.sub(depth32, const(I32, 1)),
+        top_bit = _top_differing_bit(b, xyz, [p.get() for p in prev])
+        shared = b.select(b.icmp_signed("<", top_bit, const(I32, 0)), b.sub(depth32, const(I32, 1)),
                           b.sub(b.sub(depth32, const(I32, 1)), top_bit))
         start = b.zext(b.select(started.get(), shared, const(I32, 0)), I64)
         # room for the nodes this voxel may create (levels start+1 .. depth-1)
@@ -153,8 +161,6 @@ def emit_octree_traverse(module: ir.Module):
     b.ret(count.get())
 
 
-
-
 def emit_octree_mark_inside(module: ir.Module):
     fn, b = define(module, abi.OCTREE_MARK_INSIDE)
     nodes, node_cap, state, rows, n = fn.args
@@ -168,8 +174,6 @@ def emit_octree_mark_inside(module: ir.Module):
     done = Local(b, I64, 0, "done")
     aborted = Local(b, ir.IntType(1), const(ir.IntType(1), 0), "aborted")
     inside = const(I32, -1)
-    ctlz = module.globals.get("llvm.ctlz.i32") or ir.Function(
-        module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.ctlz.i32")
     depth = load_at(b, state, abi.DEPTH)
     # the previous row's first cell (at the grid's depth) and how deep its path is valid (0: only the root)
     prev = [Local(b, I32, const(I32, 0), f"prev{a}") for a in range(3)]
@@ -185,11 +189,8 @@ def emit_octree_mark_inside(module: ir.Module):
         # a node a previous row merged away is never on a later disjoint row's path)
         to_depth = b.trunc(b.sub(depth, level), I32)
         first = [b.shl(xyz[a], to_depth) for a in range(3)]
-        diff = b.xor(first[0], prev[0].get())
-        for a in (1, 2):
-            diff = b.or_(diff, b.xor(first[a], prev[a].get()))
-        top_bit = b.sub(const(I32, 31), b.call(ctlz, [diff, const(ir.IntType(1), 0)]))
-        shared = b.select(b.icmp_signed("==", diff, const(I32, 0)), depth,
+        top_bit = _top_differing_bit(b, first, [p.get() for p in prev])
+        shared = b.select(b.icmp_signed("<", top_bit, const(I32, 0)), depth,
                           b.sext(b.sub(b.sub(b.trunc(depth, I32), const(I32, 1)), top_bit), I64))
         start = b.select(b.icmp_signed("<", shared, prev_valid.get()), shared, prev_valid.get())
         start = b.select(b.icmp_signed("<", start, b.sub(level, const(I64, 1))), start, b.sub(level, const(I64, 1)))
@@ -251,21 +252,17 @@ def emit_octree_mark_inside(module: ir.Module):
 def emit_octree_subtree_rows(module: ir.Module):
     fn, b = define(module, abi.OCTREE_SUBTREE_ROWS)
     coords, n, below = fn.args
-    ctlz = module.globals.get("llvm.ctlz.i32") or ir.Function(
-        module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.ctlz.i32")
     below32 = b.trunc(below, I32)
     # the first voxel creates a node at every level between the root and the voxels
     rows = Local(b, I64, b.select(b.icmp_signed(">", n, const(I64, 0)), b.sub(below, const(I64, 1)), const(I64, 0)),
                  "rows")
     with for_range(b, n, start=const(I64, 1)) as v:
-        diff = const(I32, 0)
-        for a in range(3):
-            here = load_at(b, coords, b.add(b.mul(v, const(I64, 3)), const(I64, a)))
-            before = load_at(b, coords, b.add(b.mul(b.sub(v, const(I64, 1)), const(I64, 3)), const(I64, a)))
-            diff = b.or_(diff, b.xor(here, before))
+        here = [load_at(b, coords, b.add(b.mul(v, const(I64, 3)), const(I64, a))) for a in range(3)]
+        before = [load_at(b, coords, b.add(b.mul(b.sub(v, const(I64, 1)), const(I64, 3)), const(I64, a)))
+                  for a in range(3)]
         # a voxel differing from the previous one first at bit t adds a node at each of the t levels
         # above the voxels that it does not share (t = 0: the same leaf parent), capped at below - 1
-        top = b.sub(const(I32, 31), b.call(ctlz, [diff, const(ir.IntType(1), 0)]))
+        top = _top_differing_bit(b, here, before)
         top = b.select(b.icmp_signed("<", top, b.sub(below32, const(I32, 1))), top, b.sub(below32, const(I32, 1)))
         top = b.select(b.icmp_signed("<", top, const(I32, 0)), const(I32, 0), top)
         rows.set(b.add(rows.get(), b.sext(top, I64)))
