@@ -238,7 +238,6 @@ def tightness(args, out):
     (modes interleaved in each repeat, kernels compiled before the clock starts), for every scene and the
     peer models of --tightness-models (their cells counted by numpy on the .vm text)."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import sympy
     import vm_sampling
 
     cases = [(name, compiled(name), None) for name in args.tightness_scenes]
@@ -249,10 +248,8 @@ def tightness(args, out):
             continue
         rows_vm = vm_sampling.parse(path.read_text())
         model = implc.load_vm(path)
-        extrude = None if vm_sampling.uses_z(rows_vm) else sympy.Rational(1, 10)
-        expr = model if extrude is None else sympy.Max(model(implc.x, implc.y, implc.z), sympy.Abs(implc.z) - extrude)
-        cases.append((stem + (" (extruded)" if extrude is not None else ""), implc.compile(expr, model.bounds),
-                      (rows_vm, None if extrude is None else float(extrude))))
+        expr, suffix, extrude = _peer_surface(model, rows_vm)
+        cases.append((stem + suffix, implc.compile(expr, model.bounds), (rows_vm, extrude)))
     rows = []
     depth = args.tightness_depth
     for name, s, vm in cases:
@@ -324,8 +321,24 @@ def kernels(args, out):
     return md
 
 
+EXTRUDE = "1/10"
+"""The half-thickness a 2-D peer model (prospero) is extruded by: max(F(x, y), |z| − 1/10)."""
+
+
+def _peer_surface(model, rows):
+    """A peer model's surface as the benchmarks voxelize it, its name's suffix, and the extrusion for
+    :func:`vm_sampling.corner_values` (None for a model that uses z)."""
+    import sympy
+    import vm_sampling
+    if vm_sampling.uses_z(rows):
+        return model, "", None
+    slab = sympy.Abs(implc.z) - sympy.Rational(EXTRUDE)
+    return sympy.Max(model(implc.x, implc.y, implc.z), slab), " (extruded)", float(sympy.Rational(EXTRUDE))
+
+
 def _fresh_process_compile(path, extrude, cache_dir) -> float:
-    """Seconds to load and compile a model in a new Python process with the kernel cache at cache_dir."""
+    """Seconds to load and compile a model in a new Python process with the kernel cache at cache_dir
+    (``extrude``: as :func:`_peer_surface` gives it, None for a 3-D model)."""
     code = ("import sys, time, sympy, implc\n"
             "t0 = time.perf_counter()\n"
             "m = implc.load_vm(sys.argv[1])\n"
@@ -334,7 +347,7 @@ def _fresh_process_compile(path, extrude, cache_dir) -> float:
             "implc.compile(e, m.bounds)\n"
             "print(time.perf_counter() - t0)\n")
     env = dict(os.environ, IMPLC_CACHE_DIR=str(cache_dir))
-    done = subprocess.run([sys.executable, "-c", code, str(path), "-" if extrude is None else extrude],
+    done = subprocess.run([sys.executable, "-c", code, str(path), "-" if extrude is None else EXTRUDE],
                           capture_output=True, text=True, env=env, check=True)
     return float(done.stdout.strip().splitlines()[-1])
 
@@ -346,7 +359,6 @@ def models(args, out):
     against numpy's run of the .vm text (:mod:`vm_sampling`). A model without z (prospero) is extruded:
     max(F(x, y), |z| − 1/10)."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import sympy
     import vm_sampling
 
     folder = Path(args.models_dir)
@@ -360,19 +372,16 @@ def models(args, out):
     for path in paths:
         if path.stem in skip:
             continue
-        text = path.read_text()
-        program_rows = vm_sampling.parse(text)
-        extrude = None if vm_sampling.uses_z(program_rows) else "1/10"
+        program_rows = vm_sampling.parse(path.read_text())
         t0 = time.perf_counter()
         model = implc.load_vm(path)
         load_s = time.perf_counter() - t0
-        expr = model if extrude is None else sympy.Max(model(implc.x, implc.y, implc.z),
-                                                         sympy.Abs(implc.z) - sympy.Rational(extrude))
+        expr, suffix, extrude = _peer_surface(model, program_rows)
         with tempfile.TemporaryDirectory() as tmp:
             fresh_empty = _fresh_process_compile(path, extrude, tmp)
             fresh_engine = _fresh_process_compile(path, extrude, tmp)  # the engine is in the cache now
         cached, s = median_time(lambda: implc.compile(expr, model.bounds), args.repeats)
-        row = {"model": path.stem + (" (extruded)" if extrude else ""), "instructions": model.instructions,
+        row = {"model": path.stem + suffix, "instructions": model.instructions,
                "ops": len(s.tape), "engine": s.engine, "load_s": load_s, "compile_fresh_empty_cache_s": fresh_empty,
                "compile_fresh_s": fresh_engine, "compile_cached_s": cached, "depths": {}}
         for depth in args.models_depths:
@@ -384,8 +393,7 @@ def models(args, out):
         if 9 in args.models_depths:
             cpu = statistics.median(_cpu_seconds(lambda: implc.voxelize(s, 9)) for _ in range(args.repeats))
             row["cpu_512_s"], row["cpu_vs_scene1"] = cpu, cpu / scene1_cpu
-        truth = vm_sampling.sign_change_cells(vm_sampling.corner_values(
-            program_rows, s.bounds, 7, None if extrude is None else float(sympy.Rational(extrude))))
+        truth = vm_sampling.sign_change_cells(vm_sampling.corner_values(program_rows, s.bounds, 7, extrude))
         got = implc.voxelize(s, 7, storage="coords").to_dense()
         row["missed_128"] = int((truth & ~got).sum())
         row["sign_change_cells_128"] = int(truth.sum())
