@@ -436,7 +436,11 @@ def test_the_default_keeps_at_most_ten_percent_spurious_voxels(name):
     lambdify, not by implc), misses none, and keeps no more than the natural mode (measured: 1.00-1.05;
     the natural mode 1.00-4.54)."""
     from implc.symbols import cartesian_form
-    expr, bounds = TIGHTNESS_CASES[name] or (scene.load(name).surface, scene.load(name).bounds)
+    if TIGHTNESS_CASES[name] is None:
+        sc = scene.load(name)
+        expr, bounds = sc.surface, sc.bounds
+    else:
+        expr, bounds = TIGHTNESS_CASES[name]
     s = implc.compile(expr, bounds)
     n = 1 << 8
     axes = [np.linspace(lo, hi, n + 1) for lo, hi in s.bounds]
