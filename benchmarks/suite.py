@@ -668,7 +668,7 @@ def parser():
     p.add_argument("--growth-depths", default="7,8,9,10,11")
     p.add_argument("--tightness-scenes", default=None, help="default: every scene")
     p.add_argument("--tightness-depth", type=int, default=8)
-    p.add_argument("--tightness-models", default="tanglecube,bear,colonnade",
+    p.add_argument("--tightness-models", default="tanglecube,bear,colonnade,prospero",
                    help="peer models (in --models-dir) for the tightness table, comma-separated")
     p.add_argument("--models-dir", default=str(Path(__file__).resolve().parent.parent.parent / "shared" / "models"),
                    help="folder of .vm models for the 'models' section (default: ../shared/models of the checkout)")

@@ -103,7 +103,10 @@ TAPE_SUBDIVIDE = _entry("implc_tape_subdivide",
                         "program:i64* prune:i64 refine:i64 geom:f64* state:i64* frames:i32* tapes:i32* choices:i8* "
                         "slots:f64* need:i32* marks:i8* remap:i32* out:i32* out_normals:f32* out_flags:i8* "
                         "capacity:i64 inside:i32* inside_capacity:i64 stats:i64* cancel:i32*", "i64")
-TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE)
+TAPE_BOX_GRADIENT = _entry("implc_tape_box_gradient", "program:i64* slots:f64* lo:f64* hi:f64* out:f64* n:i64")
+"""Enclosures of F and its partials over boxes: eight doubles per box in ``out`` (F's lo, hi, then each
+partial's lo, hi), as the tape engine's second look uses them."""
+TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE, TAPE_BOX_GRADIENT)
 
 # -- layouts shared by native code and Python ------------------------------------------------------
 MAX_DEPTH = 21
@@ -132,9 +135,10 @@ OCTANT_INSIDE_SHIFT = 8
 """The octant kernels return bit c set where child c may meet the surface, and bit 8 + c where child c's
 enclosure lies below zero (inside)."""
 
-TAPE_SLOT_DOUBLES = 48
-"""Scratch doubles per slot of a tape program: its interval (two vectors of eight) in the first third of
-the slots, its dual number (four vectors) in the rest."""
+TAPE_SLOT_DOUBLES = 112
+"""Scratch doubles per slot of a tape program (eight lanes each): its interval (two vectors) in the first
+region, its dual number (four vectors) in the second, its interval and interval partials (eight vectors)
+in the third."""
 PROGRAM_INSTRUCTIONS, PROGRAM_LENGTH, PROGRAM_OUTPUT = 0, 1, 2
 PROGRAM_CONSTANTS, PROGRAM_CONSTANT_SLOTS, PROGRAM_CONSTANT_COUNT = 3, 4, 5
 PROGRAM_VARIABLES = 6

@@ -18,8 +18,8 @@ from .jit import NativeModule
 
 
 class TapeEngine:
-    """The tape-engine module's entry points for one rounding mode: ``interval``, ``gradient`` and
-    ``subdivide`` (signatures in :mod:`implc.abi`; programs from :mod:`implc.tape_program`)."""
+    """The tape-engine module's entry points for one rounding mode: ``interval``, ``gradient``,
+    ``subdivide`` and ``box_gradient`` (signatures in :mod:`implc.abi`; programs from :mod:`implc.tape_program`)."""
 
     def __init__(self, directed: bool):
         self.directed = directed
@@ -28,6 +28,7 @@ class TapeEngine:
         self.interval = self.native.bind(abi.TAPE_INTERVAL)
         self.gradient = self.native.bind(abi.TAPE_GRADIENT)
         self.subdivide = self.native.bind(abi.TAPE_SUBDIVIDE)
+        self.box_gradient = self.native.bind(abi.TAPE_BOX_GRADIENT)
 
 
 class Runtime:

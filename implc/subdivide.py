@@ -36,10 +36,6 @@ faults with two workers, and at 4096³ Scene 1 a 10% lower peak (1176 tasks inst
 wall time)."""
 MAX_TASK_LEVEL = 5
 """The deepest level a plan goes to (32³ cells: cheap whatever the grid)."""
-TIGHTEN_TAPE_OPS = 200
-"""The largest tape the tape engine's voxelizations tighten by default: the one compiled kernel it needs
-took 0.4-0.6 s to build for tapes of 19-126 ops, 3.4-6.8 s for the peer models of 650-800 ops (which the
-engine voxelizes untightened)."""
 OUTPUT_CHUNK = 1 << 16
 """Free rows a task's result has before each native call (it returns when they are full, and the
 result grows)."""
@@ -219,10 +215,11 @@ class Subdivider:
             self.fine_box = surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else self.box
             self.gradient = surface.kernel_address(abi.GRADIENT_LIVE)
             self.point = surface.kernel_address(abi.POINT)
-        # the tightening pass's kernel (the monotonicity form's bound), where it runs: with compiled kernels,
-        # and on the tape engine for tapes small enough to compile that one kernel in about a second
-        tightens = refine_leaves == "auto" and (self.program is None or len(surface.tape) <= TIGHTEN_TAPE_OPS)
-        self.tighten = surface.kernel_address(abi.BOUND_MONOTONE) if tightens else None
+        # the second look at the leaves the normals flag: with compiled kernels, the monotonicity form's bound
+        # over each leaf (implc.codegen.tighten); the tape engine looks below each leaf itself
+        # (implc.codegen.tape_tighten) and the pass only drops what it proved
+        self.tightens = refine_leaves == "auto"
+        self.bound = surface.kernel_address(abi.BOUND_MONOTONE) if self.tightens and self.program is None else None
         self.cancel = np.zeros(1, dtype=np.int32)
         self.geom_ptr, self.leaf_geom_ptr = self.geom.ctypes.data, self.leaf_geom.ctypes.data
         self.cancel_ptr = self.cancel.ctypes.data
@@ -268,7 +265,7 @@ class Subdivider:
         w.tape_state[abi.TAPE_TASK_LEVEL] = level
         while True:
             room = result.make_room(OUTPUT_CHUNK)
-            flags = result.flags_ptr + result.count if self.tighten is not None else None
+            flags = result.flags_ptr + result.count if self.tightens else None
             n = self.tape_engine.subdivide(*self.program_args, self.geom_ptr, *w.tape_buffers,
                                            result.coords_ptr + 12 * result.count,
                                            result.normals_ptr + 12 * result.count, flags, room,
@@ -302,18 +299,16 @@ class Subdivider:
         octants)."""
         n = result.count
         if self.program is None:
-            flags = result.flags[:n] if self.tighten is not None else None
+            flags = result.flags[:n] if self.tightens else None
             self._normals(result.coords[:n], result.normals[:n], result.masks[:n], flags)
-        elif self.tighten is not None:
-            result.masks[:n] = -1  # the compiled bound over every term (the engine's pruning is its own)
-        if self.tighten is None or n == 0:
+        if not self.tightens or n == 0:
             return
         inside = None
         if self.solid:
             result.make_inside_room(n)
             inside = result.inside.ctypes.data
             w.inside_count[0] = result.inside_count
-        result.count = self.runtime.tighten(self.tighten, self.geom_ptr, self.depth, result.coords_ptr,
+        result.count = self.runtime.tighten(self.bound, self.geom_ptr, self.depth, result.coords_ptr,
                                             result.masks_ptr, result.normals_ptr, result.flags_ptr, n, inside,
                                             w.inside_count.ctypes.data, w.tighten_stats.ctypes.data)
         if self.solid:

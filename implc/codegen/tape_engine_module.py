@@ -2,7 +2,8 @@
 
 Exports (signatures in :mod:`implc.abi`): ``implc_tape_interval`` (enclosures over boxes, rows of an
 (n, 3) array; an undefined result is the whole line), ``implc_tape_gradient`` (F and its gradient at
-points) and ``implc_tape_subdivide`` (:mod:`.tape_subdivision`). The same for every surface, so it is
+points), ``implc_tape_box_gradient`` (enclosures of F and its partials over boxes, as the second look at
+the leaves uses them) and ``implc_tape_subdivide`` (:mod:`.tape_subdivision`). The same for every surface, so it is
 compiled once per rounding mode and cached (:class:`implc.runtime.Runtime`); a surface run by the engine
 compiles nothing of its own.
 """
@@ -15,9 +16,10 @@ from .. import abi
 from .control import I64, define, for_range, load_at, local_array
 from .interval_rules import whole_line_if_undefined
 from .kernels import load_xyz, store_lanes, store_xyz
-from .tape_eval import LANES, V8, emit_tape_dual, emit_tape_interval, emit_tape_prefill
+from .tape_eval import LANES, V8, emit_tape_box_gradient, emit_tape_dual, emit_tape_interval, emit_tape_prefill
 from .tape_simplify import emit_tape_simplify
 from .tape_subdivision import emit_tape_normals, emit_tape_subdivide
+from .tape_tighten import emit_tape_tighten
 from .vector import DOUBLE, VectorBuilder
 
 _P = ir.PointerType
@@ -39,7 +41,9 @@ def build_tape_engine(directed: bool) -> str:
     dual = emit_tape_dual(module)
     simplify = emit_tape_simplify(module)
     normals = emit_tape_normals(module, dual)
-    emit_tape_subdivide(module, prefill, interval, simplify, normals)
+    box_gradient = emit_tape_box_gradient(module, directed)
+    tighten = emit_tape_tighten(module, interval, box_gradient, directed)
+    emit_tape_subdivide(module, prefill, interval, simplify, normals, tighten)
     null_remap = ir.Constant(_P(ir.IntType(32)), None)
 
     def whole_program(b, header):
@@ -76,5 +80,22 @@ def build_tape_engine(directed: bool) -> str:
         store_lanes(b, out_value, block, b.load(vresult, align=8), LANES)
         store_xyz(b, out_grad, block, [b.load(b.gep(vresult, [ir.Constant(I64, 1 + a)]), align=8) for a in range(3)],
                   LANES)
+    b.ret_void()
+
+    fn, b = define(module, abi.TAPE_BOX_GRADIENT)
+    header, slots, lo, hi, out, n = fn.args
+    box = local_array(b, DOUBLE, 6 * LANES, "box")
+    result = local_array(b, DOUBLE, 8 * LANES, "result")
+    b.call(prefill, [header, slots, null_remap])
+    program = whole_program(b, header)
+    with for_range(b, b.sdiv(n, ir.Constant(I64, LANES))) as block:
+        _soa(b, lo, block, box)
+        _soa(b, hi, block, b.gep(box, [ir.Constant(I64, 3 * LANES)]))
+        b.call(box_gradient, [header, *program, slots, box, result])
+        rows = b.gep(out, [b.mul(block, ir.Constant(I64, 8 * LANES))])
+        for k in range(8):  # lane j of result vector k: entry k of box j's row
+            for j in range(LANES):
+                value = b.load(b.gep(result, [ir.Constant(I64, LANES * k + j)]))
+                b.store(value, b.gep(rows, [ir.Constant(I64, 8 * j + k)]))
     b.ret_void()
     return str(module)

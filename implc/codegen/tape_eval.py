@@ -14,10 +14,17 @@ switch on the opcode, eight lanes (the eight children of an octant, or eight poi
 - ``tape_dual(header, instructions, length, output, slots, points, result)``: F and its gradient at eight
   points (three vectors), forward mode (value and three partials per slot), into ``result`` (value, dx,
   dy, dz): for normals.
+- ``tape_box_gradient(header, instructions, length, output, slots, box, result)``: enclosures of F and of
+  its three partials over eight boxes (as ``tape_interval``'s), forward mode with the interval rules
+  (an interval and three interval partials per slot), into ``result`` (eight vectors: F's lo, hi, then
+  each partial's lo, hi). Where a Min/Max may take either operand its partial is the hull of both (the
+  generalized gradient of a kink); an undecided select's is NaN (it may jump); NaN stays NaN. For the
+  monotonicity test of :mod:`.tape_tighten`.
 
 ``header`` is the full program's (:data:`implc.abi.PROGRAM_WORDS`); ``instructions``, ``length`` and
 ``output`` those of the program to run (the full one, or one simplified from it). ``slots``: the scratch
-of :func:`implc.tape_program.slot_scratch` (interval slots first, dual-number slots after them).
+of :func:`implc.tape_program.slot_scratch` (interval slots, then dual-number slots, then interval-gradient
+slots).
 """
 
 from __future__ import annotations
@@ -65,6 +72,11 @@ def dual_slots(b: ir.IRBuilder, header, slots):
     return b.gep(slots, [b.mul(_header(b, header, abi.PROGRAM_SLOT_COUNT), ir.Constant(I64, 2 * LANES))])
 
 
+def box_gradient_slots(b: ir.IRBuilder, header, slots):
+    """Where the interval-gradient slots start (64 doubles each): after the dual-number slots (32 each)."""
+    return b.gep(slots, [b.mul(_header(b, header, abi.PROGRAM_SLOT_COUNT), ir.Constant(I64, 6 * LANES))])
+
+
 def emit_tape_prefill(module: ir.Module) -> ir.Function:
     """Define ``tape_prefill`` (see the module docstring) in ``module``."""
     fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(DOUBLE), _P(I32)]), name="implc.tape.prefill")
@@ -74,6 +86,7 @@ def emit_tape_prefill(module: ir.Module) -> ir.Function:
     constants = b.inttoptr(_header(b, header, abi.PROGRAM_CONSTANTS), _P(DOUBLE))
     constant_slots = b.inttoptr(_header(b, header, abi.PROGRAM_CONSTANT_SLOTS), _P(I32))
     vslots, vdual = b.bitcast(slots, _P(V8)), b.bitcast(dual_slots(b, header, slots), _P(V8))
+    vgrad = b.bitcast(box_gradient_slots(b, header, slots), _P(V8))
     has_remap = b.icmp_unsigned("!=", remap, ir.Constant(_P(I32), None))
     zero = ir.Constant(V8, [0.0] * LANES)
     with for_range(b, _header(b, header, abi.PROGRAM_CONSTANT_COUNT)) as k:
@@ -85,6 +98,8 @@ def emit_tape_prefill(module: ir.Module) -> ir.Function:
         b.store(hi, b.gep(vslots, [b.add(b.mul(slot, ir.Constant(I64, 2)), ir.Constant(I64, 1))]), align=8)
         for c, value in enumerate((nearest, zero, zero, zero)):
             b.store(value, b.gep(vdual, [b.add(b.mul(slot, ir.Constant(I64, 4)), ir.Constant(I64, c))]), align=8)
+        for c, value in enumerate((lo, hi) + (zero,) * 6):
+            b.store(value, b.gep(vgrad, [b.add(b.mul(slot, ir.Constant(I64, 8)), ir.Constant(I64, c))]), align=8)
         with if_(b, has_remap):
             store_at(b, b.trunc(slot, I32), remap, slot)
     for a in range(3):
@@ -274,3 +289,122 @@ def emit_tape_dual(module: ir.Module) -> ir.Function:
     b.ret_void()
     return fn
 
+
+
+def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
+    """Define ``tape_box_gradient`` (see the module docstring) in ``module``."""
+    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE),
+                                                              _P(DOUBLE)]), name="implc.tape.box_gradient")
+    fn.linkage = "internal"
+    header, program, length, output, slots, box, result = fn.args
+    b = ir.IRBuilder(fn.append_basic_block("entry"))
+    vb = VectorBuilder(b, LANES, directed, outline_elementary=True)
+    em = IntervalEmitter(vb)
+    vslots, vbox = b.bitcast(box_gradient_slots(b, header, slots), _P(V8)), b.bitcast(box, _P(V8))
+    zero, one = vb.splat(0.0), vb.splat(1.0)
+
+    def load(slot):
+        """[F's (lo, hi), then each partial's (lo, hi)]."""
+        base = b.mul(slot, ir.Constant(I64, 8))
+        v = [b.load(b.gep(vslots, [b.add(base, ir.Constant(I64, k))], inbounds=True), align=8) for k in range(8)]
+        return [(v[0], v[1]), (v[2], v[3]), (v[4], v[5]), (v[6], v[7])]
+
+    def store(slot, pairs):
+        base = b.mul(slot, ir.Constant(I64, 8))
+        for k, value in enumerate(x for pair in pairs for x in pair):
+            b.store(value, b.gep(vslots, [b.add(base, ir.Constant(I64, k))], inbounds=True), align=8)
+
+    def variable(a, slot):
+        value = (b.load(b.gep(vbox, [ir.Constant(I64, a)]), align=8),
+                 b.load(b.gep(vbox, [ir.Constant(I64, 3 + a)]), align=8))
+        store(slot, [value] + [(one, one) if k == a else (zero, zero) for k in range(3)])
+
+    _variables(b, header, variable)
+
+    def chain(value, scale, x):
+        """f(x) with f(x) in ``value`` and f'(x) in ``scale`` over the box: the partials scale · ∂x."""
+        return [value] + [em.i_mul([scale, d], None) for d in x[1:]]
+
+    def hull(p, q):
+        return vb.minimum(p[0], q[0]), vb.maximum(p[1], q[1])
+
+    def unary(rule):
+        return lambda i, out, a, c, d: store(out, rule(load(a)))
+
+    def binary(rule):
+        return lambda i, out, a, c, d: store(out, rule(load(a), load(c)))
+
+    def power(n):
+        def rule(x):
+            below = x[0] if n == 2 else em.i_powi([x[0]], n - 1)
+            return chain(em.i_powi([x[0]], n), em.i_scale([below], float(n)), x)
+        return rule
+
+    def sqrt(x):
+        s = em.i_sqrt([x[0]], None)
+        return [s] + [em.i_div([d, em.i_scale([s], 2.0)], None) for d in x[1:]]
+
+    def abs_(x):
+        v = x[0]
+        up, down = vb.cmp(">=", v[0], zero), vb.cmp("<=", v[1], zero)
+        partials = []
+        for d in x[1:]:
+            negated = em.i_neg([d], None)
+            either = hull(d, negated)
+            partials.append(tuple(vb.select(up, p, vb.select(down, n, e)) for p, n, e in zip(d, negated, either)))
+        return [em.i_abs([v], None)] + partials
+
+    def pick(op):
+        def rule(x, y):
+            v, w = x[0], y[0]
+            if op == "min":  # x is the minimum throughout where x.hi <= y.lo: its partials are F's
+                value, x_only, y_only = em.i_min([v, w], None), vb.cmp("<=", v[1], w[0]), vb.cmp("<=", w[1], v[0])
+            else:
+                value, x_only, y_only = em.i_max([v, w], None), vb.cmp(">=", v[0], w[1]), vb.cmp(">=", w[0], v[1])
+            partials = []
+            for dx, dy in zip(x[1:], y[1:]):
+                either = hull(dx, dy)
+                partials.append(tuple(vb.select(x_only, p, vb.select(y_only, q, e)) for p, q, e in zip(dx, dy, either)))
+            return [value] + partials
+        return rule
+
+    def select(op):
+        def emit(i, out, a, c, d):
+            g, t, f = load(a), load(c), load(d)
+            rule = getattr(em, f"i_{op}")
+            store(out, [rule([g[0], t[0], f[0]], None)]
+                  + [rule([g[0], p, q], "jump") for p, q in zip(t[1:], f[1:])])
+        return emit
+
+    def mul(x, y):
+        return [em.i_mul([x[0], y[0]], None)] + [
+            em.i_add([em.i_mul([x[0], dy], None), em.i_mul([y[0], dx], None)], False)
+            for dx, dy in zip(x[1:], y[1:])]
+
+    def div(x, y):
+        q = em.i_div([x[0], y[0]], None)
+        return [q] + [em.i_div([em.i_sub([dx, em.i_mul([q, dy], None)], None), y[0]], None)
+                      for dx, dy in zip(x[1:], y[1:])]
+
+    def add(nonnegative):
+        return lambda x, y: [em.i_add([x[0], y[0]], nonnegative)] + [em.i_add([p, q], False)
+                                                                      for p, q in zip(x[1:], y[1:])]
+
+    cases = {"neg": unary(lambda x: [em.i_neg([p], None) for p in x]), "abs": unary(abs_),
+             "sqrt": unary(sqrt),
+             "exp": unary(lambda x: (lambda e: chain(e, e, x))(em.i_exp([x[0]], None))),
+             "log": unary(lambda x: [em.i_log([x[0]], None)] + [em.i_div([d, x[0]], None) for d in x[1:]]),
+             "sin": unary(lambda x: chain(em.i_sin([x[0]], None), em.i_cos([x[0]], None), x)),
+             "cos": unary(lambda x: chain(em.i_cos([x[0]], None), em.i_neg([em.i_sin([x[0]], None)], None), x)),
+             "square": unary(power(2)), "cube": unary(power(3)), "fourth": unary(power(4)),
+             "add": binary(add(False)), "add_nonneg": binary(add(True)),
+             "sub": binary(lambda x, y: [em.i_sub([p, q], None) for p, q in zip(x, y)]),
+             "mul": binary(mul), "div": binary(div), "min": binary(pick("min")), "max": binary(pick("max")),
+             "select_lt": select("select_lt"), "select_le": select("select_le")}
+    assert set(cases) == set(OPCODES), "every opcode has an interval-gradient case"
+    _instruction_loop(b, program, length, cases)
+    vresult = b.bitcast(result, _P(V8))
+    for k, value in enumerate(x for pair in load(output) for x in pair):
+        b.store(value, b.gep(vresult, [ir.Constant(I64, k)]), align=8)
+    b.ret_void()
+    return fn

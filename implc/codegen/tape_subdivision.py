@@ -9,8 +9,10 @@ the full program simplified down the path from the root to its octant. The child
 above the leaves are the voxels (with ``refine``, those one of whose eighths may meet the surface); their
 unit normals come eight at a time from ``tape_dual`` over the program
 two levels above the leaves (valid for every voxel below that octant, and barely longer than their
-parents'), through the normals block of :mod:`implc.codegen.normals`, before the voxels leave the call
-(with each voxel's flag for tightening where ``out_flags`` is not NULL).
+parents'), through the normals block of :mod:`implc.codegen.normals`, before the voxels leave the call.
+Where ``out_flags`` is not NULL each voxel gets its flag for tightening, and the flagged ones their second
+look (:mod:`implc.codegen.tape_tighten`, with the same program), which marks those it proves empty for
+:mod:`implc.codegen.tighten` to drop.
 Where ``inside`` is not NULL (a solid), every child whose enclosure lies below 0 is written there too
 (:data:`implc.abi.INSIDE_WORDS` each). Resumable: when the output is full or the cancel flag is raised it
 returns with its frames and state intact (layouts in :mod:`implc.abi`)."""
@@ -83,7 +85,7 @@ def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
 
 
 def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Function, simplify: ir.Function,
-                        normals: ir.Function):
+                        normals: ir.Function, tighten: ir.Function):
     fn, b = define(module, abi.TAPE_SUBDIVIDE)
     (header, prune, refine, geom, state, frames, tapes, choices, slots, need, mark, remap, out, out_normals,
      out_flags, capacity, inside, inside_capacity, stats, cancel) = fn.args
@@ -107,7 +109,8 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
     normals_level = b.select(b.icmp_signed(">", b.sub(depth, const(I64, 2)), task_level), b.sub(depth, const(I64, 2)),
                              task_level)
     ctpop = ir.Function(module, ir.FunctionType(I32, [I32]), name="llvm.ctpop.i32")
-    cttz = ir.Function(module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.cttz.i32")
+    cttz = module.globals.get("llvm.cttz.i32") or ir.Function(module, ir.FunctionType(I32, [I32, ir.IntType(1)]),
+                                                              name="llvm.cttz.i32")
 
     def program_of(level):
         return b.inttoptr(load_at(b, state, b.add(level, const(I64, abi.TAPE_PROGRAMS))), _P(I32))
@@ -202,6 +205,10 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
                              slots, leaf_geom,
                              b.gep(out, [offset]), pending, b.gep(out_normals, [offset]),
                              b.select(has_flags, b.gep(out_flags, [first]), out_flags)])
+            with if_(b, has_flags):  # the second look at the flagged ones, with the same program
+                b.call(tighten, [header, program_of(normals_level), length_of(normals_level),
+                                 output_of(normals_level), slots, choices_of(b.add(depth, const(I64, 1))), geom,
+                                 depth, b.gep(out, [offset]), b.gep(out_flags, [first]), pending])
             normals_done.set(b.add(first, pending))
 
     def may_meet(lo, hi):

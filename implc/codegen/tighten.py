@@ -5,7 +5,9 @@ them. The normals pass flags the others worth a second look, the cells the linea
 misses (:mod:`implc.codegen.normals`), with the side F(c) lies on. For each flagged leaf one sound test:
 the bound of the monotonicity form on that side over the leaf's box (``bound``, a surface's
 ``implc_bound_monotone``, eight leaves per call, their live-term masks joined). A leaf is dropped when
-the bound proves F > 0 (or F < 0) on the whole box; a NaN bound never does. Where ``inside`` is not
+the bound proves F > 0 (or F < 0) on the whole box; a NaN bound never does. With ``bound`` NULL the leaves
+come tested (the tape engine's second look, :mod:`implc.codegen.tape_tighten`, marked the proven ones with
+:data:`OUTSIDE` or :data:`INSIDE`): this pass counts them and drops those marked. Where ``inside`` is not
 NULL (a solid) the leaves proven below 0 are appended to it (:data:`implc.abi.INSIDE_WORDS` each,
 ``*inside_count`` rows already there, and updated). The survivors (coordinates, masks, normals) are
 moved down in order; the new count is returned.
@@ -68,18 +70,30 @@ def emit_tighten(module: ir.Module):
         lanes.set(const(I64, 0))
         union.set(const(I64, 0))
 
-    with for_range(b, n) as i:
-        flag = load_at(b, flags, i)
-        flagged = b.or_(b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_ABOVE)),
-                        b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_BELOW)))
-        with if_(b, flagged):
-            store_at(b, i, slots, lanes.get())
-            lanes.set(b.add(lanes.get(), const(I64, 1)))
-            union.set(b.or_(union.get(), load_at(b, masks, i)))
-            with if_(b, b.icmp_signed("==", lanes.get(), const(I64, 8))):
+    has_bound = b.icmp_unsigned("!=", bound_ptr, ir.Constant(bound_ptr.type, None))
+    with b.if_else(has_bound) as (testing, tested):
+        with testing:
+            with for_range(b, n) as i:
+                flag = load_at(b, flags, i)
+                flagged = b.or_(b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_ABOVE)),
+                                b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_BELOW)))
+                with if_(b, flagged):
+                    store_at(b, i, slots, lanes.get())
+                    lanes.set(b.add(lanes.get(), const(I64, 1)))
+                    union.set(b.or_(union.get(), load_at(b, masks, i)))
+                    with if_(b, b.icmp_signed("==", lanes.get(), const(I64, 8))):
+                        test_pending()
+            with if_(b, b.icmp_signed(">", lanes.get(), const(I64, 0))):
                 test_pending()
-    with if_(b, b.icmp_signed(">", lanes.get(), const(I64, 0))):
-        test_pending()
+        with tested:  # the tape engine's look marked them: count the flagged leaves and the proven ones
+            with for_range(b, n) as i:
+                flag = load_at(b, flags, i)
+                with if_(b, b.and_(b.icmp_unsigned(">=", flag, const(I8, abi.TIGHTEN_ABOVE)),
+                                   b.icmp_unsigned("<=", flag, const(I8, abi.TIGHTEN_BELOW)))):
+                    bump(b, stats, 0)
+                with if_(b, b.or_(b.icmp_unsigned("==", flag, const(I8, OUTSIDE)),
+                                  b.icmp_unsigned("==", flag, const(I8, INSIDE)))):
+                    bump(b, stats, 1)
 
     solid = b.icmp_unsigned("!=", inside, ir.Constant(inside.type, None))
     kept = Local(b, I64, 0, "kept")
