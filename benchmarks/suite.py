@@ -281,8 +281,9 @@ def tightness(args, out):
                   f"| {r['tightest_cpu_s']:.3f} ({r['tightest_cpu_s'] / n:.2f}×) |")
     md += ["", "natural: voxelize(..., **implc.NATURAL) (mean_value_levels=0, refine_leaves=False), every leaf the "
            "natural enclosure keeps; default: refine_leaves='auto', the kept leaves the linear model at their centre "
-           "misses tested again with the monotonicity form; tightest: voxelize(..., **implc.TIGHTEST) "
-           "(mean_value_levels=1, refine_leaves=True). CPU seconds: process time, medians, the modes interleaved."]
+           "misses tested again with the monotonicity form (over the leaf, then its eighths and theirs); "
+           "tightest: voxelize(..., **implc.TIGHTEST) (mean_value_levels=1, refine_leaves='auto'). CPU seconds: "
+           "process time, medians, the modes interleaved."]
     return md
 
 
@@ -452,7 +453,7 @@ def techniques(args, out):
         "natural leaves (no second look)": ({}, implc.NATURAL),
         "mean-value leaves": ({}, {"mean_value_levels": 1, "refine_leaves": False}),
         "refined leaves": ({}, {"refine_leaves": True}),
-        "tightest (both)": ({}, implc.TIGHTEST),
+        "tightest": ({}, implc.TIGHTEST),
     }
     rows = []
     for name, (expr, bounds) in cases.items():

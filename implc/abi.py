@@ -81,8 +81,8 @@ SUBDIVIDE = _entry("implc_subdivide",
                    "stats:i64* cancel:i32*", "i64")
 NORMALS = _entry("implc_normals", "gradient_live:fn* point:fn* leaf_geom:f64* coords:i32* masks:i64* n:i64 out:f32* "
                                   "flags:i8*")
-TIGHTEN = _entry("implc_tighten", "bound:fn* geom:f64* depth:i64 coords:i32* masks:i64* normals:f32* flags:i8* "
-                                  "n:i64 inside:i32* inside_count:i64* stats:i64*", "i64")
+TIGHTEN = _entry("implc_tighten", "bound:fn* point:fn* geom:f64* depth:i64 coords:i32* masks:i64* normals:f32* "
+                                  "flags:i8* n:i64 inside:i32* inside_count:i64* stats:i64*", "i64")
 OCTREE_INSERT = _entry("implc_octree_insert", "nodes:i32* node_capacity:i64 state:i64* coords:i32* n:i64 "
                                               "first_index:i64", "i64")
 OCTREE_TRAVERSE = _entry("implc_octree_traverse", "nodes:i32* depth:i64 level:i64 out:i32* payload:i64*", "i64")

@@ -112,7 +112,7 @@ def _surface_from_args(args):
 
 
 TIGHTNESS = {"natural": {"mean_value_levels": 0, "refine_leaves": False}, "default": {},
-             "tightest": {"mean_value_levels": 1, "refine_leaves": True}}
+             "tightest": {"mean_value_levels": 1, "refine_leaves": "auto"}}
 """--tightness: implc.NATURAL, the default and implc.TIGHTEST (spelt out: importing them would load NumPy)."""
 
 

@@ -308,7 +308,8 @@ class Subdivider:
             result.make_inside_room(n)
             inside = result.inside.ctypes.data
             w.inside_count[0] = result.inside_count
-        result.count = self.runtime.tighten(self.bound, self.geom_ptr, self.depth, result.coords_ptr,
+        point = self.point if self.bound else None  # the compiled F, to spare leaves the surface crosses a split
+        result.count = self.runtime.tighten(self.bound, point, self.geom_ptr, self.depth, result.coords_ptr,
                                             result.masks_ptr, result.normals_ptr, result.flags_ptr, n, inside,
                                             w.inside_count.ctypes.data, w.tighten_stats.ctypes.data)
         if self.solid:

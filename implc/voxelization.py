@@ -218,9 +218,10 @@ def _check_depth(depth):
 
 NATURAL = {"mean_value_levels": 0, "refine_leaves": False}
 """``voxelize(s, depth, **implc.NATURAL)``: every leaf the natural enclosure keeps (no second test)."""
-TIGHTEST = {"mean_value_levels": 1, "refine_leaves": True}
-"""``voxelize(s, depth, **implc.TIGHTEST)``: every leaf decided by the mean-value form and kept only if
-one of its eighths may meet the surface (the tightest, at two to six times the default's time)."""
+TIGHTEST = {"mean_value_levels": 1, "refine_leaves": "auto"}
+"""``voxelize(s, depth, **implc.TIGHTEST)``: every leaf decided by the mean-value form, then the default's
+second look (never more voxels than the default with compiled kernels, and rarely fewer: the second look
+re-tests what the mean-value form would drop; at two to six times the default's time)."""
 
 ESTIMATE_MARGIN = 1.5
 """The memory check's allowance for the estimate running low (measured up to about 1.5x below the peak)."""
@@ -259,11 +260,12 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     boxes, about five times the work per box); 0 uses the natural enclosure everywhere. ``prune``: skip,
     below each octant, the terms of a blend sum or a Min/Max chain that its enclosure showed dead there.
     ``refine_leaves``: "auto" (the default) tests again the kept leaves that the linear model at their
-    centre does not cross (the monotonicity form's bound over the leaf) and drops those proven empty;
+    centre does not cross with the monotonicity form (over the leaf, then where that fails over its
+    eighths and theirs; the tape engine runs its own version) and drops those proven empty;
     True keeps a leaf only if one of its eight half-size sub-boxes may meet the surface (about twice the
     interval work); False keeps what the enclosures of the leaves keep (the natural
     mode, with ``mean_value_levels=0``). The tightest: :data:`TIGHTEST`, ``mean_value_levels=1,
-    refine_leaves=True``.
+    refine_leaves="auto"``.
     ``solid``: also classify the inside: octants whose enclosure lies below 0 are kept whole
     (``Voxels.inside``, never expanded), which gives ``Voxels.volume_bounds()`` and
     ``Voxels.to_dense(solid=True)``.

@@ -12,10 +12,8 @@ at a time (:func:`emit_tape_tighten`'s ``prove``):
   sign) and ``tape_interval`` encloses F there. Sound where F is continuous on the box: never used where
   F's enclosure is undefined (NaN) or a partial's is NaN or infinite (a pole, a possible jump).
 
-A leaf the test leaves open is split, eighths then their eighths (:data:`LEVELS_BELOW` levels, depth
-first, the eighths a level proves dropping out), and proven when every box at the last level is: the test
-tightens as boxes shrink (the partials keep their sign on smaller boxes, and the rest of the enclosure
-shrinks with the box). Boxes are the subdivider's at the finer levels (origin + i·h, padded outward).
+A leaf the test leaves open is split (:mod:`implc.codegen.leaf_split`), each box below it tested by its
+plain enclosure first. Boxes are the subdivider's at the finer levels (origin + i·h, padded outward).
 """
 
 from __future__ import annotations
@@ -23,14 +21,13 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, Local, const, for_range, if_, load_at, local_array, store_at, while_true
+from .control import I32, I64, Local, const, for_range, if_, load_at, local_array, store_at
+from .leaf_split import emit_split
 from .tape_eval import LANES, V8
 from .tighten import INSIDE, OUTSIDE
 from .vector import DOUBLE, VectorBuilder, broadcast
 
 I8 = ir.IntType(8)
-LEVELS_BELOW = 2
-"""How many levels below a flagged leaf the second look splits it to prove it empty."""
 _P = ir.PointerType
 
 
@@ -56,20 +53,17 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
     sides = local_array(b, DOUBLE, LANES, "sides")  # +1: prove F > 0, -1: prove F < 0
     first_sides = local_array(b, DOUBLE, LANES, "first_sides")  # the first test's, while its voxels are split
     slots_of = local_array(b, I64, LANES, "slots_of")  # the voxel in each lane of the first test
-    base = local_array(b, DOUBLE, 3 * (LEVELS_BELOW + 1), "base")  # the parent cell of each level's boxes
-    open_ = local_array(b, I32, LEVELS_BELOW + 1, "open")  # each level's boxes not proven yet (bit c: box c)
     vbox, vreduced, vgradient = (b.bitcast(p, _P(V8)) for p in (box, reduced, gradient))
     origin = [broadcast(b, load_at(b, geom, a), LANES) for a in range(3)]
     pad = [broadcast(b, load_at(b, geom, 3 + a), LANES) for a in range(3)]
     leaf_h = [load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
     zero, one, inf = vb.splat(0.0), vb.splat(1.0), vb.splat(float("inf"))
     lanes = Local(b, I64, 0, "lanes")
-    cttz = module.globals.get("llvm.cttz.i32") or ir.Function(module, ir.FunctionType(I32, [I32, ir.IntType(1)]),
-                                                              name="llvm.cttz.i32")
 
-    def prove(factor):
+    def prove(factor, natural_first=False):
         """The lanes (i8 mask) whose box (cells at ``cells``, of the leaves' size times ``factor``) is
-        proven on its side: its enclosure, or the enclosure over the face or corner its monotone axes give."""
+        proven on its side: by its enclosure, or by the enclosure over the face or corner its monotone axes
+        give (``natural_first``: the plain enclosure first, and the rest only if it leaves a box open)."""
         vcells = b.bitcast(cells, _P(V8))
         for a in range(3):
             h = broadcast(b, b.fmul(leaf_h[a], factor), LANES)
@@ -77,75 +71,52 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
             b.store(b.fsub(b.fadd(origin[a], b.fmul(i, h)), pad[a]), b.gep(vbox, [const(I64, a)]), align=8)
             b.store(b.fadd(b.fadd(origin[a], b.fmul(b.fadd(i, one), h)), pad[a]), b.gep(vbox, [const(I64, 3 + a)]),
                     align=8)
-        b.call(box_gradient, [header, program, length, output, slots, box, gradient])
         side = b.load(b.bitcast(sides, _P(V8)), align=8)
         above = vb.cmp(">", side, zero)
-        f_lo, f_hi = (b.load(b.gep(vgradient, [const(I64, k)]), align=8) for k in range(2))
-        defined = b.not_(b.or_(vb.isnan(f_lo), vb.isnan(f_hi)))
-        proven = b.select(above, vb.cmp(">", f_lo, zero), vb.cmp("<", f_hi, zero))
-        for a in range(3):
-            d_lo, d_hi = (b.load(b.gep(vgradient, [const(I64, 2 + 2 * a + k)]), align=8) for k in range(2))
-            rising = b.and_(vb.cmp(">=", d_lo, zero), vb.cmp("<", d_hi, inf))
-            falling = b.and_(vb.cmp("<=", d_hi, zero), vb.cmp(">", d_lo, vb.neg(inf)))
-            # F is least on the lo face where it rises along a, greatest there where it falls
-            to_lo = b.and_(defined, b.select(above, rising, falling))
-            to_hi = b.and_(defined, b.and_(b.not_(to_lo), b.select(above, falling, rising)))
-            lo = b.load(b.gep(vbox, [const(I64, a)]), align=8)
-            hi = b.load(b.gep(vbox, [const(I64, 3 + a)]), align=8)
-            b.store(b.select(to_hi, hi, lo), b.gep(vreduced, [const(I64, a)]), align=8)
-            b.store(b.select(to_lo, lo, hi), b.gep(vreduced, [const(I64, 3 + a)]), align=8)
-        b.call(interval, [header, program, length, output, slots, choices, reduced, result])
         vresult = b.bitcast(result, _P(V8))
-        r_lo, r_hi = b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
-        proven = b.or_(proven, b.and_(defined, b.select(above, vb.cmp(">", r_lo, zero), vb.cmp("<", r_hi, zero))))
-        return b.bitcast(proven, I8)
 
-    def open_children(level):
-        """The eight boxes below ``base[level]`` (``level`` an i64, 1 to LEVELS_BELOW): those not proven
-        (i32 mask, bit c: box c)."""
-        for a in range(3):
-            parent = broadcast(b, load_at(b, base, b.add(b.mul(level, const(I64, 3)), const(I64, a))), LANES)
-            bits = ir.Constant(V8, [float((c >> a) & 1) for c in range(LANES)])
-            b.store(b.fadd(b.fmul(parent, vb.splat(2.0)), bits), b.gep(b.bitcast(cells, _P(V8)), [const(I64, a)]),
-                    align=8)
-        factor = b.fdiv(const(DOUBLE, 1.0), b.uitofp(b.shl(const(I64, 1), level), DOUBLE))  # exact: 2^-level
-        return b.zext(b.xor(prove(factor), const(I8, 0xFF)), I32)
+        def on_side(lo, hi):
+            return b.select(above, vb.cmp(">", lo, zero), vb.cmp("<", hi, zero))
+
+        verdict = Local(b, I8, const(I8, 0), "verdict")
+        if natural_first:
+            b.call(interval, [header, program, length, output, slots, choices, box, result])
+            verdict.set(b.bitcast(on_side(b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)),
+                                  I8))
+        with if_(b, b.icmp_unsigned("!=", verdict.get(), const(I8, 0xFF))):
+            b.call(box_gradient, [header, program, length, output, slots, box, gradient])
+            f_lo, f_hi = (b.load(b.gep(vgradient, [const(I64, k)]), align=8) for k in range(2))
+            defined = b.not_(b.or_(vb.isnan(f_lo), vb.isnan(f_hi)))
+            proven = on_side(f_lo, f_hi)
+            for a in range(3):
+                d_lo, d_hi = (b.load(b.gep(vgradient, [const(I64, 2 + 2 * a + k)]), align=8) for k in range(2))
+                rising = b.and_(vb.cmp(">=", d_lo, zero), vb.cmp("<", d_hi, inf))
+                falling = b.and_(vb.cmp("<=", d_hi, zero), vb.cmp(">", d_lo, vb.neg(inf)))
+                # F is least on the lo face where it rises along a, greatest there where it falls
+                to_lo = b.and_(defined, b.select(above, rising, falling))
+                to_hi = b.and_(defined, b.and_(b.not_(to_lo), b.select(above, falling, rising)))
+                lo = b.load(b.gep(vbox, [const(I64, a)]), align=8)
+                hi = b.load(b.gep(vbox, [const(I64, 3 + a)]), align=8)
+                b.store(b.select(to_hi, hi, lo), b.gep(vreduced, [const(I64, a)]), align=8)
+                b.store(b.select(to_lo, lo, hi), b.gep(vreduced, [const(I64, 3 + a)]), align=8)
+            b.call(interval, [header, program, length, output, slots, choices, reduced, result])
+            r_lo, r_hi = b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
+            proven = b.or_(proven, b.and_(defined, on_side(r_lo, r_hi)))
+            verdict.set(b.or_(verdict.get(), b.bitcast(proven, I8)))
+        return verdict.get()
 
     def mark(index, side):
         store_at(b, b.select(b.fcmp_ordered(">", side, const(DOUBLE, 0.0)), const(I8, OUTSIDE), const(I8, INSIDE)),
                  flags, index)
 
     def split(index, side):
-        """The voxel ``index`` split ``LEVELS_BELOW`` levels down, depth first: marked if every box is proven."""
-        for a in range(3):
-            store_at(b, b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE),
-                     base, const(I64, 3 + a))
+        """The voxel ``index`` split below (:func:`~implc.codegen.leaf_split.emit_split`): marked if every box
+        is proven."""
         b.store(broadcast(b, side, LANES), b.bitcast(sides, _P(V8)), align=8)
-        level = Local(b, I64, 1, "level")
-        store_at(b, open_children(const(I64, 1)), open_, 1)
-        with while_true(b) as loop:
-            k = level.get()
-            remaining = load_at(b, open_, k)
-            survives = b.and_(b.icmp_signed("==", k, const(I64, LEVELS_BELOW)),
-                              b.icmp_unsigned("!=", remaining, const(I32, 0)))
-            loop.break_if(survives)  # a box at the last level stays open: so does the voxel
-            with b.if_else(b.icmp_unsigned("==", remaining, const(I32, 0))) as (up, down):
-                with up:
-                    level.set(b.sub(k, const(I64, 1)))
-                with down:  # into the next open box
-                    c = b.call(cttz, [remaining, ir.Constant(ir.IntType(1), 1)])
-                    store_at(b, b.and_(remaining, b.sub(remaining, const(I32, 1))), open_, k)
-                    child = b.add(k, const(I64, 1))
-                    for a in range(3):
-                        bit = b.uitofp(b.and_(b.lshr(c, const(I32, a)), const(I32, 1)), DOUBLE)
-                        parent = load_at(b, base, b.add(b.mul(k, const(I64, 3)), const(I64, a)))
-                        store_at(b, b.fadd(b.fmul(parent, const(DOUBLE, 2.0)), bit), base,
-                                 b.add(b.mul(child, const(I64, 3)), const(I64, a)))
-                    store_at(b, open_children(child), open_, child)
-                    level.set(child)
-            with if_(b, b.icmp_signed("==", level.get(), const(I64, 0))):  # every box proven
-                mark(index, side)
-            loop.break_if(b.icmp_signed("==", level.get(), const(I64, 0)))
+        leaf = [b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE)
+                for a in range(3)]
+        with if_(b, emit_split(b, leaf, cells, lambda factor: prove(factor, natural_first=True))):
+            mark(index, side)
 
     def test_pending():
         """The first test over the pending flagged voxels' own boxes (unused lanes repeat the first); the

@@ -5,7 +5,11 @@ them. The normals pass flags the others worth a second look, the cells the linea
 misses (:mod:`implc.codegen.normals`), with the side F(c) lies on. For each flagged leaf one sound test:
 the bound of the monotonicity form on that side over the leaf's box (``bound``, a surface's
 ``implc_bound_monotone``, eight leaves per call, their live-term masks joined). A leaf is dropped when
-the bound proves F > 0 (or F < 0) on the whole box; a NaN bound never does. With ``bound`` NULL the leaves
+the bound proves F > 0 (or F < 0) on the whole box; a NaN bound never does. A leaf the bound leaves
+open is split (:mod:`implc.codegen.leaf_split`: the bound over its eighths, then theirs, with the leaf's
+live terms) and dropped when every box at the last level is proven, unless F at one of its corners
+(``point``, in floating point) already lies across 0: the surface crosses it (most leaves the bound
+leaves open on smooth surfaces), and splitting it would only spend time. With ``bound`` NULL the leaves
 come tested (the tape engine's second look, :mod:`implc.codegen.tape_tighten`, marked the proven ones with
 :data:`OUTSIDE` or :data:`INSIDE`): this pass counts them and drops those marked. Where ``inside`` is not
 NULL (a solid) the leaves proven below 0 are appended to it (:data:`implc.abi.INSIDE_WORDS` each,
@@ -19,6 +23,7 @@ from llvmlite import ir
 
 from .. import abi
 from .control import I32, I64, Local, bump, const, define, for_range, if_, load_at, local_array, store_at
+from .leaf_split import V8, emit_split
 
 DOUBLE = ir.DoubleType()
 I8 = ir.IntType(8)
@@ -29,8 +34,9 @@ OUTSIDE, INSIDE = 2, 3
 
 def emit_tighten(module: ir.Module):
     fn, b = define(module, abi.TIGHTEN)
-    bound_ptr, geom, depth, coords, masks, normals, flags, n, inside, inside_count, stats = fn.args
+    bound_ptr, point_ptr, geom, depth, coords, masks, normals, flags, n, inside, inside_count, stats = fn.args
     bound = b.bitcast(bound_ptr, ir.PointerType(abi.BOUND_MONOTONE.llvm_type()))
+    point = b.bitcast(point_ptr, ir.PointerType(abi.POINT.llvm_type()))
     origin = [load_at(b, geom, a) for a in range(3)]
     pad = [load_at(b, geom, 3 + a) for a in range(3)]
     h = [load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
@@ -38,9 +44,49 @@ def emit_tighten(module: ir.Module):
     side, out = local_array(b, DOUBLE, 8, "side"), local_array(b, DOUBLE, 8, "out")
     live = local_array(b, I64, 1, "live")
     slots = local_array(b, I64, 8, "slots")
+    # the split's: the boxes' cells (axis by axis), their boxes, side, bounds and the leaf's live terms
+    cells = local_array(b, DOUBLE, 24, "cells")
+    split_lo, split_hi = local_array(b, DOUBLE, 24, "split_lo"), local_array(b, DOUBLE, 24, "split_hi")
+    split_side, split_out = local_array(b, DOUBLE, 8, "split_side"), local_array(b, DOUBLE, 8, "split_out")
+    split_live = local_array(b, I64, 1, "split_live")
     lanes = Local(b, I64, 0, "lanes")
     union = Local(b, I64, 0, "union")
     zero = const(DOUBLE, 0.0)
+
+    def mark(index, above):
+        store_at(b, b.select(above, const(I8, OUTSIDE), const(I8, INSIDE)), flags, index)
+        bump(b, stats, 1)
+
+    def prove(factor, sign):
+        """The boxes (cells at ``cells``, the leaves' size times ``factor``) the bound proves on the side
+        ``sign`` (i8 mask), the leaf's live terms with them."""
+        for j in range(8):
+            for a in range(3):
+                step = b.fmul(h[a], factor)
+                c = load_at(b, cells, 8 * a + j)
+                store_at(b, b.fsub(b.fadd(origin[a], b.fmul(c, step)), pad[a]), split_lo, 3 * j + a)
+                store_at(b, b.fadd(b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 1.0)), step)), pad[a]), split_hi,
+                         3 * j + a)
+            store_at(b, sign, split_side, j)
+        b.call(bound, [split_lo, split_hi, split_side, split_out, const(I64, 8), split_live])
+        values = b.load(b.bitcast(split_out, ir.PointerType(V8)), align=8)
+        splat = ir.Constant(V8, [0.0] * 8)
+        above = b.fcmp_ordered(">", sign, zero)
+        return b.bitcast(b.select(above, b.fcmp_ordered(">", values, splat), b.fcmp_ordered("<", values, splat)), I8)
+
+    def across(leaf, sign):
+        """The leaf's corners (i8 mask) where F, evaluated in floating point (``point``), lies on the other
+        side of 0 than ``sign``: the surface crosses such a leaf, so no split will drop it (a choice of
+        work only: a leaf not split is kept)."""
+        for j in range(8):
+            for a in range(3):
+                store_at(b, b.fadd(origin[a], b.fmul(b.fadd(leaf[a], const(DOUBLE, float((j >> a) & 1))), h[a])),
+                         split_lo, 3 * j + a)
+        b.call(point, [split_lo, split_out, const(I64, 8)])
+        values = b.load(b.bitcast(split_out, ir.PointerType(V8)), align=8)
+        splat = ir.Constant(V8, [0.0] * 8)
+        above = b.fcmp_ordered(">", sign, zero)
+        return b.bitcast(b.select(above, b.fcmp_ordered("<", values, splat), b.fcmp_ordered(">", values, splat)), I8)
 
     def test_pending():
         """The bounds over the pending leaves' boxes (unused lanes repeat the first), and the verdicts."""
@@ -57,16 +103,22 @@ def emit_tighten(module: ir.Module):
             store_at(b, b.select(above, const(DOUBLE, 1.0), const(DOUBLE, -1.0)), side, j)
         store_at(b, union.get(), live, 0)
         b.call(bound, [lo, hi, side, out, const(I64, 8), live])
-        for j in range(8):
-            with if_(b, b.icmp_signed("<", const(I64, j), count)):
-                index = load_at(b, slots, j)
-                value = load_at(b, out, j)
-                above = b.fcmp_ordered(">", load_at(b, side, j), zero)
-                proven = b.select(above, b.fcmp_ordered(">", value, zero), b.fcmp_ordered("<", value, zero))
-                bump(b, stats, 0)
-                with if_(b, proven):
-                    store_at(b, b.select(above, const(I8, OUTSIDE), const(I8, INSIDE)), flags, index)
-                    bump(b, stats, 1)
+        with for_range(b, count) as j:
+            index = load_at(b, slots, j)
+            value, sign = load_at(b, out, j), load_at(b, side, j)
+            above = b.fcmp_ordered(">", sign, zero)
+            bump(b, stats, 0)
+            proven = b.select(above, b.fcmp_ordered(">", value, zero), b.fcmp_ordered("<", value, zero))
+            with b.if_else(proven) as (yes, no):
+                with yes:
+                    mark(index, above)
+                with no:  # split below (the bound over its eighths, then theirs) unless a corner is across
+                    store_at(b, load_at(b, masks, index), split_live, 0)
+                    leaf = [b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE)
+                            for a in range(3)]
+                    with if_(b, b.icmp_unsigned("==", across(leaf, sign), const(I8, 0))):
+                        with if_(b, emit_split(b, leaf, cells, lambda factor: prove(factor, sign))):
+                            mark(index, above)
         lanes.set(const(I64, 0))
         union.set(const(I64, 0))
 
