@@ -1,4 +1,6 @@
-"""The second look's split of a leaf it could not prove whole: its eighths, then theirs, depth first.
+"""What both second looks at the leaves share: the flagged leaves taken eight at a time
+(:func:`for_flagged_batches`), and the split of a leaf the first test could not prove whole: its
+eighths, then theirs, depth first (:func:`emit_split`).
 
 Both second looks (:mod:`implc.codegen.tighten` with a surface's compiled bound, and the tape engine's
 :mod:`implc.codegen.tape_tighten`) test a flagged leaf's box first; where that leaves it open, the tests
@@ -13,7 +15,8 @@ from __future__ import annotations
 
 from llvmlite import ir
 
-from .control import I32, I64, Local, const, if_, load_at, local_array, store_at, while_true
+from .. import abi
+from .control import I32, I64, Local, const, for_range, if_, load_at, local_array, store_at, while_true
 from .vector import DOUBLE, broadcast
 
 LEVELS_BELOW = 2
@@ -77,3 +80,29 @@ def emit_split(b: ir.IRBuilder, leaf, cells, prove):
             proven.set(ir.Constant(ir.IntType(1), 1))
         loop.break_if(done)
     return proven.get()
+
+
+def for_flagged_batches(b: ir.IRBuilder, flags, n, slots, test, on_flagged=None):
+    """Gather the leaves flagged for a second look (:data:`implc.abi.TIGHTEN_ABOVE` or
+    :data:`~implc.abi.TIGHTEN_BELOW`) among the ``n`` at ``flags`` into ``slots`` (eight i64 indices) and
+    call ``test(count)`` (an i64, 1 to 8) for each batch, the last maybe partial; ``on_flagged(i)`` runs for
+    each flagged leaf as it joins its batch."""
+    lanes = Local(b, I64, const(I64, 0), "flagged.lanes")
+
+    def run():
+        test(lanes.get())
+        lanes.set(const(I64, 0))
+
+    with for_range(b, n) as i:
+        flag = load_at(b, flags, i)
+        flagged = b.or_(b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_ABOVE)),
+                        b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_BELOW)))
+        with if_(b, flagged):
+            store_at(b, i, slots, lanes.get())
+            lanes.set(b.add(lanes.get(), const(I64, 1)))
+            if on_flagged is not None:
+                on_flagged(i)
+            with if_(b, b.icmp_signed("==", lanes.get(), const(I64, LANES))):
+                run()
+    with if_(b, b.icmp_signed(">", lanes.get(), const(I64, 0))):
+        run()

@@ -10,6 +10,8 @@ compiles nothing of its own.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 from llvmlite import ir
 
 from .. import abi
@@ -46,17 +48,23 @@ def build_tape_engine(directed: bool) -> str:
     emit_tape_subdivide(module, prefill, interval, simplify, normals, tighten)
     null_remap = ir.Constant(_P(ir.IntType(32)), None)
 
-    def whole_program(b, header):
-        return (b.inttoptr(load_at(b, header, abi.PROGRAM_INSTRUCTIONS), _P(ir.IntType(32))),
-                load_at(b, header, abi.PROGRAM_LENGTH), load_at(b, header, abi.PROGRAM_OUTPUT))
+    @contextmanager
+    def over_blocks(entry, inputs, results):
+        """Define ``entry``: its prefilled slots, then a loop over blocks of eight rows with ``inputs``
+        (scratch doubles per block), ``results`` (scratch doubles) and the whole program; yields the
+        builder, the function's arguments, the block, the scratch arrays and the program."""
+        fn, b = define(module, entry)
+        header, slots = fn.args[:2]
+        scratch = local_array(b, DOUBLE, inputs, "in"), local_array(b, DOUBLE, results, "result")
+        b.call(prefill, [header, slots, null_remap])
+        program = (b.inttoptr(load_at(b, header, abi.PROGRAM_INSTRUCTIONS), _P(ir.IntType(32))),
+                   load_at(b, header, abi.PROGRAM_LENGTH), load_at(b, header, abi.PROGRAM_OUTPUT))
+        with for_range(b, b.sdiv(fn.args[-1], ir.Constant(I64, LANES))) as block:
+            yield b, fn.args, block, scratch, program
+        b.ret_void()
 
-    fn, b = define(module, abi.TAPE_INTERVAL)
-    header, slots, choices, lo, hi, out_lo, out_hi, n = fn.args
-    box = local_array(b, DOUBLE, 6 * LANES, "box")
-    result = local_array(b, DOUBLE, 2 * LANES, "result")
-    b.call(prefill, [header, slots, null_remap])
-    program = whole_program(b, header)
-    with for_range(b, b.sdiv(n, ir.Constant(I64, LANES))) as block:
+    with over_blocks(abi.TAPE_INTERVAL, 6 * LANES, 2 * LANES) as (b, args, block, (box, result), program):
+        header, slots, choices, lo, hi, out_lo, out_hi, n = args
         _soa(b, lo, block, box)
         _soa(b, hi, block, b.gep(box, [ir.Constant(I64, 3 * LANES)]))
         b.call(interval, [header, *program, slots, choices, box, result])
@@ -65,30 +73,18 @@ def build_tape_engine(directed: bool) -> str:
                                              b.load(b.gep(vresult, [ir.Constant(I64, 1)]), align=8))
         store_lanes(b, out_lo, block, f_lo, LANES)
         store_lanes(b, out_hi, block, f_hi, LANES)
-    b.ret_void()
 
-    fn, b = define(module, abi.TAPE_GRADIENT)
-    header, slots, pts, out_value, out_grad, n = fn.args
-    points = local_array(b, DOUBLE, 3 * LANES, "points")
-    result = local_array(b, DOUBLE, 4 * LANES, "result")
-    b.call(prefill, [header, slots, null_remap])
-    program = whole_program(b, header)
-    with for_range(b, b.sdiv(n, ir.Constant(I64, LANES))) as block:
+    with over_blocks(abi.TAPE_GRADIENT, 3 * LANES, 4 * LANES) as (b, args, block, (points, result), program):
+        header, slots, pts, out_value, out_grad, n = args
         _soa(b, pts, block, points)
         b.call(dual, [header, *program, slots, points, result])
         vresult = b.bitcast(result, _P(V8))
         store_lanes(b, out_value, block, b.load(vresult, align=8), LANES)
         store_xyz(b, out_grad, block, [b.load(b.gep(vresult, [ir.Constant(I64, 1 + a)]), align=8) for a in range(3)],
                   LANES)
-    b.ret_void()
 
-    fn, b = define(module, abi.TAPE_BOX_GRADIENT)
-    header, slots, lo, hi, out, n = fn.args
-    box = local_array(b, DOUBLE, 6 * LANES, "box")
-    result = local_array(b, DOUBLE, 8 * LANES, "result")
-    b.call(prefill, [header, slots, null_remap])
-    program = whole_program(b, header)
-    with for_range(b, b.sdiv(n, ir.Constant(I64, LANES))) as block:
+    with over_blocks(abi.TAPE_BOX_GRADIENT, 6 * LANES, 8 * LANES) as (b, args, block, (box, result), program):
+        header, slots, lo, hi, out, n = args
         _soa(b, lo, block, box)
         _soa(b, hi, block, b.gep(box, [ir.Constant(I64, 3 * LANES)]))
         b.call(box_gradient, [header, *program, slots, box, result])
@@ -97,5 +93,4 @@ def build_tape_engine(directed: bool) -> str:
             for j in range(LANES):
                 value = b.load(b.gep(result, [ir.Constant(I64, LANES * k + j)]))
                 b.store(value, b.gep(rows, [ir.Constant(I64, 8 * j + k)]))
-    b.ret_void()
     return str(module)

@@ -22,7 +22,7 @@ from llvmlite import ir
 
 from .. import abi
 from .control import I32, I64, Local, const, for_range, if_, load_at, local_array, store_at
-from .leaf_split import emit_split
+from .leaf_split import emit_split, for_flagged_batches
 from .tape_eval import LANES, V8
 from .tighten import INSIDE, OUTSIDE
 from .vector import DOUBLE, VectorBuilder, broadcast
@@ -58,7 +58,6 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
     pad = [broadcast(b, load_at(b, geom, 3 + a), LANES) for a in range(3)]
     leaf_h = [load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
     zero, one, inf = vb.splat(0.0), vb.splat(1.0), vb.splat(float("inf"))
-    lanes = Local(b, I64, 0, "lanes")
 
     def prove(factor, natural_first=False):
         """The lanes (i8 mask) whose box (cells at ``cells``, of the leaves' size times ``factor``) is
@@ -118,10 +117,9 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
         with if_(b, emit_split(b, leaf, cells, lambda factor: prove(factor, natural_first=True))):
             mark(index, side)
 
-    def test_pending():
-        """The first test over the pending flagged voxels' own boxes (unused lanes repeat the first); the
+    def test_pending(count):
+        """The first test over ``count`` flagged voxels' own boxes (unused lanes repeat the first); the
         ones it leaves open are split."""
-        count = lanes.get()
         first = load_at(b, slots_of, 0)
         for j in range(LANES):
             index = b.select(b.icmp_signed("<", const(I64, j), count), load_at(b, slots_of, j), first)
@@ -140,18 +138,7 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
                     mark(index, side)
                 with no:
                     split(index, side)
-        lanes.set(const(I64, 0))
 
-    with for_range(b, n) as i:
-        flag = load_at(b, flags, i)
-        flagged = b.or_(b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_ABOVE)),
-                        b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_BELOW)))
-        with if_(b, flagged):
-            store_at(b, i, slots_of, lanes.get())
-            lanes.set(b.add(lanes.get(), const(I64, 1)))
-            with if_(b, b.icmp_signed("==", lanes.get(), const(I64, LANES))):
-                test_pending()
-    with if_(b, b.icmp_signed(">", lanes.get(), const(I64, 0))):
-        test_pending()
+    for_flagged_batches(b, flags, n, slots_of, test_pending)
     b.ret_void()
     return fn

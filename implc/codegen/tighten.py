@@ -23,7 +23,7 @@ from llvmlite import ir
 
 from .. import abi
 from .control import I32, I64, Local, bump, const, define, for_range, if_, load_at, local_array, store_at
-from .leaf_split import V8, emit_split
+from .leaf_split import V8, emit_split, for_flagged_batches
 
 DOUBLE = ir.DoubleType()
 I8 = ir.IntType(8)
@@ -49,7 +49,6 @@ def emit_tighten(module: ir.Module):
     split_lo, split_hi = local_array(b, DOUBLE, 24, "split_lo"), local_array(b, DOUBLE, 24, "split_hi")
     split_side, split_out = local_array(b, DOUBLE, 8, "split_side"), local_array(b, DOUBLE, 8, "split_out")
     split_live = local_array(b, I64, 1, "split_live")
-    lanes = Local(b, I64, 0, "lanes")
     union = Local(b, I64, 0, "union")
     zero = const(DOUBLE, 0.0)
 
@@ -88,9 +87,8 @@ def emit_tighten(module: ir.Module):
         above = b.fcmp_ordered(">", sign, zero)
         return b.bitcast(b.select(above, b.fcmp_ordered("<", values, splat), b.fcmp_ordered(">", values, splat)), I8)
 
-    def test_pending():
-        """The bounds over the pending leaves' boxes (unused lanes repeat the first), and the verdicts."""
-        count = lanes.get()
+    def test_pending(count):
+        """The bounds over ``count`` flagged leaves' boxes (unused lanes repeat the first), and the verdicts."""
         first = load_at(b, slots, 0)
         for j in range(8):
             index = b.select(b.icmp_signed("<", const(I64, j), count), load_at(b, slots, j), first)
@@ -119,24 +117,13 @@ def emit_tighten(module: ir.Module):
                     with if_(b, b.icmp_unsigned("==", across(leaf, sign), const(I8, 0))):
                         with if_(b, emit_split(b, leaf, cells, lambda factor: prove(factor, sign))):
                             mark(index, above)
-        lanes.set(const(I64, 0))
         union.set(const(I64, 0))
 
     has_bound = b.icmp_unsigned("!=", bound_ptr, ir.Constant(bound_ptr.type, None))
     with b.if_else(has_bound) as (testing, tested):
         with testing:
-            with for_range(b, n) as i:
-                flag = load_at(b, flags, i)
-                flagged = b.or_(b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_ABOVE)),
-                                b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_BELOW)))
-                with if_(b, flagged):
-                    store_at(b, i, slots, lanes.get())
-                    lanes.set(b.add(lanes.get(), const(I64, 1)))
-                    union.set(b.or_(union.get(), load_at(b, masks, i)))
-                    with if_(b, b.icmp_signed("==", lanes.get(), const(I64, 8))):
-                        test_pending()
-            with if_(b, b.icmp_signed(">", lanes.get(), const(I64, 0))):
-                test_pending()
+            for_flagged_batches(b, flags, n, slots, test_pending,
+                                lambda i: union.set(b.or_(union.get(), load_at(b, masks, i))))
         with tested:  # the tape engine's look marked them: count the flagged leaves and the proven ones
             with for_range(b, n) as i:
                 flag = load_at(b, flags, i)
