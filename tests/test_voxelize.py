@@ -433,7 +433,7 @@ TIGHTNESS_CASES = {
 @pytest.mark.parametrize("name", sorted(TIGHTNESS_CASES))
 def test_the_default_keeps_at_most_ten_percent_spurious_voxels(name):
     """At 256³ the default keeps at most 1.10 voxels per sign-change cell (corners sampled by numpy through
-    lambdify, not by implc), misses none, and keeps no more than the natural mode (measured: 1.00-1.05;
+    lambdify, not by implc), misses none, and keeps no more than the natural mode (measured: 1.00-1.03;
     the natural mode 1.00-4.54)."""
     from implc.symbols import cartesian_form
     if TIGHTNESS_CASES[name] is None:
