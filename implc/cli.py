@@ -399,7 +399,7 @@ def _parser():
         p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
         p.add_argument("--tightness", choices=tuple(TIGHTNESS), default="default",
                        help="leaves kept: natural (every leaf its enclosure keeps), default (those the linear model "
-                            "misses tested again: about 1.0-1.05 voxels per sign-change cell) or tightest (slowest)")
+                            "misses tested again: about 1.00-1.03 voxels per sign-change cell) or tightest (slowest)")
 
     v = sub.add_parser("voxelize", help="voxelize a scene or formula and write .npz, .ply, .npy, .vdb or .zarr")
     surface_args(v)

@@ -265,7 +265,9 @@ class Subdivider:
         w.tape_state[abi.TAPE_TASK_LEVEL] = level
         while True:
             room = result.make_room(OUTPUT_CHUNK)
-            flags = result.flags_ptr + result.count if self.tightens else None
+            # the leaves' flags (and so the engine's second look) only where the task reaches the leaves:
+            # never for the plan's cells above them
+            flags = result.flags_ptr + result.count if self.tightens and depth == self.depth else None
             n = self.tape_engine.subdivide(*self.program_args, self.geom_ptr, *w.tape_buffers,
                                            result.coords_ptr + 12 * result.count,
                                            result.normals_ptr + 12 * result.count, flags, room,

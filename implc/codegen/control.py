@@ -63,12 +63,21 @@ def for_range(builder: ir.IRBuilder, count, start=None, step=1):
     builder.position_at_end(done)
 
 
+def bit_intrinsic(module: ir.Module, op: str, type_=I32):
+    """``llvm.<op>.<type>`` for op ctpop, cttz or ctlz, declared once (cttz and ctlz take a second, i1
+    argument: whether a zero input is poison)."""
+    name = f"llvm.{op}.{type_}"
+    fn = module.globals.get(name)
+    if fn is None:
+        fn = ir.Function(module, ir.FunctionType(type_, [type_] if op == "ctpop" else [type_, I1]), name=name)
+    return fn
+
+
 @contextmanager
 def for_set_bits(builder: ir.IRBuilder, mask):
     """``for bit in the set bits of mask`` (an integer, ascending): the loop runs once per set bit, so
     what the body skips for clear bits costs nothing. Yields the bit index (same type as mask)."""
-    cttz = builder.module.globals.get(f"llvm.cttz.{mask.type}") or ir.Function(
-        builder.module, ir.FunctionType(mask.type, [mask.type, I1]), name=f"llvm.cttz.{mask.type}")
+    cttz = bit_intrinsic(builder.module, "cttz", mask.type)
     remaining = Local(builder, mask.type, mask, "bits")
     header = builder.append_basic_block("bits.header")
     body = builder.append_basic_block("bits.body")

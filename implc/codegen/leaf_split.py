@@ -1,5 +1,5 @@
 """What both second looks at the leaves share: the flagged leaves taken eight at a time
-(:func:`for_flagged_batches`), and the split of a leaf the first test could not prove whole: its
+(:func:`for_flagged_batches`, :func:`load_batch`), and the split of a leaf the first test could not prove whole: its
 eighths, then theirs, depth first (:func:`emit_split`).
 
 Both second looks (:mod:`implc.codegen.tighten` with a surface's compiled bound, and the tape engine's
@@ -16,7 +16,7 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, Local, const, for_range, if_, load_at, local_array, store_at, while_true
+from .control import I32, I64, Local, bit_intrinsic, const, for_range, if_, load_at, local_array, store_at, while_true
 from .vector import DOUBLE, broadcast
 
 LEVELS_BELOW = 2
@@ -34,8 +34,7 @@ def emit_split(b: ir.IRBuilder, leaf, cells, prove):
     bit c: box c), ``factor`` (a double value) being their size over the leaves'."""
     assert LEVELS_BELOW >= 1
     module = b.module
-    cttz = module.globals.get("llvm.cttz.i32") or ir.Function(module, ir.FunctionType(I32, [I32, ir.IntType(1)]),
-                                                              name="llvm.cttz.i32")
+    cttz = bit_intrinsic(module, "cttz")
     base = local_array(b, DOUBLE, 3 * (LEVELS_BELOW + 1), "split.base")  # the parent cell of each level's boxes
     open_ = local_array(b, I32, LEVELS_BELOW + 1, "split.open")  # each level's boxes not proven yet
     vcells = b.bitcast(cells, ir.PointerType(V8))
@@ -80,6 +79,20 @@ def emit_split(b: ir.IRBuilder, leaf, cells, prove):
             proven.set(ir.Constant(ir.IntType(1), 1))
         loop.break_if(done)
     return proven.get()
+
+
+def load_batch(b: ir.IRBuilder, coords, flags, slots, count, cells, sides):
+    """The batch's leaves (``count`` of them, their indices at ``slots``) into ``cells`` (axis by axis, as
+    doubles) and their sides into ``sides`` (+1 where flagged :data:`implc.abi.TIGHTEN_ABOVE`: prove F > 0,
+    else -1); unused lanes repeat the first leaf."""
+    first = load_at(b, slots, 0)
+    for j in range(LANES):
+        index = b.select(b.icmp_signed("<", const(I64, j), count), load_at(b, slots, j), first)
+        for a in range(3):
+            store_at(b, b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE),
+                     cells, LANES * a + j)
+        above = b.icmp_unsigned("==", load_at(b, flags, index), const(I8, abi.TIGHTEN_ABOVE))
+        store_at(b, b.select(above, const(DOUBLE, 1.0), const(DOUBLE, -1.0)), sides, j)
 
 
 def for_flagged_batches(b: ir.IRBuilder, flags, n, slots, test, on_flagged=None):

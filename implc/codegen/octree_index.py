@@ -22,6 +22,7 @@ from .control import (
     I64,
     Local,
     at,
+    bit_intrinsic,
     bump,
     const,
     copy_words,
@@ -46,8 +47,7 @@ def _child_index(b, xyz, bit):
 def _top_differing_bit(b, xyz, other):
     """The highest bit at which two cells' coordinates (three i32 each) differ: an i32, -1 where they are
     the same cell. A voxel shares the node with the previous one at every level above that bit."""
-    ctlz = b.module.globals.get("llvm.ctlz.i32") or ir.Function(
-        b.module, ir.FunctionType(I32, [I32, ir.IntType(1)]), name="llvm.ctlz.i32")
+    ctlz = bit_intrinsic(b.module, "ctlz")
     diff = b.xor(xyz[0], other[0])
     for a in (1, 2):
         diff = b.or_(diff, b.xor(xyz[a], other[a]))

@@ -75,20 +75,20 @@ def emit_pruned_monotone_form(vb: VectorBuilder, tape, plan, lo_coords, hi_coord
     form (:func:`implc.codegen.mean_value.intersect_monotone`), and each box's live mask."""
     nat_lo, nat_hi, masks = emit_interval_regions(vb, tape, plan, lo_coords, hi_coords, live_mask)
     grad = _live_gradient(vb, tape, plan, lo_coords, hi_coords, live_mask)
-
-    def value_at(point):
-        return emit_interval_regions(vb, tape, plan, point, point, live_mask)[:2]
-    lo, hi = intersect_monotone(vb, (nat_lo, nat_hi), grad, lo_coords, hi_coords, value_at)
+    lo, hi = intersect_monotone(vb, (nat_lo, nat_hi), grad, lo_coords, hi_coords,
+                                _live_value_at(vb, tape, plan, live_mask))
     return lo, hi, masks
 
 
 def emit_pruned_monotone_bound(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask, above):
     """One bound of the monotonicity form over the live terms (:func:`implc.codegen.mean_value.monotone_bound`)."""
     grad = _live_gradient(vb, tape, plan, lo_coords, hi_coords, live_mask)
+    return monotone_bound(vb, grad, lo_coords, hi_coords, above, _live_value_at(vb, tape, plan, live_mask))
 
-    def value_at(point):
-        return emit_interval_regions(vb, tape, plan, point, point, live_mask)[:2]
-    return monotone_bound(vb, grad, lo_coords, hi_coords, above, value_at)
+
+def _live_value_at(vb: VectorBuilder, tape, plan, live_mask):
+    """F's enclosure at a point over the live terms (for the monotonicity form's corners)."""
+    return lambda point: emit_interval_regions(vb, tape, plan, point, point, live_mask)[:2]
 
 
 def _live_gradient(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask):

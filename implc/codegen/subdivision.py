@@ -15,7 +15,21 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, Local, at, bump, const, define, if_, load_at, local_array, store_at, while_true
+from .control import (
+    I32,
+    I64,
+    Local,
+    at,
+    bit_intrinsic,
+    bump,
+    const,
+    define,
+    if_,
+    load_at,
+    local_array,
+    store_at,
+    while_true,
+)
 
 
 def append_inside(b: ir.IRBuilder, inside, count: Local, cells, level, inside_bits):
@@ -91,8 +105,7 @@ def emit_subdivide(module: ir.Module):
             bump(b, stats, 0, 8)
             return b.icmp_unsigned("!=", b.and_(sub_kept, const(I32, 0xFF)), const(I32, 0))
 
-        ctpop = module.globals.get("llvm.ctpop.i32") or ir.Function(
-            module, ir.FunctionType(I32, [I32]), name="llvm.ctpop.i32")
+        ctpop = bit_intrinsic(module, "ctpop")
 
         def append(array, masks_array, n, c, width):
             """Write child c at slot n whether it is kept or not; the next slot is n + its keep bit

@@ -27,6 +27,7 @@ from .control import (
     I64,
     Local,
     at,
+    bit_intrinsic,
     const,
     define,
     for_range,
@@ -108,9 +109,7 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
     # normals come from the program two levels above the leaves (valid for all its voxels, eight at a time)
     normals_level = b.select(b.icmp_signed(">", b.sub(depth, const(I64, 2)), task_level), b.sub(depth, const(I64, 2)),
                              task_level)
-    ctpop = ir.Function(module, ir.FunctionType(I32, [I32]), name="llvm.ctpop.i32")
-    cttz = module.globals.get("llvm.cttz.i32") or ir.Function(module, ir.FunctionType(I32, [I32, ir.IntType(1)]),
-                                                              name="llvm.cttz.i32")
+    ctpop, cttz = bit_intrinsic(module, "ctpop"), bit_intrinsic(module, "cttz")
 
     def program_of(level):
         return b.inttoptr(load_at(b, state, b.add(level, const(I64, abi.TAPE_PROGRAMS))), _P(I32))

@@ -20,9 +20,8 @@ from __future__ import annotations
 
 from llvmlite import ir
 
-from .. import abi
 from .control import I32, I64, Local, const, for_range, if_, load_at, local_array, store_at
-from .leaf_split import emit_split, for_flagged_batches
+from .leaf_split import emit_split, for_flagged_batches, load_batch
 from .tape_eval import LANES, V8
 from .tighten import INSIDE, OUTSIDE
 from .vector import DOUBLE, VectorBuilder, broadcast
@@ -120,14 +119,7 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
     def test_pending(count):
         """The first test over ``count`` flagged voxels' own boxes (unused lanes repeat the first); the
         ones it leaves open are split."""
-        first = load_at(b, slots_of, 0)
-        for j in range(LANES):
-            index = b.select(b.icmp_signed("<", const(I64, j), count), load_at(b, slots_of, j), first)
-            for a in range(3):
-                store_at(b, b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE),
-                         cells, LANES * a + j)
-            above = b.icmp_unsigned("==", load_at(b, flags, index), const(I8, abi.TIGHTEN_ABOVE))
-            store_at(b, b.select(above, const(DOUBLE, 1.0), const(DOUBLE, -1.0)), sides, j)
+        load_batch(b, coords, flags, slots_of, count, cells, sides)
         proven = b.zext(prove(const(DOUBLE, 1.0)), I32)
         vsides = b.bitcast(sides, _P(V8))
         b.store(b.load(vsides, align=8), b.bitcast(first_sides, _P(V8)), align=8)  # splitting overwrites sides

@@ -23,7 +23,7 @@ from llvmlite import ir
 
 from .. import abi
 from .control import I32, I64, Local, bump, const, define, for_range, if_, load_at, local_array, store_at
-from .leaf_split import V8, emit_split, for_flagged_batches
+from .leaf_split import V8, emit_split, for_flagged_batches, load_batch
 
 DOUBLE = ir.DoubleType()
 I8 = ir.IntType(8)
@@ -40,36 +40,41 @@ def emit_tighten(module: ir.Module):
     origin = [load_at(b, geom, a) for a in range(3)]
     pad = [load_at(b, geom, 3 + a) for a in range(3)]
     h = [load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
-    lo, hi = local_array(b, DOUBLE, 24, "lo"), local_array(b, DOUBLE, 24, "hi")
-    side, out = local_array(b, DOUBLE, 8, "side"), local_array(b, DOUBLE, 8, "out")
+    lo, hi = local_array(b, DOUBLE, 24, "lo"), local_array(b, DOUBLE, 24, "hi")  # the boxes bound, or points
+    cells = local_array(b, DOUBLE, 24, "cells")  # the boxes' cells, axis by axis (at the leaves, or below)
+    side, out = local_array(b, DOUBLE, 8, "side"), local_array(b, DOUBLE, 8, "out")  # the first test's
     live = local_array(b, I64, 1, "live")
     slots = local_array(b, I64, 8, "slots")
-    # the split's: the boxes' cells (axis by axis), their boxes, side, bounds and the leaf's live terms
-    cells = local_array(b, DOUBLE, 24, "cells")
-    split_lo, split_hi = local_array(b, DOUBLE, 24, "split_lo"), local_array(b, DOUBLE, 24, "split_hi")
+    # the split's: side, bounds and the leaf's live terms (the first test's are read while its leaves split)
     split_side, split_out = local_array(b, DOUBLE, 8, "split_side"), local_array(b, DOUBLE, 8, "split_out")
     split_live = local_array(b, I64, 1, "split_live")
     union = Local(b, I64, 0, "union")
     zero = const(DOUBLE, 0.0)
+    splat = ir.Constant(V8, [0.0] * 8)
 
     def mark(index, above):
         store_at(b, b.select(above, const(I8, OUTSIDE), const(I8, INSIDE)), flags, index)
         bump(b, stats, 1)
 
-    def prove(factor, sign):
-        """The boxes (cells at ``cells``, the leaves' size times ``factor``) the bound proves on the side
-        ``sign`` (i8 mask), the leaf's live terms with them."""
+    def bounds(factor, sides, values, live_terms):
+        """The bound over the eight boxes of the cells at ``cells`` (the leaves' size times ``factor``), on
+        each box's side (``sides``), into ``values``."""
         for j in range(8):
             for a in range(3):
                 step = b.fmul(h[a], factor)
                 c = load_at(b, cells, 8 * a + j)
-                store_at(b, b.fsub(b.fadd(origin[a], b.fmul(c, step)), pad[a]), split_lo, 3 * j + a)
-                store_at(b, b.fadd(b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 1.0)), step)), pad[a]), split_hi,
+                store_at(b, b.fsub(b.fadd(origin[a], b.fmul(c, step)), pad[a]), lo, 3 * j + a)
+                store_at(b, b.fadd(b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 1.0)), step)), pad[a]), hi,
                          3 * j + a)
+        b.call(bound, [lo, hi, sides, values, const(I64, 8), live_terms])
+
+    def prove(factor, sign):
+        """The boxes (cells at ``cells``, the leaves' size times ``factor``) the bound proves on the side
+        ``sign`` (i8 mask), the leaf's live terms with them."""
+        for j in range(8):
             store_at(b, sign, split_side, j)
-        b.call(bound, [split_lo, split_hi, split_side, split_out, const(I64, 8), split_live])
+        bounds(factor, split_side, split_out, split_live)
         values = b.load(b.bitcast(split_out, ir.PointerType(V8)), align=8)
-        splat = ir.Constant(V8, [0.0] * 8)
         above = b.fcmp_ordered(">", sign, zero)
         return b.bitcast(b.select(above, b.fcmp_ordered(">", values, splat), b.fcmp_ordered("<", values, splat)), I8)
 
@@ -80,27 +85,17 @@ def emit_tighten(module: ir.Module):
         for j in range(8):
             for a in range(3):
                 store_at(b, b.fadd(origin[a], b.fmul(b.fadd(leaf[a], const(DOUBLE, float((j >> a) & 1))), h[a])),
-                         split_lo, 3 * j + a)
-        b.call(point, [split_lo, split_out, const(I64, 8)])
+                         lo, 3 * j + a)
+        b.call(point, [lo, split_out, const(I64, 8)])
         values = b.load(b.bitcast(split_out, ir.PointerType(V8)), align=8)
-        splat = ir.Constant(V8, [0.0] * 8)
         above = b.fcmp_ordered(">", sign, zero)
         return b.bitcast(b.select(above, b.fcmp_ordered("<", values, splat), b.fcmp_ordered(">", values, splat)), I8)
 
     def test_pending(count):
         """The bounds over ``count`` flagged leaves' boxes (unused lanes repeat the first), and the verdicts."""
-        first = load_at(b, slots, 0)
-        for j in range(8):
-            index = b.select(b.icmp_signed("<", const(I64, j), count), load_at(b, slots, j), first)
-            for a in range(3):
-                c = b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE)
-                store_at(b, b.fsub(b.fadd(origin[a], b.fmul(c, h[a])), pad[a]), lo, 3 * j + a)
-                store_at(b, b.fadd(b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 1.0)), h[a])), pad[a]), hi,
-                         3 * j + a)
-            above = b.icmp_unsigned("==", load_at(b, flags, index), const(I8, abi.TIGHTEN_ABOVE))
-            store_at(b, b.select(above, const(DOUBLE, 1.0), const(DOUBLE, -1.0)), side, j)
+        load_batch(b, coords, flags, slots, count, cells, side)
         store_at(b, union.get(), live, 0)
-        b.call(bound, [lo, hi, side, out, const(I64, 8), live])
+        bounds(const(DOUBLE, 1.0), side, out, live)
         with for_range(b, count) as j:
             index = load_at(b, slots, j)
             value, sign = load_at(b, out, j), load_at(b, side, j)
