@@ -12,15 +12,19 @@ import implc
 from implc import abi, x, y, z
 from implc.codegen.kernels import build_bound_module, build_mean_value_module, build_module
 from implc.codegen.runtime_module import build_runtime
+from implc.codegen.tape_engine_module import build_tape_engine
 
 DEFINE = re.compile(r'^define\s+(.*?)\s*@"?([\w.]+)"?\((.*?)\)', re.M)
 
 
 def exported(ir_text: str) -> dict[str, str]:
-    """name -> "ret (arg types)" of every function the module text defines (typed pointers, as written)."""
+    """name -> "ret (arg types)" of every function the module text defines and exports (typed pointers, as
+    written; internal helpers left out)."""
     llvm.parse_assembly(ir_text).verify()
     out = {}
     for ret, name, args in DEFINE.findall(ir_text):
+        if ret.startswith("internal "):
+            continue
         types = [arg.split()[0] for arg in args.split(", ")] if args else []
         out[name] = f"{ret} ({', '.join(types)})"
     return out
@@ -31,7 +35,7 @@ def surface():
     return implc.compile(sympy.Min(x**2 + y**2 - 1, sympy.exp(z) - 2) + sympy.sin(x))
 
 
-@pytest.mark.parametrize("module_entries", ["surface", "mean_value", "bound", "runtime"])
+@pytest.mark.parametrize("module_entries", ["surface", "mean_value", "bound", "tape", "runtime"])
 def test_every_entry_is_exported_with_its_declared_signature(module_entries, surface):
     if module_entries == "surface":
         text, entries = build_module(surface.tape, surface.gradient_tape), abi.SURFACE_ENTRIES
@@ -39,6 +43,8 @@ def test_every_entry_is_exported_with_its_declared_signature(module_entries, sur
         text, entries = build_mean_value_module(surface.tape, surface.gradient_tape), abi.MEAN_VALUE_ENTRIES
     elif module_entries == "bound":
         text, entries = build_bound_module(surface.tape, surface.gradient_tape), abi.BOUND_ENTRIES
+    elif module_entries == "tape":
+        text, entries = build_tape_engine(directed=False), abi.TAPE_ENTRIES
     else:
         text, entries = build_runtime(), abi.RUNTIME_ENTRIES
     defined = exported(text)
@@ -48,7 +54,8 @@ def test_every_entry_is_exported_with_its_declared_signature(module_entries, sur
 
 
 def test_ctypes_prototypes_follow_the_declarations():
-    for entry in (*abi.SURFACE_ENTRIES, *abi.MEAN_VALUE_ENTRIES, *abi.BOUND_ENTRIES, *abi.RUNTIME_ENTRIES):
+    for entry in (*abi.SURFACE_ENTRIES, *abi.MEAN_VALUE_ENTRIES, *abi.BOUND_ENTRIES, *abi.TAPE_ENTRIES,
+                  *abi.RUNTIME_ENTRIES):
         proto = entry.ctypes_type()
         assert len(proto._argtypes_) == len(entry.params)
         for (name, kind), ctype in zip(entry.params, proto._argtypes_):
