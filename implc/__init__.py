@@ -9,11 +9,12 @@ from importlib import import_module
 _EXPORTS = {
     "CompileError": "errors", "Surface": "surface", "compile": "surface", "Voxels": "voxelization",
     "voxelize": "voxelization", "x": "symbols", "y": "symbols", "z": "symbols", "r": "symbols", "theta": "symbols",
-    "phi": "symbols", "load_vm": "vm", "NATURAL": "voxelization", "TIGHTEST": "voxelization",
+    "phi": "symbols", "load_vm": "vm", "mesh": "voxelization", "Mesh": "triangle_mesh", "NATURAL": "voxelization",
+    "TIGHTEST": "voxelization",
 }
 
-__all__ = ["NATURAL", "TIGHTEST", "CompileError", "Surface", "Voxels", "compile", "load_vm", "phi", "r", "shapes",
-           "theta", "voxelize", "x", "y", "z"]
+__all__ = ["NATURAL", "TIGHTEST", "CompileError", "Mesh", "Surface", "Voxels", "compile", "load_vm", "mesh", "phi",
+           "r", "shapes", "theta", "voxelize", "x", "y", "z"]
 __version__ = "0.1.0"
 
 

@@ -292,8 +292,33 @@ def _color(text):
     return tuple(rgb)
 
 
+def cmd_mesh(args) -> int:
+    from .triangle_mesh import MESH_SUFFIXES
+    out = Path(args.output)
+    _check_writable(out, MESH_SUFFIXES)
+    _check_surface_options(args)
+    name, surface, sc = _surface_from_args(args)
+    depth = args.depth if args.depth is not None else (sc.depth if sc else 8)
+    voxels, seconds = _voxelize(surface, depth, args.workers, args.quiet, tightness=args.tightness)
+    t0 = time.perf_counter()
+    mesh = voxels.mesh()
+    mesh.save(out)
+    if not args.quiet:
+        print(f"{name}: {len(mesh.faces)} triangles, {len(mesh.vertices)} vertices at {1 << depth}³, volume "
+              f"{mesh.volume:.6g} (voxelized in {seconds:.2f} s, meshed in {time.perf_counter() - t0:.2f} s) -> {out}")
+    return 0
+
+
 def cmd_info(args) -> int:
     from . import voxel_files
+    from .triangle_mesh import MESH_SUFFIXES, MeshFileError, describe, is_mesh_file
+    if Path(args.file).suffix.lower() in MESH_SUFFIXES and is_mesh_file(args.file):
+        try:
+            lines = describe(args.file)
+        except MeshFileError as exc:
+            raise UsageError(str(exc)) from None
+        print("\n".join(lines))
+        return 0
     if Path(args.file).suffix.lower() == ".vm":
         from .vm import load_vm
         model = load_vm(args.file)
@@ -413,6 +438,12 @@ def _parser():
                    help="write one 1-bit image per z layer into the folder -o names (with --solid: the solid)")
     v.set_defaults(run=cmd_voxelize)
 
+    m = sub.add_parser("mesh", help="mesh a scene, formula or .vm model: a closed, oriented, intersection-free "
+                                    "triangle mesh of {F < 0} within the bounds (.stl, .obj, .ply, .glb, .3mf)")
+    surface_args(m)
+    m.add_argument("-o", "--output", required=True, help="output: .stl, .obj, .ply, .glb or .3mf")
+    m.set_defaults(run=cmd_mesh)
+
     w = sub.add_parser("view", help="view a scene, formula, .vm model or .npz in the browser (levels of detail)")
     surface_args(w)
     w.add_argument("--port", type=int, help="port on 127.0.0.1 (default: 8765 or the next free one; 0: any)")
@@ -433,7 +464,8 @@ def _parser():
     r.add_argument("--color", help="surface colour R,G,B in 0..1")
     r.set_defaults(run=cmd_render)
 
-    i = sub.add_parser("info", help="describe a voxel file (.npz, .ply or .npy) or a model (.vm)")
+    i = sub.add_parser("info", help="describe a voxel file (.npz, .ply, .npy, .vdb, .zarr), a mesh (.stl, .obj, .ply, .glb, .3mf) "
+                                    "or a model (.vm)")
     i.add_argument("file")
     i.set_defaults(run=cmd_info)
 

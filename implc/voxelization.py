@@ -14,6 +14,8 @@ import time
 import numpy as np
 
 from . import big_arrays
+from .contour import contour
+from .triangle_mesh import Mesh
 from .storage import bytes_per_voxel, make_backend
 from .storage.grid import dense_bytes
 from .storage.octree import Octree, OctreeAssembly, OctreeBuilder
@@ -40,9 +42,11 @@ class Voxels:
     (``voxelize(..., solid=True)``) also ``inside``: the octants whose whole box lies where F < 0, as
     (n, 4) int32 rows (i, j, k, level), each a cube of 2^(depth − level) voxels per axis, never expanded."""
 
-    def __init__(self, coords, normals, depth, bounds, stats: SubdivisionStats, storage=None, inside=None):
+    def __init__(self, coords, normals, depth, bounds, stats: SubdivisionStats, storage=None, inside=None,
+                 surface=None):
         """``coords`` may be None when ``storage`` is an :class:`Octree`: they are read from the tree on
-        first use (the octree holds them; the default voxelization stores no other copy)."""
+        first use (the octree holds them; the default voxelization stores no other copy). ``surface``: the
+        :class:`Surface` voxelized (None for voxels read from a file), which :meth:`mesh` samples."""
         if coords is None and not isinstance(storage, Octree):
             raise ValueError("Voxels without coords need their octree as storage")
         self._coords = coords
@@ -52,6 +56,7 @@ class Voxels:
         self.stats = stats
         self.storage = storage
         self.inside = inside  # None: a shell (solid=False)
+        self.surface = surface
         self._octree = storage if isinstance(storage, Octree) else None
 
     @property
@@ -120,6 +125,19 @@ class Voxels:
     def _repr_html_(self) -> str:
         """A notebook shows voxels as the viewer (with up to 4 MiB of levels of detail)."""
         return self.show(max_bytes=4 << 20)._repr_html_()
+
+    def mesh(self, surface: Surface | None = None) -> Mesh:
+        """The boundary of {F < 0} within the bounds as a closed, oriented, intersection-free triangle mesh,
+        contoured over these voxels' cells (:func:`implc.contour.contour`; docs/soundness.md says what holds
+        by construction). ``surface``: the surface these voxels came from, needed only for voxels read from
+        a file."""
+        surface = self.surface if surface is None else surface
+        if not isinstance(surface, Surface):
+            raise ValueError("these voxels do not know their surface (read from a file?): pass it, "
+                             "voxels.mesh(implc.compile(...))")
+        if tuple(map(tuple, surface.bounds)) != tuple(map(tuple, self.bounds)):
+            raise ValueError(f"the surface's bounds {surface.bounds} are not these voxels' {self.bounds}")
+        return contour(surface, self.coords, self.depth, self.bounds)
 
     def inside_voxels(self) -> int:
         """How many voxels the inside octants cover."""
@@ -316,7 +334,21 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     stats.seconds["finish"] = time.perf_counter() - t1
     stats.seconds["setup"] = t0 - t_start - stats.seconds["plan"]
     stats.seconds["total"] = time.perf_counter() - t_start
-    return Voxels(coords, normals, depth, surface.bounds, stats, storage=result, inside=inside)
+    return Voxels(coords, normals, depth, surface.bounds, stats, storage=result, inside=inside, surface=surface)
+
+
+def mesh(surface, depth=8, *, workers=None, progress=False, **options) -> Mesh:
+    """The boundary of the solid {F < 0} within ``surface``'s bounds as a closed, oriented,
+    intersection-free triangle mesh on the 2^depth grid: :func:`voxelize` (``options`` are its tightness
+    options) finds the cells the surface may meet, then :meth:`Voxels.mesh` contours them.
+
+    >>> import implc
+    >>> ball = implc.compile(implc.x**2 + implc.y**2 + implc.z**2 - 0.5)
+    >>> m = implc.mesh(ball, depth=5)
+    >>> m.check()["open_edges"], m.volume > 0
+    (0, True)
+    """
+    return voxelize(surface, depth, workers=workers, progress=progress, **options).mesh()
 
 
 @contextlib.contextmanager
@@ -348,4 +380,4 @@ def _voxelize_into_octree(surface, depth, subdivider, plan, capacity, progress, 
     stats.seconds["finish"] = time.perf_counter() - t1
     stats.seconds["setup"] = t0 - t_start - stats.seconds["plan"]
     stats.seconds["total"] = time.perf_counter() - t_start
-    return Voxels(None, tree.normals, depth, surface.bounds, stats, storage=tree, inside=inside)
+    return Voxels(None, tree.normals, depth, surface.bounds, stats, storage=tree, inside=inside, surface=surface)

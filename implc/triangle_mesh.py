@@ -1,0 +1,182 @@
+"""Triangle meshes: :class:`Mesh` (vertices, faces, analytic normals), its counted checks, and mesh files.
+
+Files are written and read through trimesh (STL, OBJ, PLY, glTF binary, 3MF: one well-kept library for
+all five, where each format's quirks are already handled), always under a temporary name renamed into
+place.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .atomic_file import replacing
+
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb", ".3mf")
+
+
+class MeshFileError(ValueError):
+    """A mesh file that cannot be read or written; the message names the file."""
+
+
+class Mesh:
+    """A triangle mesh in world coordinates: ``vertices`` (V, 3) float64, ``faces`` (F, 3) int64 vertex
+    indices, counter-clockwise seen from outside, ``normals`` (V, 3) float64 unit normals at the vertices
+    (F's analytic gradient where the vertex lies on F = 0), ``stats`` (how it was made) and ``bounds``."""
+
+    def __init__(self, vertices, faces, normals=None, *, stats=None, bounds=None):
+        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+        self.faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+        self.normals = None if normals is None else np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
+        self.stats = stats
+        self.bounds = bounds
+
+    def __repr__(self) -> str:
+        return f"Mesh({len(self.vertices)} vertices, {len(self.faces)} triangles)"
+
+    def __len__(self) -> int:
+        return len(self.faces)
+
+    # -- measures ---------------------------------------------------------------------------------
+    def _corners(self):
+        p = self.vertices[self.faces]
+        return p[:, 0], p[:, 1], p[:, 2]
+
+    @property
+    def area(self) -> float:
+        a, b, c = self._corners()
+        return float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum() / 2)
+
+    @property
+    def volume(self) -> float:
+        """The signed volume enclosed (divergence theorem): positive for a closed mesh oriented outward."""
+        a, b, c = self._corners()
+        return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6)
+
+    def check(self) -> dict:
+        """Counted facts about the mesh, each 0 for a closed, oriented, edge-manifold mesh without
+        degenerate triangles: ``open_edges`` and ``overused_edges`` (undirected edges in fewer or more
+        than two faces), ``repeated_directed_edges`` (an oriented edge used twice: inconsistent
+        orientation), ``degenerate`` (triangles with a repeated vertex or zero area), ``split_vertices``
+        (vertices whose faces form more than one fan), and ``volume``."""
+        f = self.faces
+        directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        nv = max(len(self.vertices), 1)
+        dkey = directed[:, 0] * nv + directed[:, 1]
+        _, dcount = np.unique(dkey, return_counts=True)
+        ukey = np.minimum(directed[:, 0], directed[:, 1]) * nv + np.maximum(directed[:, 0], directed[:, 1])
+        _, ucount = np.unique(ukey, return_counts=True)
+        a, b, c = self._corners()
+        area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+        return {"open_edges": int(np.sum(ucount < 2)), "overused_edges": int(np.sum(ucount > 2)),
+                "repeated_directed_edges": int(np.sum(dcount > 1)),
+                "degenerate": int(np.sum(repeated | ~(area2 > 0))),
+                "split_vertices": _split_vertices(f, len(self.vertices)), "volume": self.volume}
+
+    # -- files ------------------------------------------------------------------------------------
+    def to_trimesh(self):
+        """A ``trimesh.Trimesh`` of this mesh (vertices not merged, faces not reordered)."""
+        import trimesh
+        return trimesh.Trimesh(vertices=self.vertices, faces=self.faces, vertex_normals=self.normals,
+                               process=False, validate=False)
+
+    def save(self, path) -> Path:
+        """Write ``path`` (.stl, .obj, .ply, .glb or .3mf, by its suffix) through trimesh, under a temporary
+        name renamed into place."""
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix not in MESH_SUFFIXES:
+            raise MeshFileError(f"unknown mesh format {path.suffix or '(none)'!r} for {path}: use "
+                                f"{', '.join(MESH_SUFFIXES)}")
+        with replacing(path) as tmp:
+            self.to_trimesh().export(str(tmp), file_type=suffix[1:])
+        return path
+
+
+def _split_vertices(faces: np.ndarray, count: int) -> int:
+    """How many vertices have faces that form more than one fan (joined through shared edges at the
+    vertex): a closed edge-manifold mesh can still be pinched at a vertex, which this counts."""
+    if not len(faces):
+        return 0
+    # each face contributes, at each of its corners, the link edge (next, previous) of that corner
+    center = faces.reshape(-1)
+    nxt = np.roll(faces, -1, axis=1).reshape(-1)
+    prv = np.roll(faces, 1, axis=1).reshape(-1)
+    order = np.argsort(center, kind="stable")
+    center, nxt, prv = center[order], nxt[order], prv[order]
+    starts = np.flatnonzero(np.r_[True, center[1:] != center[:-1]])
+    ends = np.r_[starts[1:], len(center)]
+    split = 0
+    # union-find over each vertex's link edges: a single fan is one connected link
+    parent = {}
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for s, e in zip(starts, ends):
+        parent.clear()
+        for a, b in zip(nxt[s:e].tolist(), prv[s:e].tolist()):
+            parent.setdefault(a, a)
+            parent.setdefault(b, b)
+            ra, rb = find(a), find(b)
+            if ra != rb:
+                parent[ra] = rb
+        roots = {find(a) for a in parent}
+        split += len(roots) > 1
+    return split
+
+
+def is_mesh_file(path) -> bool:
+    """Whether ``path`` is to be read as a mesh: a mesh suffix, and for .ply (also implc's voxel point
+    clouds) a header that declares faces."""
+    path = Path(path)
+    if path.suffix.lower() != ".ply":
+        return path.suffix.lower() in MESH_SUFFIXES
+    try:
+        with open(path, "rb") as f:
+            header = f.read(4096)
+    except OSError:
+        return False
+    return b"element face" in header.split(b"end_header")[0]
+
+
+def load(path) -> Mesh:
+    """Read a mesh file (any format trimesh reads) as a :class:`Mesh`; one clear error if it is not one."""
+    path = Path(path)
+    if not path.is_file():
+        raise MeshFileError(f"cannot read {path}: {'it is a folder' if path.is_dir() else 'no such file'}")
+    import trimesh
+    try:
+        loaded = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as error:  # trimesh raises many kinds for a bad file
+        raise MeshFileError(f"cannot read {path} as a mesh: {error}") from None
+    vertices, faces = np.asarray(loaded.vertices), np.asarray(loaded.faces)
+    if vertices.ndim != 2 or len(faces) == 0:
+        raise MeshFileError(f"{path} holds no triangles")
+    return Mesh(vertices, faces)
+
+
+def describe(path) -> list[str]:
+    """``implc info`` for a mesh file: size, extent, and the counted checks (after merging the vertices
+    that formats such as STL repeat per triangle)."""
+    path = Path(path)
+    mesh = load(path)
+    merged = mesh.to_trimesh()
+    merged.merge_vertices()
+    report = Mesh(merged.vertices, merged.faces).check()
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    closed = report["open_edges"] == 0 and report["overused_edges"] == 0
+    return [
+        f"{path}: a triangle mesh ({path.suffix.lower()[1:]}), {len(mesh.faces)} triangles, "
+        f"{len(merged.vertices)} distinct vertices",
+        "extent: " + ", ".join(f"[{a:.6g}, {b:.6g}]" for a, b in zip(lo, hi)),
+        f"closed: {'yes' if closed else 'no'} ({report['open_edges']} open, {report['overused_edges']} "
+        f"non-manifold edges); orientation: {'consistent' if report['repeated_directed_edges'] == 0 else 'inconsistent'}"
+        f"; degenerate triangles: {report['degenerate']}; pinched vertices: {report['split_vertices']}",
+        f"volume: {report['volume']:.9g}, area: {merged.area:.9g}",
+    ]

@@ -1,0 +1,291 @@
+"""Meshes: closed, oriented 2-manifolds without degenerate or intersecting triangles, every vertex on an
+edge of its cell where F (sampled by numpy through lambdify, or by the numpy interpreter of .vm text, not
+by implc's compiler) changes sign, the volume inside the solid's bounds, the same for every worker count.
+
+The outside validators: edges and fans counted here in numpy, manifold3d's status, pymeshlab's topological
+measures and self-intersection selection, trimesh's watertightness and winding, tetgen in a subprocess.
+"""
+
+from __future__ import annotations
+
+import itertools
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy
+
+import implc
+from benchmarks import vm_sampling
+from implc import x, y, z
+from implc.cli import main
+from implc.triangle_mesh import Mesh, is_mesh_file
+from implc.scene import load as load_scene
+from implc.symbols import cartesian_form
+from implc.vm import parse_vm
+
+from .test_vm import CSG
+
+MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
+BOX_BALL = sympy.Max(sympy.Abs(x) - 0.6, sympy.Abs(y) - 0.6, sympy.Abs(z) - 0.6, 0.75 - sympy.sqrt(x**2 + y**2 + z**2))
+SURFACES = {  # name: (expression, bounds)
+    "ball": (x**2 + y**2 + z**2 - sympy.Rational(1, 2), ((-1, 1),) * 3),
+    "heightfield": (z - sympy.sin(3 * x) * sympy.cos(2 * y) / 3, ((-1, 1),) * 3),  # closed by the box's faces
+    "gyroid": (sympy.sin(4 * x) * sympy.cos(4 * y) + sympy.sin(4 * y) * sympy.cos(4 * z)
+               + sympy.sin(4 * z) * sympy.cos(4 * x), ((-1, 1),) * 3),
+    "box_minus_ball": (BOX_BALL, ((-1, 1),) * 3),
+    "off_centre_bounds": (x**2 + y**2 + z**2 - 1, ((-0.3, 1.2), (-1.1, 0.4), (0.1, 0.9))),
+}
+SCENES = ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4", "csg_part", "torus", "tangle_cube", "gyroid_sphere",
+          "heart", "spherical_flower")
+
+
+def numpy_f(expr):
+    fn = sympy.lambdify((x, y, z), cartesian_form(expr), modules="numpy")
+    return lambda p: np.broadcast_to(np.asarray(fn(p[:, 0], p[:, 1], p[:, 2]), dtype=np.float64), (len(p),))
+
+
+def vm_f(text):
+    rows = vm_sampling.parse(text)
+    return lambda p: vm_sampling.evaluate(rows, p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy())
+
+
+# -- the independent checks ----------------------------------------------------------------------------
+def edge_counts(faces):
+    """(undirected edge use counts, directed edge use counts), counted directly."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    _, d = np.unique(directed, axis=0, return_counts=True)
+    _, u = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    return u, d
+
+
+def assert_closed_manifold(mesh: Mesh):
+    v, f = mesh.vertices, mesh.faces
+    assert len(f) > 0
+    undirected, directed = edge_counts(f)
+    assert np.all(undirected == 2), f"{np.sum(undirected != 2)} edges not in exactly two faces"
+    assert np.all(directed == 1), f"{np.sum(directed != 1)} directed edges used twice (orientation flips)"
+    assert np.all((f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0]))
+    p = v[f]
+    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1) / 2
+    assert area.min() > 0, "a degenerate triangle"
+    import manifold3d
+    import pymeshlab
+    import trimesh
+    solid = manifold3d.Manifold(manifold3d.Mesh(vert_properties=v.astype(np.float32),
+                                                tri_verts=f.astype(np.uint32)))
+    assert solid.status() == manifold3d.Error.NoError
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=v, face_matrix=f.astype(np.int32)))
+    topo = ms.get_topological_measures()
+    assert topo["non_two_manifold_edges"] == 0 and topo["non_two_manifold_vertices"] == 0
+    assert topo["boundary_edges"] == 0
+    ms.compute_selection_by_self_intersections_per_face()
+    assert ms.current_mesh().selected_face_number() == 0, "pymeshlab finds self-intersecting faces"
+    tm = trimesh.Trimesh(v, f, process=False)
+    assert tm.is_watertight and tm.is_winding_consistent
+    assert tm.volume > 0, "oriented inward"
+    assert tm.volume == pytest.approx(mesh.volume, rel=1e-9)
+
+
+def assert_vertices_on_sign_changes(mesh: Mesh, f, bounds, depth):
+    """Each vertex lies in a cell whose corners have both signs of F (numpy), except the caps' corners:
+    grid points on the bounds where F < 0."""
+    v = mesh.vertices
+    lo = np.array([b[0] for b in bounds], float)
+    hi = np.array([b[1] for b in bounds], float)
+    n = 1 << depth
+    assert np.all(v >= lo) and np.all(v <= hi), "a vertex outside the bounds"
+    g = (v - lo) / (hi - lo) * n
+    on_grid = np.abs(g - np.round(g)) < 1e-9
+    corner = on_grid.all(1)
+    if corner.any():  # a cap's corner: on the bounds, inside the solid
+        gc = np.round(g[corner])
+        assert np.all(((gc == 0) | (gc == n)).any(1))
+        assert np.all(f(v[corner]) < 0)
+    g = g[~corner]
+    ok = np.zeros(len(g), bool)
+    for delta in itertools.product((-1e-7, 1e-7), repeat=3):
+        cell = np.clip(np.floor(g + np.array(delta)), 0, n - 1)
+        corners = np.concatenate([cell + np.array(c) for c in itertools.product((0, 1), repeat=3)])
+        values = f(lo + corners / n * (hi - lo)).reshape(8, -1)
+        ok |= (values < 0).any(0) & ~(values < 0).all(0)
+    assert ok.all(), f"{np.sum(~ok)} vertices in cells where numpy's F keeps one sign"
+
+
+def check_mesh(surface, depth, f, solid_voxels=None):
+    voxels = implc.voxelize(surface, depth, solid=solid_voxels is None or solid_voxels)
+    mesh = voxels.mesh()
+    assert_closed_manifold(mesh)
+    assert_vertices_on_sign_changes(mesh, f, surface.bounds, depth)
+    lo, hi = voxels.volume_bounds()
+    assert lo <= mesh.volume <= hi
+    assert mesh.stats.added_cells == 0
+    assert np.allclose(np.linalg.norm(mesh.normals, axis=1), 1)
+    return mesh
+
+
+# -- the surfaces ---------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", sorted(SURFACES))
+def test_surfaces_mesh_closed_manifold_and_on_the_surface(name):
+    expr, bounds = SURFACES[name]
+    check_mesh(implc.compile(expr, bounds), 5, numpy_f(expr))
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_scenes_mesh_closed_manifold_and_on_the_surface(name):
+    sc = load_scene(name)
+    check_mesh(implc.compile(sc.surface, sc.bounds), 5, numpy_f(sc.surface))
+
+
+def test_a_vm_model_meshes_on_the_tape_engine():
+    model = parse_vm(CSG, name="csg")
+    surface = implc.compile(model, engine="tape")
+    check_mesh(surface, 6, vm_f(CSG))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(SURFACES) + list(SCENES))
+def test_at_128(name):
+    if name in SURFACES:
+        expr, bounds = SURFACES[name]
+    else:
+        sc = load_scene(name)
+        expr, bounds = sc.surface, sc.bounds
+    check_mesh(implc.compile(expr, bounds), 7, numpy_f(expr))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["bear", "colonnade"])
+def test_peer_models_at_128(name):
+    path = MODELS / f"{name}.vm"
+    if not path.is_file():
+        pytest.skip(f"{path} is not here (the shared models)")
+    model = implc.load_vm(str(path))
+    text = path.read_text()
+    rows = vm_sampling.parse(text)
+    f = vm_f(text)
+    if not vm_sampling.uses_z(rows):
+        pytest.skip("a 2D model")
+    check_mesh(implc.compile(model), 7, f)
+
+
+# -- properties of the construction ------------------------------------------------------------------
+def test_the_same_mesh_for_every_worker_count():
+    sc = load_scene("paper_blobs")
+    s = implc.compile(sc.surface, sc.bounds)
+    one = implc.mesh(s, 6, workers=1)
+    two = implc.mesh(s, 6, workers=2)
+    assert np.array_equal(one.vertices, two.vertices) and np.array_equal(one.faces, two.faces)
+
+
+def test_a_solid_filling_the_bounds_is_the_box():
+    s = implc.compile(x + y + z - 10, ((-1, 1),) * 3)  # F < 0 everywhere: the mesh is the box itself
+    mesh = implc.mesh(s, 3)
+    assert_closed_manifold(mesh)
+    assert mesh.volume == pytest.approx(8.0, rel=1e-12)
+    assert np.all(np.abs(mesh.vertices).max(1) == 1)
+
+
+def test_nothing_inside_gives_an_empty_mesh():
+    mesh = implc.mesh(implc.compile(x**2 + y**2 + z**2 + 1), 4)
+    assert len(mesh.faces) == 0 and len(mesh.vertices) == 0
+
+
+def test_voxels_from_a_file_need_their_surface(tmp_path):
+    expr, bounds = SURFACES["ball"]
+    s = implc.compile(expr, bounds)
+    implc.voxel_files.save(implc.voxelize(s, 4), tmp_path / "b.npz")
+    loaded = implc.voxel_files.load_npz(tmp_path / "b.npz")
+    with pytest.raises(ValueError, match="do not know their surface"):
+        loaded.mesh()
+    assert np.array_equal(loaded.mesh(s).faces, implc.mesh(s, 4).faces)
+
+
+# -- Mesh.check: the counted checks find what they claim to --------------------------------------------
+def tetrahedron(offset=0.0):
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float) + offset
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    return v, f
+
+
+def test_check_counts_each_defect():
+    v, f = tetrahedron()
+    good = Mesh(v, f).check()
+    assert good == {**good, "open_edges": 0, "overused_edges": 0, "repeated_directed_edges": 0, "degenerate": 0,
+                    "split_vertices": 0}
+    assert good["volume"] == pytest.approx(1 / 6)
+    flipped = f.copy()
+    flipped[0] = flipped[0][::-1]
+    assert Mesh(v, flipped).check()["repeated_directed_edges"] == 3
+    assert Mesh(v, f[1:]).check()["open_edges"] == 3
+    assert Mesh(v, np.vstack([f, [[0, 1, 1]]])).check()["degenerate"] == 1
+    v2, f2 = tetrahedron(offset=-1.0)  # a second tetrahedron sharing only the corner (0, 0, 0)
+    pinched_v = np.vstack([v, v2[:3]])
+    f2 = np.where(f2 == 3, 0, f2 + 4)
+    assert Mesh(pinched_v, np.vstack([f, f2])).check()["split_vertices"] == 1
+
+
+# -- files and the command -------------------------------------------------------------------------------
+@pytest.mark.parametrize("suffix", [".stl", ".obj", ".ply", ".glb", ".3mf"])
+def test_files_round_trip_through_trimesh(tmp_path, suffix):
+    import trimesh
+    expr, bounds = SURFACES["ball"]
+    mesh = implc.mesh(implc.compile(expr, bounds), 4)
+    path = mesh.save(tmp_path / f"ball{suffix}")
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporary left
+    back = trimesh.load(str(path), force="mesh")
+    back.merge_vertices()
+    assert len(back.faces) == len(mesh.faces)
+    assert back.is_watertight and back.volume == pytest.approx(mesh.volume, rel=1e-5)
+    assert is_mesh_file(path)
+
+
+def test_the_mesh_command_writes_and_info_describes(tmp_path, capsys):
+    out = tmp_path / "t.stl"
+    assert main(["mesh", "torus", "--depth", "5", "-o", str(out), "--quiet"]) == 0
+    assert main(["info", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "closed: yes (0 open, 0 non-manifold edges); orientation: consistent; degenerate triangles: 0" in text
+    assert main(["mesh", "--expr", "x**2 + y**2 + z**2 - 0.5", "--depth", "4", "-o", str(tmp_path / "b.glb")]) == 0
+    assert "triangles" in capsys.readouterr().out
+
+
+def test_the_mesh_command_refuses_bad_input_in_one_line(tmp_path, capsys):
+    assert main(["mesh", "torus", "-o", str(tmp_path / "t.xyz")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "unknown output format" in err
+    (tmp_path / "bad.stl").write_bytes(b"solid nothing\nendsolid\n")
+    assert main(["info", str(tmp_path / "bad.stl")]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert not (tmp_path / "t.xyz").exists()
+
+
+def test_a_voxel_point_cloud_ply_is_still_described_as_voxels(tmp_path, capsys):
+    expr, bounds = SURFACES["ball"]
+    implc.voxel_files.save(implc.voxelize(implc.compile(expr, bounds), 4), tmp_path / "v.ply")
+    assert not is_mesh_file(tmp_path / "v.ply")
+    assert main(["info", str(tmp_path / "v.ply")]) == 0
+    assert "triangle mesh" not in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_tetgen_tetrahedralizes_the_meshes(tmp_path):
+    """tetgen (as an FEA user would run it, in a subprocess: it can crash on bad input) accepts the meshes
+    and fills them with tetrahedra, checking for self-intersections as it goes (its -d mode)."""
+    pytest.importorskip("tetgen")
+    for name in ("csg_part", "paper_blobs"):
+        sc = load_scene(name)
+        mesh = implc.mesh(implc.compile(sc.surface, sc.bounds), 6)
+        np.savez(tmp_path / f"{name}.npz", v=mesh.vertices, f=mesh.faces)
+        script = ("import sys, numpy as np, tetgen\n"
+                  "d = np.load(sys.argv[1])\n"
+                  "t = tetgen.TetGen(d['v'], d['f'].astype(np.int32))\n"
+                  "nodes, elems = t.tetrahedralize()[:2]\n"
+                  "print(len(elems))\n")
+        run = subprocess.run([sys.executable, "-c", script, str(tmp_path / f"{name}.npz")], capture_output=True,
+                             text=True, timeout=300)
+        assert run.returncode == 0, run.stderr[-2000:]
+        assert int(run.stdout.split()[-1]) > len(mesh.faces) // 4
