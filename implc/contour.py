@@ -1,29 +1,36 @@
 """Contouring: the boundary of the solid {F < 0} within the bounds as a closed, oriented triangle mesh.
 
-The mesh is the zero set of the piecewise-linear function that takes F's sampled values at the vertices
-of a tetrahedralization of the voxel grid, cut by the bounds' faces where the solid reaches them:
+The mesh is the zero set of the piecewise-linear function that takes F's sampled signs at the vertices of
+a tetrahedralization of the voxel grid, cut by the bounds' faces where the solid reaches them:
 
 - **the tetrahedralization**: each cell is split into the six Kuhn (Freudenthal) tetrahedra around its
-  main diagonal; the split is the same in every cell, so neighbours agree on their shared faces. A cell
-  whose sign pattern says a crease or corner of F runs through it (its edge crossings' gradients
-  disagree) is split instead into a fan from a *feature point* inside it (dual contouring's QEF
-  minimiser, kept strictly inside the cell) over its faces, each face fanned from a feature point of its
-  own where a feature crosses it. Every such split is a valid tetrahedralization of the grid.
+  main diagonal, the same split in every cell, so neighbours agree on their shared faces (each face cut
+  by the diagonal from its lowest to its highest corner). A *feature cell*, where the analytic normals
+  at the surface's crossings disagree (a crease or corner of Min/Max CSG runs through it), is split
+  instead into a fan from a cell point inside it (dual contouring's QEF minimiser: on the crease) over
+  its faces, each face fanned from a face point of its own (the face's 2D QEF minimiser: where the crease
+  crosses it); its neighbours fan from their centres over the same face triangulations. Every such split
+  is a valid tetrahedralization of the grid: points stay strictly inside their cells and faces.
 - **marching tetrahedra** over it: each tetrahedron whose vertices' signs differ holds one triangle or
   one quadrilateral (two triangles, split along the diagonal that keeps them on their sides). Each
-  surface vertex lies on a tetrahedron edge whose ends have opposite signs, at the root found there by
-  regula falsi, kept a little inside the edge.
+  surface vertex lies on a tetrahedron edge whose ends have opposite signs, at the root that regula
+  falsi finds there, kept a little inside the edge.
 - **the caps**: each face of the bounds, triangulated as the tetrahedra's faces there, contributes the
   part where the sampled F is negative, so the mesh is closed where the solid meets the bounds.
 
 What follows by construction, for any placement of the surface vertices strictly inside their edges:
-every edge of the mesh lies in exactly two triangles, consistently oriented (outward: the normal
-points from the negative to the positive side); no two triangles meet except in a shared edge or vertex,
-since each triangle lies in its own tetrahedron and meets the tetrahedron's faces only in the segments
-shared with its neighbours; every vertex lies in a cell where F takes both signs at sampled points, so
-a cell whose enclosure contains 0 (the voxelizer keeps every such cell; :func:`contour` counts any it
-had to add). Only the cells the voxelizer kept are visited; any cell that the sampled signs show the
-surface leaving into is added, so the mesh is closed whatever the rounding of single samples.
+every edge of the mesh lies in exactly two triangles, consistently oriented (outward: from the negative
+to the positive side); no two triangles meet except in a shared edge or vertex, since each triangle lies
+in its own tetrahedron and meets the tetrahedron's faces only in the segments shared with its neighbours;
+every vertex lies in a cell where F takes both signs at sampled points, so in a cell whose enclosure
+contains 0 (the voxelizer keeps every such cell). Only the cells the voxelizer kept are visited, and any
+cell that the sampled signs show the surface entering (``MeshStats.added_cells`` counts them, 0 when every
+sample agrees with the enclosures), so the mesh is closed whatever the rounding of a single sample.
+
+Vertex keys: every mesh vertex is named by an int64 whose low three bits say what it is (:data:`GRID`: a
+grid corner or the crossing on a grid edge; :data:`FACE_CORNER`, :data:`CELL_CORNER`, :data:`FACE_CELL`:
+the crossing on an edge from a face or cell point; :data:`FACE_POINT`: a face point on a cap), so that
+the cells that share a vertex name it alike.
 """
 
 from __future__ import annotations
@@ -43,16 +50,31 @@ NUDGE = 1e-7
 construction holds for any place inside the edge, and the nudge breaks the exact coplanarity that a
 surface aligned with the grid gives (walls of extrusions, faces of boxes), on which floating-point
 intersection tests such as pymeshlab's report disjoint coplanar triangles as intersecting."""
+FEATURE_COSINE = 0.985
+"""A cell is a feature cell where the normal at one of its surface vertices meets the cell's mean normal
+at a cosine below this (an angle above about 10°: a crease of 20° or more)."""
+QEF_CUTOFF = 0.01
+"""Singular values of a QEF below this fraction of the largest are dropped (the point stays near the mean
+along those directions)."""
+POINT_MARGIN = 1.0 / 32
+"""Cell and face points stay this fraction of the cell inside their cell or face."""
+MAX_DEPTH = 14
+"""The deepest grid contoured: vertex keys hold (2^depth + 1)³ corners times 64 kinds of edge."""
+
+GRID, FACE_CORNER, CELL_CORNER, FACE_CELL, FACE_POINT = range(5)
 
 CORNERS = np.array([[(c >> a) & 1 for a in range(3)] for c in range(8)], dtype=np.int64)
 """A cell's local corner c sits at offset (c & 1, c >> 1 & 1, c >> 2 & 1)."""
+SQUARE = ((0, 0), (1, 0), (1, 1), (0, 1))
+"""A face's corners in order around it, as steps along its two axes (in increasing order of axis)."""
 
 
 @dataclass
 class MeshStats:
-    """What a contouring did: cells, triangles, the cells it had to add, seconds per stage."""
+    """What a contouring did: cells, triangles, feature cells, the cells it had to add, seconds per stage."""
     cells: int = 0
     crossed_cells: int = 0
+    feature_cells: int = 0
     added_cells: int = 0
     cap_triangles: int = 0
     triangles: int = 0
@@ -62,8 +84,8 @@ class MeshStats:
     def summary(self) -> str:
         total = self.seconds.get("total", 0.0)
         return (f"{self.triangles} triangles, {self.vertices} vertices from {self.crossed_cells} crossed cells "
-                f"of {self.cells} kept ({self.added_cells} added by the signs, {self.cap_triangles} cap "
-                f"triangles), {total:.3f} s")
+                f"of {self.cells} kept ({self.feature_cells} feature cells, {self.added_cells} added by the "
+                f"signs, {self.cap_triangles} cap triangles), {total:.3f} s")
 
 
 # -- tables ------------------------------------------------------------------------------------------
@@ -119,27 +141,33 @@ def _kuhn_tables():
 
 
 KUHN_TETS, KUHN_COUNT, KUHN_CORNER, KUHN_CODE = _kuhn_tables()
+KUHN_EDGES = [(u, v & ~u) for u in range(8) for v in range(8) if u != v and u & v == u]
+"""The 19 edges of a cell's Kuhn split, as (lower corner, code)."""
+
+FAN_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (2, 3), (1, 3))
+"""A fan tetrahedron (cell point, p, q, r)'s six edges, in the order its edge keys are listed."""
 
 
-def _cap_tables():
-    """For each face of the bounds (axis, side): its cells' two triangles as 3D corner offsets, ordered
-    counter-clockwise seen from outside, and for each of the 8 sign cases of a triangle the polygon of its
-    inside part, fanned into triangles whose vertices are (corner i, corner j): the corner itself where
-    i == j, else the crossing on edge i-j."""
-    faces = {}
-    for axis in range(3):
-        b, c = [a for a in range(3) if a != axis]
-        e_b, e_c = np.eye(3, dtype=np.int64)[b], np.eye(3, dtype=np.int64)[c]
-        square = [np.zeros(3, np.int64), e_b, e_b + e_c, e_c]  # the diagonal 0-2 is the Kuhn one
-        for side in (0, 1):
-            normal = np.eye(3)[axis] * (1 if side else -1)
-            triangles = []
-            for tri in ((0, 1, 2), (0, 2, 3)):
-                pts = [square[k] for k in tri]
-                if np.cross(pts[1] - pts[0], pts[2] - pts[0]) @ normal < 0:
-                    pts = [pts[0], pts[2], pts[1]]
-                triangles.append(np.array(pts))
-            faces[axis, side] = triangles
+def _fan_tables():
+    """Marching tetrahedra on a fan tetrahedron (cell point, p, q, r), p q r counter-clockwise seen from
+    outside the cell: per sign case, the triangles as indices into :data:`FAN_PAIRS`."""
+    reference = np.array([[1 / 3, 1 / 3, -1], [0, 0, 0], [1, 0, 0], [0, 1, 0]], float)  # outside is +z
+    slot = {frozenset(p): k for k, p in enumerate(FAN_PAIRS)}
+    count = np.zeros(16, dtype=np.int64)
+    edges = np.zeros((16, 2, 3), dtype=np.int64)
+    for case, triangles in enumerate(_oriented_triangles(reference)):
+        count[case] = len(triangles)
+        for s, tri in enumerate(triangles):
+            edges[case, s] = [slot[frozenset(pair)] for pair in tri]
+    return count, edges
+
+
+FAN_COUNT, FAN_EDGES = _fan_tables()
+
+
+def _cap_polygons():
+    """For each of the 8 sign cases of a triangle (bit k: vertex k inside), its inside part fanned into
+    triangles whose vertices are (k, k): vertex k itself, or (k, k + 1 mod 3): the crossing on that edge."""
     polygons = []
     for case in range(8):
         inside = [bool(case >> k & 1) for k in range(3)]
@@ -151,15 +179,27 @@ def _cap_tables():
             if inside[i] != inside[j]:
                 polygon.append((i, j))
         polygons.append([(polygon[0], polygon[k], polygon[k + 1]) for k in range(1, len(polygon) - 1)])
-    return faces, polygons
+    return polygons
 
 
-CAP_FACES, CAP_POLYGONS = _cap_tables()
+CAP_POLYGONS = _cap_polygons()
+
+
+def _face_axes(axis: int) -> tuple[int, int]:
+    b, c = [a for a in range(3) if a != axis]
+    return b, c
+
+
+def _reversed_face(axis: int, side: int) -> bool:
+    """Whether a face's corners in :data:`SQUARE` order run clockwise seen from outside a cell that has the
+    face on ``side`` (0: its lower face on ``axis``)."""
+    b, c = _face_axes(axis)
+    return float(np.cross(np.eye(3)[b], np.eye(3)[c]) @ np.eye(3)[axis]) * (1 if side else -1) < 0
 
 
 # -- the grid ----------------------------------------------------------------------------------------
 class _Grid:
-    """The 2^depth grid over the bounds: corner keys, world positions, F's sampled signs."""
+    """The 2^depth grid over the bounds: corner, cell and face keys, world positions, F's samples."""
 
     def __init__(self, surface, depth: int, bounds):
         self.surface = surface
@@ -170,10 +210,17 @@ class _Grid:
         self.step = (self.hi - self.lo) / self.n
 
     def key(self, ijk: np.ndarray) -> np.ndarray:
+        """Corner keys."""
         return (ijk[..., 0] * self.k + ijk[..., 1]) * self.k + ijk[..., 2]
 
     def unkey(self, key: np.ndarray) -> np.ndarray:
         return np.stack([key // (self.k * self.k), key // self.k % self.k, key % self.k], axis=-1)
+
+    def cell_key(self, cells: np.ndarray) -> np.ndarray:
+        return (cells[..., 0] * self.n + cells[..., 1]) * self.n + cells[..., 2]
+
+    def cell_unkey(self, key: np.ndarray) -> np.ndarray:
+        return np.stack([key // (self.n * self.n), key // self.n % self.n, key % self.n], axis=-1)
 
     def world(self, ijk: np.ndarray) -> np.ndarray:
         """World coordinates of corner indices (the last corner of an axis is its upper bound exactly)."""
@@ -188,10 +235,27 @@ class _Grid:
         return (self.values(self.world(ijk)) < 0).reshape(ijk.shape[:-1])
 
 
-def _cell_keys(grid: _Grid, cells: np.ndarray) -> np.ndarray:
-    return (cells[:, 0] * grid.n + cells[:, 1]) * grid.n + cells[:, 2]
+class _Points:
+    """Points added to the tetrahedralization (cell points or face points): sorted ids, positions, signs."""
+
+    def __init__(self, grid: _Grid, ids: np.ndarray, positions: np.ndarray):
+        order = np.argsort(ids)
+        self.ids, self.positions = ids[order], positions[order]
+        self.inside = grid.values(self.positions) < 0 if len(ids) else np.zeros(0, bool)
+
+    def find(self, ids: np.ndarray) -> np.ndarray:
+        """The rows of ``ids`` (each must be present)."""
+        rows = np.searchsorted(self.ids, ids)
+        if len(ids) and (rows.max() >= len(self.ids) or np.any(self.ids[rows] != ids)):
+            raise AssertionError("a face or cell point that was not placed")
+        return rows
 
 
+def _grid_edge_key(corner_keys, code):
+    return (corner_keys * 8 + code) * 8 + GRID
+
+
+# -- which cells -------------------------------------------------------------------------------------
 def _close(grid: _Grid, cells: np.ndarray, inside: np.ndarray, seeds: np.ndarray):
     """Add to ``cells`` the ``seeds`` and every cell that the surface of the sampled signs enters from them
     across a face, until none is missing. Returns (cells, inside, how many were added)."""
@@ -208,95 +272,323 @@ def _close(grid: _Grid, cells: np.ndarray, inside: np.ndarray, seeds: np.ndarray
                 neighbours[:, axis] += 1 if side else -1
                 candidates.append(neighbours[(neighbours[:, axis] >= 0) & (neighbours[:, axis] < grid.n)])
         start = len(cells)
-        keys = np.unique(_cell_keys(grid, np.concatenate(candidates)))
-        known = np.sort(_cell_keys(grid, cells))
-        if len(known):
-            keys = keys[known[np.minimum(np.searchsorted(known, keys), len(known) - 1)] != keys]
-        if not len(keys):
+        cells, inside, fresh = _add_cells(grid, cells, inside, np.concatenate(candidates))
+        if not fresh:
             return cells, inside, added
-        fresh = np.stack([keys // (grid.n * grid.n), keys // grid.n % grid.n, keys % grid.n], 1)
-        cells = np.concatenate([cells, fresh])
-        inside = np.concatenate([inside, grid.inside(fresh[:, None, :] + CORNERS)])
-        added += len(fresh)
+        added += fresh
         pending = np.zeros((0, 3), np.int64)
 
 
-def _tet_triangles(grid: _Grid, cells: np.ndarray, inside: np.ndarray) -> np.ndarray:
-    """Marching tetrahedra over the Kuhn split of each cell: the triangles' vertex keys, (T, 3)."""
+def _add_cells(grid: _Grid, cells, inside, more):
+    """``cells`` with those of ``more`` it lacks appended (their corners sampled): (cells, inside, how many)."""
+    keys = np.unique(grid.cell_key(more))
+    known = np.sort(grid.cell_key(cells))
+    if len(known) and len(keys):
+        keys = keys[known[np.minimum(np.searchsorted(known, keys), len(known) - 1)] != keys]
+    if not len(keys):
+        return cells, inside, 0
+    fresh = grid.cell_unkey(keys)
+    return (np.concatenate([cells, fresh]), np.concatenate([inside, grid.inside(fresh[:, None, :] + CORNERS)]),
+            len(fresh))
+
+
+# -- triangles ---------------------------------------------------------------------------------------
+def _kuhn_triangles(grid: _Grid, cells: np.ndarray, inside: np.ndarray):
+    """Marching tetrahedra over the Kuhn split of each cell: the triangles' vertex keys (T, 3) and the row
+    of ``cells`` each came from."""
     corner_keys = grid.key(cells)[:, None] + grid.key(CORNERS)  # (n, 8)
     bits = inside.astype(np.int64)
-    out = []
+    out, owner = [], []
     rows = np.arange(len(cells))
     for t, tet in enumerate(KUHN_TETS):
         case = bits[:, tet[0]] | bits[:, tet[1]] << 1 | bits[:, tet[2]] << 2 | bits[:, tet[3]] << 3
         count = KUHN_COUNT[t, case]
         for slot in (0, 1):
-            sel = count > slot
+            sel = rows[count > slot]
             c = case[sel]
-            corner = KUHN_CORNER[t, c, slot]  # (m, 3)
-            code = KUHN_CODE[t, c, slot]
-            out.append(corner_keys[rows[sel][:, None], corner] * 8 + code)
+            out.append(_grid_edge_key(corner_keys[sel[:, None], KUHN_CORNER[t, c, slot]], KUHN_CODE[t, c, slot]))
+            owner.append(sel)
+    if not out:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    return np.concatenate(out), np.concatenate(owner)
+
+
+def _face_ids(grid: _Grid, cells: np.ndarray, axis: int, side: int) -> np.ndarray:
+    """The ids of the cells' faces on ``axis`` (0: lower, 1: upper): the face's lowest corner key × 3 + axis."""
+    lowest = cells.copy()
+    lowest[:, axis] += side
+    return grid.key(lowest) * 3 + axis
+
+
+def _face_corner_keys(grid: _Grid, cells: np.ndarray, axis: int, side: int):
+    """For the cells' faces on (axis, side): the four corners in :data:`SQUARE` order as local corner
+    indices of the cell, and as corner keys (m, 4)."""
+    b, c = _face_axes(axis)
+    local = [(side << axis) | (du << b) | (dv << c) for du, dv in SQUARE]
+    return local, grid.key(cells)[:, None] + grid.key(CORNERS[local])
+
+
+def _square_edge_key(corner_keys, axis: int, i: int, j: int):
+    """The grid edge key of the edge between square corners i and j (adjacent, or the diagonal 0-2)."""
+    b, c = _face_axes(axis)
+    lo, hi = (i, j) if all(p <= q for p, q in zip(SQUARE[i], SQUARE[j])) else (j, i)
+    du, dv = SQUARE[hi][0] - SQUARE[lo][0], SQUARE[hi][1] - SQUARE[lo][1]
+    return _grid_edge_key(corner_keys[:, lo], (du << b) | (dv << c))
+
+
+def _face_triangles(grid, cells, axis, side, split4, face_points: _Points, inside):
+    """The triangles of the cells' faces on (axis, side), counter-clockwise seen from outside the cells:
+    yields (rows of cells, vertex inside flags (m, 3), vertex self keys (m, 3), vertex ids for fan edges,
+    edge keys (m, 3) for edges 0-1, 1-2, 2-0). Faces with ``split4`` are fanned from their face point."""
+    local, corner_keys = _face_corner_keys(grid, cells, axis, side)
+    face_ids = _face_ids(grid, cells, axis, side)
+    flip = _reversed_face(axis, side)
+    rows = np.arange(len(cells))
+    corner_in = inside[:, local]
+    for fanned, shapes in ((False, ((("c", 0), ("c", 1), ("c", 2)), (("c", 0), ("c", 2), ("c", 3)))),
+                           (True, tuple((("f", 0), ("c", k), ("c", (k + 1) % 4)) for k in range(4)))):
+        sel = rows[split4 == fanned]
+        if not len(sel):
+            continue
+        fp = face_points.find(face_ids[sel]) if fanned else None
+        for shape in shapes:
+            if flip:
+                shape = (shape[0], shape[2], shape[1])
+            flags, selves, edges = [], [], []
+            for kind, k in shape:
+                if kind == "c":
+                    flags.append(corner_in[sel, k])
+                    selves.append(_grid_edge_key(corner_keys[sel, k], 0))
+                else:
+                    flags.append(face_points.inside[fp])
+                    selves.append(face_ids[sel] * 8 + FACE_POINT)
+            for v in range(3):
+                (ka, a), (kb, bb) = shape[v], shape[(v + 1) % 3]
+                if ka == "c" and kb == "c":
+                    edges.append(_square_edge_key(corner_keys[sel], axis, a, bb))
+                else:
+                    corner = a if ka == "c" else bb
+                    edges.append((face_ids[sel] * 4 + corner) * 8 + FACE_CORNER)
+            yield sel, shape, np.stack(flags, 1), np.stack(selves, 1), np.stack(edges, 1)
+
+
+def _fan_triangles(grid: _Grid, cells, inside, feature, cell_points: _Points, face_points: _Points, is_feature):
+    """Marching tetrahedra over the fans of ``cells`` (each from its cell point over its faces' triangles):
+    the triangles' vertex keys (T, 3). ``is_feature(cells)`` says which cells are feature cells (their
+    faces, and their neighbours' faces toward them, fan from face points)."""
+    out = []
+    cell_keys = grid.cell_key(cells)
+    cp = cell_points.find(cell_keys)
+    for axis in range(3):
+        for side in (0, 1):
+            neighbour = cells.copy()
+            neighbour[:, axis] += 1 if side else -1
+            split4 = feature | is_feature(neighbour)
+            local, _ = _face_corner_keys(grid, cells, axis, side)
+            face = 2 * axis + side
+            for sel, shape, flags, selves, edges in _face_triangles(grid, cells, axis, side, split4, face_points,
+                                                                    inside):
+                spokes = []  # edges from the cell point to p, q, r
+                for kind, k in shape:
+                    if kind == "c":
+                        spokes.append((cell_keys[sel] * 8 + local[k]) * 8 + CELL_CORNER)
+                    else:
+                        spokes.append((cell_keys[sel] * 6 + face) * 8 + FACE_CELL)
+                keys = np.stack(spokes + [edges[:, 0], edges[:, 1], edges[:, 2]], 1)  # FAN_PAIRS order
+                bits = flags.astype(np.int64)
+                case = (cell_points.inside[cp[sel]].astype(np.int64) | bits[:, 0] << 1 | bits[:, 1] << 2
+                        | bits[:, 2] << 3)
+                count = FAN_COUNT[case]
+                rows = np.arange(len(sel))
+                for slot in (0, 1):
+                    pick = rows[count > slot]
+                    out.append(keys[pick[:, None], FAN_EDGES[case[pick], slot]])
     return np.concatenate(out) if out else np.zeros((0, 3), np.int64)
 
 
-def _cap_triangles(grid: _Grid):
+def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
     """The bounds' faces where the sampled F is negative, as triangles of vertex keys (T, 3), and the
     cells beside them whose face there has both signs (they must be contoured too)."""
     out, seeds = [], []
     n = grid.n
-    u, v = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-    for (axis, side), triangles in CAP_FACES.items():
-        b, c = [a for a in range(3) if a != axis]
-        ijk = np.zeros((n + 1, n + 1, 3), np.int64)
-        ijk[..., axis] = side * n
-        ijk[..., b], ijk[..., c] = u, v
-        inside = grid.inside(ijk)
-        if not inside.any():
-            continue
-        base = ijk[:-1, :-1].reshape(-1, 3)  # each face cell's lowest corner
-        corner_in = {}
-        for tri in triangles:
-            flags = np.stack([inside[(base[:, b] + o[b]), (base[:, c] + o[c])] for o in tri], 1)
-            case = flags[:, 0] | flags[:, 1].astype(np.int64) << 1 | flags[:, 2].astype(np.int64) << 2
-            keys = grid.key(base[:, None, :] + tri[None])  # (m, 3) corner keys
-            for polygon_case in range(1, 8):
-                sel = case == polygon_case
-                if not sel.any():
-                    continue
-                for triple in CAP_POLYGONS[polygon_case]:
-                    cols = [_cap_vertex_key(keys[sel], tri, i, j) for i, j in triple]
-                    out.append(np.stack(cols, 1))
-            for k, o in enumerate(tri):
-                corner_in.setdefault(tuple(o), flags[:, k])
-        flags = np.stack(list(corner_in.values()), 1)
-        mixed = flags.any(1) & ~flags.all(1)
-        cell = base[mixed].copy()
-        cell[:, axis] = side * (n - 1)
-        seeds.append(cell)
+    u, v = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    for axis in range(3):
+        b, c = _face_axes(axis)
+        for side in (0, 1):
+            cells = np.zeros((n, n, 3), np.int64)
+            cells[..., axis] = side * (n - 1)
+            cells[..., b], cells[..., c] = u, v
+            cells = cells.reshape(-1, 3)
+            local, corner_keys = _face_corner_keys(grid, cells, axis, side)
+            corners = np.zeros((n + 1, n + 1, 3), np.int64)
+            corners[..., axis] = side * n
+            corners[..., b], corners[..., c] = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+            signs = grid.inside(corners)
+            if not signs.any():
+                continue
+            inside = np.zeros((len(cells), 8), bool)
+            for k, (du, dv) in enumerate(SQUARE):
+                inside[:, local[k]] = signs[cells[:, b] + du, cells[:, c] + dv]
+            face_in = inside[:, local]
+            mixed = face_in.any(1) & ~face_in.all(1)
+            seeds.append(cells[mixed])
+            split4 = is_feature(cells)
+            for sel, shape, flags, selves, edges in _face_triangles(grid, cells, axis, side, split4, face_points,
+                                                                    inside):
+                case = flags[:, 0] | flags[:, 1].astype(np.int64) << 1 | flags[:, 2].astype(np.int64) << 2
+                for polygon_case in range(1, 8):
+                    pick = case == polygon_case
+                    if not pick.any():
+                        continue
+                    for triple in CAP_POLYGONS[polygon_case]:
+                        out.append(np.stack([selves[pick, i] if i == j else edges[pick, i] for i, j in triple], 1))
     triangles = np.concatenate(out) if out else np.zeros((0, 3), np.int64)
     seeds = np.concatenate(seeds) if seeds else np.zeros((0, 3), np.int64)
     return triangles, seeds
 
 
-def _cap_vertex_key(keys: np.ndarray, tri: np.ndarray, i: int, j: int) -> np.ndarray:
-    if i == j:
-        return keys[:, i] * 8
-    lo, hi = (i, j) if np.all(tri[i] <= tri[j]) else (j, i)
-    diff = tri[hi] - tri[lo]
-    return keys[:, lo] * 8 + int(diff[0] + 2 * diff[1] + 4 * diff[2])
+# -- features ----------------------------------------------------------------------------------------
+def _qef(points, normals, mask, project_out=None):
+    """Dual contouring's point per row: the least-squares meeting point of the tangent planes (points
+    (m, k, 3), unit normals, ``mask`` which are present), solved around their mean with small singular
+    values dropped. ``project_out``: an axis whose normal component is removed first (a face's 2D QEF)."""
+    w = mask[..., None].astype(np.float64)
+    count = np.maximum(mask.sum(1), 1)[:, None]
+    mean = (points * w).sum(1) / count
+    n = normals * w
+    if project_out is not None:
+        n = n.copy()
+        n[..., project_out] = 0
+    a = np.einsum("mki,mkj->mij", n, n)
+    rhs = np.einsum("mki,mk->mi", n, np.einsum("mki,mki->mk", n, points - mean[:, None]))
+    values, vectors = np.linalg.eigh(a)
+    keep = values > QEF_CUTOFF * values[:, -1:]
+    inverse = np.where(keep, 1 / np.where(keep, values, 1), 0)
+    step = np.einsum("mij,mj,mkj,mk->mi", vectors, inverse, vectors, rhs)
+    return mean + step
+
+
+def _feature_cells(grid, cells, tri_keys, tri_owner, unique, normals):
+    """Rows of ``cells`` where the normal at one of their triangles' vertices is further than
+    FEATURE_COSINE from the cell's mean normal (the sum over its triangles' vertices), or not defined."""
+    n = normals[np.searchsorted(unique, tri_keys)]  # (T, 3, 3)
+    owner = np.repeat(tri_owner, 3)
+    flat = n.reshape(-1, 3)
+    usable = np.isfinite(flat).all(1)
+    mean = np.zeros((len(cells), 3))
+    for k in range(3):
+        mean[:, k] = np.bincount(owner[usable], flat[usable, k], minlength=len(cells))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean /= np.linalg.norm(mean, axis=1)[:, None]
+    cosine = np.einsum("ti,ti->t", flat, mean[owner])
+    bent = ~(cosine >= FEATURE_COSINE)  # NaN normals count as bent
+    return np.unique(owner[bent])
+
+
+def _edge_data(grid, keys, unique, positions, normals):
+    """Positions, normals and presence of the vertices on the grid edges ``keys`` (absent: no crossing)."""
+    rows = np.minimum(np.searchsorted(unique, keys), len(unique) - 1)
+    present = unique[rows] == keys
+    ok = present & np.isfinite(normals[rows]).all(-1)
+    return positions[rows], np.nan_to_num(normals[rows]), ok
+
+
+def _place_points(grid, feature_cells, fanned_cells, unique, positions, normals):
+    """Cell points (the QEF point of each feature cell, the centre of every other fanned cell) and face
+    points (the face's 2D QEF point, for every face of a feature cell), kept inside their cells and faces."""
+    corner_keys = grid.key(feature_cells)[:, None] + grid.key(CORNERS)
+    keys = np.stack([_grid_edge_key(corner_keys[:, u], code) for u, code in KUHN_EDGES], 1)
+    p, nrm, ok = _edge_data(grid, keys, unique, positions, normals)
+    lo = grid.world(feature_cells)
+    hi = grid.world(feature_cells + 1)
+    margin = (hi - lo) * POINT_MARGIN
+    qef = np.clip(_qef(p, nrm, ok), lo + margin, hi - margin)
+    qef = np.where(ok.any(1)[:, None], qef, (lo + hi) / 2)
+    others = fanned_cells
+    centres = (grid.world(others) + grid.world(others + 1)) / 2
+    ids = np.concatenate([grid.cell_key(feature_cells), grid.cell_key(others)])
+    first = np.unique(ids, return_index=True)[1]  # a feature cell's QEF point wins over its centre
+    cell_points = _Points(grid, ids[first], np.concatenate([qef, centres])[first])
+
+    face_ids, face_pos = [], []
+    for axis in range(3):
+        b, c = _face_axes(axis)
+        for side in (0, 1):
+            ids = _face_ids(grid, feature_cells, axis, side)
+            _, corner_keys = _face_corner_keys(grid, feature_cells, axis, side)
+            pairs = [(0, 1), (1, 2), (3, 2), (0, 3), (0, 2)]
+            keys = np.stack([_square_edge_key(corner_keys, axis, i, j) for i, j in pairs], 1)
+            p, nrm, ok = _edge_data(grid, keys, unique, positions, normals)
+            lo = grid.world(feature_cells + side * np.eye(3, dtype=np.int64)[axis])
+            hi = lo.copy()
+            span = grid.world(feature_cells + 1) - grid.world(feature_cells)
+            hi[:, [b, c]] += span[:, [b, c]]
+            margin = span * POINT_MARGIN
+            margin[:, axis] = 0
+            point = np.clip(_qef(p, nrm, ok, project_out=axis), lo + margin, hi - margin)
+            point = np.where(ok.any(1)[:, None], point, (lo + hi) / 2)
+            point[:, axis] = lo[:, axis]
+            face_ids.append(ids)
+            face_pos.append(point)
+    ids, first = np.unique(np.concatenate(face_ids), return_index=True)
+    face_points = _Points(grid, ids, np.concatenate(face_pos)[first])
+    return cell_points, face_points
 
 
 # -- vertices ----------------------------------------------------------------------------------------
-def _vertices(grid: _Grid, keys: np.ndarray):
-    """Positions of the vertices named by ``keys``: a grid corner (code 0) or the root of F on the edge
-    from corner ``key >> 3`` along ``code``, refined by regula falsi and kept inside the edge. Returns
-    (positions, on_surface mask)."""
-    start = grid.unkey(keys >> 3)
-    code = keys & 7
-    end = start + CORNERS[code]
-    on_edge = code != 0
-    positions = grid.world(start).astype(np.float64)
-    a, b = positions[on_edge], grid.world(end[on_edge]).astype(np.float64)
+def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points):
+    """The two ends of the edge each key names (a point named by itself: both ends the same)."""
+    kind, payload = keys & 7, keys >> 3
+    a = np.empty((len(keys), 3))
+    b = np.empty((len(keys), 3))
+    grid_kind = kind == GRID
+    start = grid.unkey(payload[grid_kind] >> 3)
+    a[grid_kind] = grid.world(start)
+    b[grid_kind] = grid.world(start + CORNERS[payload[grid_kind] & 7])
+    for k in (FACE_CORNER, FACE_POINT):
+        sel = kind == k
+        if sel.any():
+            face = payload[sel] // 4 if k == FACE_CORNER else payload[sel]
+            a[sel] = face_points.positions[face_points.find(face)]
+            if k == FACE_POINT:
+                b[sel] = a[sel]
+                continue
+            axis = face % 3
+            lowest = grid.unkey(face // 3)
+            step = np.array(SQUARE)[payload[sel] % 4]
+            for ax in range(3):
+                b_ax, c_ax = _face_axes(ax)
+                on = axis == ax
+                lowest[on, b_ax] += step[on, 0]
+                lowest[on, c_ax] += step[on, 1]
+            b[sel] = grid.world(lowest)
+    sel = kind == CELL_CORNER
+    if sel.any():
+        cell = payload[sel] // 8
+        a[sel] = cell_points.positions[cell_points.find(cell)]
+        b[sel] = grid.world(grid.cell_unkey(cell) + CORNERS[payload[sel] % 8])
+    sel = kind == FACE_CELL
+    if sel.any():
+        cell, face = payload[sel] // 6, payload[sel] % 6
+        a[sel] = cell_points.positions[cell_points.find(cell)]
+        cells = grid.cell_unkey(cell)
+        ids = np.empty(len(cell), np.int64)
+        for f in range(6):
+            on = face == f
+            ids[on] = _face_ids(grid, cells[on], f // 2, f % 2)
+        b[sel] = face_points.positions[face_points.find(ids)]
+    return a, b
+
+
+def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points):
+    """Positions of the vertices named by ``keys`` (sorted, unique): a point itself, or the root of F on
+    its edge, refined by regula falsi and kept inside the edge. Returns (positions, on_surface mask,
+    witnesses: (V, 2, 3) the edge's ends, the one where F < 0 first; a point named by itself twice)."""
+    a, b = _endpoints(grid, keys, cell_points, face_points)
+    on_edge = np.any(a != b, axis=1)
+    positions = a.copy()
+    witnesses = np.stack([a, b], 1)
+    a, b = a[on_edge], b[on_edge]
     fa, fb = grid.values(a), grid.values(b)
     swap = ~(fa < 0)  # make a the inside end
     a[swap], b[swap] = b[swap].copy(), a[swap].copy()
@@ -307,7 +599,8 @@ def _vertices(grid: _Grid, keys: np.ndarray):
     hashed = (keys[on_edge].astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(11)
     t = np.clip(t + NUDGE * (hashed.astype(np.float64) / 2.0**52 - 1.0), EDGE_MARGIN, 1 - EDGE_MARGIN)
     positions[on_edge] = a + t[:, None] * (b - a)
-    return positions, on_edge
+    witnesses[on_edge, 0], witnesses[on_edge, 1] = a, b
+    return positions, on_edge, witnesses
 
 
 def _edge_roots(grid: _Grid, a, b, fa, fb) -> np.ndarray:
@@ -333,56 +626,124 @@ def _edge_roots(grid: _Grid, a, b, fa, fb) -> np.ndarray:
     return np.clip(t, EDGE_MARGIN, 1 - EDGE_MARGIN)
 
 
-def _vertex_normals(surface, vertices, faces, on_surface) -> np.ndarray:
-    """Unit normals: F's analytic gradient at the surface vertices; the triangles' area-weighted mean where
-    that is not usable (a cap's corners, a zero or undefined gradient)."""
-    normals = np.zeros_like(vertices)
+def _unit_normals(surface, vertices, on_surface) -> np.ndarray:
+    """F's analytic gradient at the surface vertices, normalised (NaN where it is not usable)."""
+    normals = np.full_like(vertices, np.nan)
     if on_surface.any():
         normals[on_surface] = surface.gradient(vertices[on_surface])
-    length = np.linalg.norm(normals, axis=1)
-    bad = ~(np.isfinite(length) & (length > 0))
-    if bad.any():
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+    normals[~np.isfinite(normals).all(1)] = np.nan
+    return normals
+
+
+def _fill_normals(normals, vertices, faces) -> np.ndarray:
+    """The triangles' area-weighted mean normal where the analytic one is not usable (a cap's corners, a
+    zero or undefined gradient)."""
+    bad = ~np.isfinite(normals).all(1)
+    if bad.any() and len(faces):
         p = vertices[faces]
         area = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         summed = np.zeros_like(vertices)
         for k in range(3):
             np.add.at(summed, faces[:, k], area)
-        normals[bad] = summed[bad]
-        length = np.linalg.norm(normals, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return normals / length[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            normals[bad] = summed[bad] / np.linalg.norm(summed[bad], axis=1)[:, None]
+    return normals
 
 
-def contour(surface, cells: np.ndarray, depth: int, bounds=None):
+# -- the whole -----------------------------------------------------------------------------------------
+def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bool = True, witnesses: bool = False):
     """The mesh of ``surface`` (an :class:`implc.Surface`) from the cells the voxelizer kept at ``depth``
-    ((N, 3) cell indices): see the module's docstring for what it promises. Returns an
-    :class:`implc.Mesh`."""
+    ((N, 3) cell indices): see the module's docstring for what it promises. ``features=False`` keeps the
+    Kuhn split everywhere (creases chamfered). ``witnesses=True`` keeps, for each vertex, the ends of the
+    edge it was found on (``Mesh.witnesses``, (V, 2, 3): two points of one cell where F has opposite
+    signs, the negative one first), so that anyone can check where it lies. Returns an :class:`implc.Mesh`."""
     from .triangle_mesh import Mesh
+    if not 1 <= depth <= MAX_DEPTH:
+        raise ValueError(f"meshes are made at depth 1 to {MAX_DEPTH}, not {depth}")
     stats = MeshStats()
     t0 = time.perf_counter()
     grid = _Grid(surface, depth, surface.bounds if bounds is None else bounds)
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
     stats.cells = len(cells)
     inside = grid.inside(cells[:, None, :] + CORNERS)
-    caps, seeds = _cap_triangles(grid)
+    no_points = _Points(grid, np.zeros(0, np.int64), np.zeros((0, 3)))
+
+    def never(c):
+        return np.zeros(len(c), bool)
+
+    caps, seeds = _cap_triangles(grid, no_points, never)
     t1 = time.perf_counter()
     cells, inside, stats.added_cells = _close(grid, cells, inside, seeds)
     crossed = inside.any(1) & ~inside.all(1)
     stats.crossed_cells = int(crossed.sum())
+    kuhn, owner = _kuhn_triangles(grid, cells[crossed], inside[crossed])
+    unique, faces = np.unique(np.concatenate([kuhn, caps]), return_inverse=True)
     t2 = time.perf_counter()
-    keys = np.concatenate([_tet_triangles(grid, cells[crossed], inside[crossed]), caps])
-    stats.cap_triangles = len(caps)
-    unique, faces = np.unique(keys, return_inverse=True)
-    faces = faces.reshape(-1, 3)
+    vertices, on_surface, ends = _vertices(grid, unique, no_points, no_points)
+    normals = _unit_normals(surface, vertices, on_surface)
     t3 = time.perf_counter()
-    vertices, on_surface = _vertices(grid, unique)
-    normals = _vertex_normals(surface, vertices, faces, on_surface)
+    feature_rows = _feature_cells(grid, cells[crossed], kuhn, owner, unique, normals) if features else []
+    stats.feature_cells = len(feature_rows)
+    if len(feature_rows):
+        vertices, normals, faces, on_surface, ends, cells_added, stats.cap_triangles = _with_features(
+            grid, cells, inside, crossed, feature_rows, unique, vertices, normals, on_surface, ends)
+        stats.added_cells += cells_added
+    else:
+        faces = faces.reshape(-1, 3)
+        stats.cap_triangles = len(caps)
+    normals = _fill_normals(normals, vertices, faces)
     t4 = time.perf_counter()
     stats.triangles, stats.vertices = len(faces), len(vertices)
-    stats.seconds = {"signs": t1 - t0, "closure": t2 - t1, "triangles": t3 - t2, "vertices": t4 - t3,
+    stats.seconds = {"signs": t1 - t0, "triangles": t2 - t1, "vertices": t3 - t2, "features": t4 - t3,
                      "total": t4 - t0}
-    return Mesh(vertices, faces, normals, stats=stats, bounds=grid_bounds(grid))
+    mesh = Mesh(vertices, faces, normals, stats=stats, bounds=tuple(zip(grid.lo.tolist(), grid.hi.tolist())))
+    mesh.witnesses = ends if witnesses else None
+    return mesh
 
 
-def grid_bounds(grid: _Grid) -> tuple[tuple[float, float], ...]:
-    return tuple((float(lo), float(hi)) for lo, hi in zip(grid.lo, grid.hi))
+def _with_features(grid, cells, inside, crossed, feature_rows, unique, vertices, normals, on_surface, ends):
+    """The mesh again with the feature cells and their neighbours fanned from cell and face points:
+    (vertices, normals, faces, on_surface, witnesses, cells the signs added, cap triangles)."""
+    feature_cells = cells[crossed][feature_rows]
+    feature_keys = np.sort(grid.cell_key(feature_cells))
+
+    def is_feature(c):
+        ok = np.all((c >= 0) & (c < grid.n), axis=1)
+        keys = grid.cell_key(np.clip(c, 0, grid.n - 1))
+        rows = np.minimum(np.searchsorted(feature_keys, keys), len(feature_keys) - 1)
+        return ok & (feature_keys[rows] == keys)
+
+    neighbours = [feature_cells]
+    for axis in range(3):
+        for step in (-1, 1):
+            c = feature_cells.copy()
+            c[:, axis] += step
+            neighbours.append(c[(c[:, axis] >= 0) & (c[:, axis] < grid.n)])
+    fanned_keys = np.unique(grid.cell_key(np.concatenate(neighbours)))
+    cells, inside, _ = _add_cells(grid, cells, inside, grid.cell_unkey(fanned_keys))
+    cells, inside, closed = _close(grid, cells, inside, np.zeros((0, 3), np.int64))
+    keys = grid.cell_key(cells)
+    fanned = np.isin(keys, fanned_keys)
+    cell_points, face_points = _place_points(grid, feature_cells, grid.cell_unkey(fanned_keys), unique, vertices,
+                                             normals)
+    crossed = inside.any(1) & ~inside.all(1)
+    kuhn, _ = _kuhn_triangles(grid, cells[crossed & ~fanned], inside[crossed & ~fanned])
+    fan = _fan_triangles(grid, cells[fanned], inside[fanned], is_feature(cells[fanned]), cell_points, face_points,
+                         is_feature)
+    caps, _ = _cap_triangles(grid, face_points, is_feature)
+    keys, faces = np.unique(np.concatenate([kuhn, fan, caps]), return_inverse=True)
+    rows = np.minimum(np.searchsorted(unique, keys), len(unique) - 1)
+    known = unique[rows] == keys  # placed in the first pass: the same vertex
+    new_vertices, new_on, new_ends = _vertices(grid, keys[~known], cell_points, face_points)
+    out_ends = np.empty((len(keys), 2, 3))
+    out_ends[known], out_ends[~known] = ends[rows[known]], new_ends
+    out_vertices = np.empty((len(keys), 3))
+    out_vertices[known], out_vertices[~known] = vertices[rows[known]], new_vertices
+    out_on = np.empty(len(keys), bool)
+    out_on[known], out_on[~known] = on_surface[rows[known]], new_on
+    out_normals = np.empty((len(keys), 3))
+    out_normals[known] = normals[rows[known]]
+    out_normals[~known] = _unit_normals(grid.surface, new_vertices, new_on)
+    return out_vertices, out_normals, faces.reshape(-1, 3), out_on, out_ends, closed, len(caps)

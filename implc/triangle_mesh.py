@@ -31,6 +31,7 @@ class Mesh:
         self.normals = None if normals is None else np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
         self.stats = stats
         self.bounds = bounds
+        self.witnesses = None  # (V, 2, 3) where contouring was asked to keep them (implc.mesh(..., witnesses=True))
 
     def __repr__(self) -> str:
         return f"Mesh({len(self.vertices)} vertices, {len(self.faces)} triangles)"

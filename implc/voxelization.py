@@ -126,18 +126,20 @@ class Voxels:
         """A notebook shows voxels as the viewer (with up to 4 MiB of levels of detail)."""
         return self.show(max_bytes=4 << 20)._repr_html_()
 
-    def mesh(self, surface: Surface | None = None) -> Mesh:
+    def mesh(self, surface: Surface | None = None, *, features: bool = True, witnesses: bool = False) -> Mesh:
         """The boundary of {F < 0} within the bounds as a closed, oriented, intersection-free triangle mesh,
         contoured over these voxels' cells (:func:`implc.contour.contour`; docs/soundness.md says what holds
         by construction). ``surface``: the surface these voxels came from, needed only for voxels read from
-        a file."""
+        a file. ``features``: fan the cells a crease or corner crosses from their QEF points (sharp CSG
+        edges; False: every cell split the same way, creases chamfered). ``witnesses``: keep each vertex's
+        edge ends (``Mesh.witnesses``: two points of its cell where F has opposite signs)."""
         surface = self.surface if surface is None else surface
         if not isinstance(surface, Surface):
             raise ValueError("these voxels do not know their surface (read from a file?): pass it, "
                              "voxels.mesh(implc.compile(...))")
         if tuple(map(tuple, surface.bounds)) != tuple(map(tuple, self.bounds)):
             raise ValueError(f"the surface's bounds {surface.bounds} are not these voxels' {self.bounds}")
-        return contour(surface, self.coords, self.depth, self.bounds)
+        return contour(surface, self.coords, self.depth, self.bounds, features=features, witnesses=witnesses)
 
     def inside_voxels(self) -> int:
         """How many voxels the inside octants cover."""
@@ -337,10 +339,11 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     return Voxels(coords, normals, depth, surface.bounds, stats, storage=result, inside=inside, surface=surface)
 
 
-def mesh(surface, depth=8, *, workers=None, progress=False, **options) -> Mesh:
+def mesh(surface, depth=8, *, workers=None, progress=False, features=True, witnesses=False, **options) -> Mesh:
     """The boundary of the solid {F < 0} within ``surface``'s bounds as a closed, oriented,
     intersection-free triangle mesh on the 2^depth grid: :func:`voxelize` (``options`` are its tightness
-    options) finds the cells the surface may meet, then :meth:`Voxels.mesh` contours them.
+    options) finds the cells the surface may meet, then :meth:`Voxels.mesh` contours them (``features``,
+    ``witnesses``: see there).
 
     >>> import implc
     >>> ball = implc.compile(implc.x**2 + implc.y**2 + implc.z**2 - 0.5)
@@ -348,7 +351,8 @@ def mesh(surface, depth=8, *, workers=None, progress=False, **options) -> Mesh:
     >>> m.check()["open_edges"], m.volume > 0
     (0, True)
     """
-    return voxelize(surface, depth, workers=workers, progress=progress, **options).mesh()
+    voxels = voxelize(surface, depth, workers=workers, progress=progress, **options)
+    return voxels.mesh(features=features, witnesses=witnesses)
 
 
 @contextlib.contextmanager
