@@ -24,9 +24,10 @@ _LLVM_KINDS = {
     "i8*": ir.PointerType(ir.IntType(8)),
     "i32*": ir.PointerType(ir.IntType(32)),
     "i64*": ir.PointerType(ir.IntType(64)),
+    "f64": ir.DoubleType(),
     "fn*": ir.PointerType(ir.IntType(8)),  # the address of another entry point
 }
-_CTYPES_KINDS = {"i32": ctypes.c_int32, "i64": ctypes.c_int64}  # every pointer kind: c_void_p
+_CTYPES_KINDS = {"i32": ctypes.c_int32, "i64": ctypes.c_int64, "f64": ctypes.c_double}  # every pointer kind: c_void_p
 
 
 @dataclass(frozen=True)
@@ -90,8 +91,14 @@ OCTREE_SUBTREE_ROWS = _entry("implc_octree_subtree_rows", "coords:i32* n:i64 bel
 OCTREE_MARK_INSIDE = _entry("implc_octree_mark_inside", "nodes:i32* node_capacity:i64 state:i64* rows:i32* n:i64",
                             "i64")
 SPLAT = _entry("implc_splat", "px:i64* py:i64* sizes:i64* depth:f64* n:i64 size:i64 zbuf:f64* winner:i64*")
+HASH_INDEX = _entry("implc_hash_index", "table:i64* bits:i64 keys:i64* n:i64 insert:i64 numbers:i64* uniques:i64* "
+                                        "state:i64*", "i64")
+KUHN_TRIANGLES = _entry("implc_kuhn_triangles", "lowest:i64* offsets:i64* inside:i8* n:i64 tables:i64* table:i64* "
+                                                "bits:i64 uniques:i64* limit:i64 state:i64* faces:i64* owner:i64*", "i64")
+BENT_CELLS = _entry("implc_bent_cells", "faces:i64* owner:i64* n:i64 normals:f64* cells:i64 mean:f64* cosine:f64 "
+                                        "bent:i8*")
 RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, TIGHTEN, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS,
-                   SPLAT)
+                   SPLAT, HASH_INDEX, KUHN_TRIANGLES, BENT_CELLS)
 
 # -- the tape engine (implc.codegen.tape_engine_module): one interpreter for every program -----------------
 # (``program``: a program header, implc.tape_program; ``slots``: TAPE_SLOT_DOUBLES per slot of the full

@@ -141,6 +141,13 @@ def _kuhn_tables():
 
 
 KUHN_TETS, KUHN_COUNT, KUHN_CORNER, KUHN_CODE = _kuhn_tables()
+KUHN_PACKED = np.ascontiguousarray(np.concatenate([KUHN_TETS.ravel(), KUHN_COUNT.ravel(), KUHN_CORNER.ravel(),
+                                                   KUHN_CODE.ravel()]), dtype=np.int64)
+"""The tables as ``implc_kuhn_triangles`` reads them."""
+KUHN_CHUNK = 1 << 16
+"""Cells per call of the native marching tetrahedra (Ctrl-C is seen between calls)."""
+KUHN_NEW_KEYS = 64
+"""Room past the index's limit: the keys one cell can add after the check."""
 KUHN_EDGES = [(u, v & ~u) for u in range(8) for v in range(8) if u != v and u & v == u]
 """The 19 edges of a cell's Kuhn split, as (lower corner, code)."""
 
@@ -225,7 +232,11 @@ class _Grid:
     def world(self, ijk: np.ndarray) -> np.ndarray:
         """World coordinates of corner indices (the last corner of an axis is its upper bound exactly)."""
         ijk = np.asarray(ijk)
-        return np.where(ijk == self.n, self.hi, self.lo + ijk * self.step)
+        out = self.lo + ijk * self.step
+        last = ijk == self.n
+        if last.any():
+            out[last] = np.broadcast_to(self.hi, out.shape)[last]
+        return out
 
     def values(self, points: np.ndarray) -> np.ndarray:
         return self.surface.eval(np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64))
@@ -256,61 +267,126 @@ def _grid_edge_key(corner_keys, code):
 
 
 # -- which cells -------------------------------------------------------------------------------------
-def _close(grid: _Grid, cells: np.ndarray, inside: np.ndarray, seeds: np.ndarray):
-    """Add to ``cells`` the ``seeds`` and every cell that the surface of the sampled signs enters from them
-    across a face, until none is missing. Returns (cells, inside, how many were added)."""
-    added, start, pending = 0, 0, seeds
-    while True:
-        candidates = [pending]
-        fresh_inside = inside[start:]
-        crossed = fresh_inside.any(1) & ~fresh_inside.all(1)
-        for axis in range(3):
-            for side in (0, 1):
-                face = [c for c in range(8) if (c >> axis) & 1 == side]
-                sub = fresh_inside[:, face]
-                neighbours = cells[start:][crossed & sub.any(1) & ~sub.all(1)].copy()
-                neighbours[:, axis] += 1 if side else -1
-                candidates.append(neighbours[(neighbours[:, axis] >= 0) & (neighbours[:, axis] < grid.n)])
-        start = len(cells)
-        cells, inside, fresh = _add_cells(grid, cells, inside, np.concatenate(candidates))
-        if not fresh:
-            return cells, inside, added
-        added += fresh
-        pending = np.zeros((0, 3), np.int64)
+class _Cells:
+    """The cells being contoured: their indices, F < 0 at their corners, and an index of their keys
+    (numbered by row)."""
 
+    def __init__(self, grid: _Grid, runtime, cells: np.ndarray):
+        self.grid = grid
+        self.cells = np.zeros((0, 3), np.int64)
+        self.inside = np.zeros((0, 8), bool)
+        self.index = _KeyIndex(runtime, 2 * len(cells) + 1024)
+        self.add(cells)
 
-def _add_cells(grid: _Grid, cells, inside, more):
-    """``cells`` with those of ``more`` it lacks appended (their corners sampled): (cells, inside, how many)."""
-    keys = np.unique(grid.cell_key(more))
-    known = np.sort(grid.cell_key(cells))
-    if len(known) and len(keys):
-        keys = keys[known[np.minimum(np.searchsorted(known, keys), len(known) - 1)] != keys]
-    if not len(keys):
-        return cells, inside, 0
-    fresh = grid.cell_unkey(keys)
-    return (np.concatenate([cells, fresh]), np.concatenate([inside, grid.inside(fresh[:, None, :] + CORNERS)]),
-            len(fresh))
+    def add(self, more: np.ndarray) -> int:
+        """Append the cells of ``more`` not yet here (their corners sampled); returns how many."""
+        keys = self.grid.cell_key(more)
+        fresh = np.unique(keys[self.index.number(keys, insert=False) < 0])
+        if not len(fresh):
+            return 0
+        self.index.number(fresh)
+        cells = self.grid.cell_unkey(fresh)
+        self.cells = np.concatenate([self.cells, cells])
+        self.inside = np.concatenate([self.inside, _corner_signs(self.grid, self.index.runtime, cells)])
+        return len(fresh)
+
+    def close(self, seeds: np.ndarray) -> int:
+        """Add the ``seeds`` and every cell that the surface of the sampled signs enters across a face from
+        a cell here, until none is missing; returns how many were added."""
+        added, start = self.add(seeds), 0
+        while True:
+            inside = self.inside[start:]
+            crossed = inside.any(1) & ~inside.all(1)
+            candidates = []
+            for axis in range(3):
+                for side in (0, 1):
+                    face = [c for c in range(8) if (c >> axis) & 1 == side]
+                    sub = inside[:, face]
+                    neighbours = self.cells[start:][crossed & sub.any(1) & ~sub.all(1)]
+                    neighbours[:, axis] += 1 if side else -1
+                    candidates.append(neighbours[(neighbours[:, axis] >= 0) & (neighbours[:, axis] < self.grid.n)])
+            start = len(self.cells)
+            fresh = self.add(np.concatenate(candidates))
+            if not fresh:
+                return added
+            added += fresh
+
+    def crossed(self) -> np.ndarray:
+        return self.inside.any(1) & ~self.inside.all(1)
 
 
 # -- triangles ---------------------------------------------------------------------------------------
-def _kuhn_triangles(grid: _Grid, cells: np.ndarray, inside: np.ndarray):
-    """Marching tetrahedra over the Kuhn split of each cell: the triangles' vertex keys (T, 3) and the row
-    of ``cells`` each came from."""
-    corner_keys = grid.key(cells)[:, None] + grid.key(CORNERS)  # (n, 8)
-    bits = inside.astype(np.int64)
-    out, owner = [], []
-    rows = np.arange(len(cells))
-    for t, tet in enumerate(KUHN_TETS):
-        case = bits[:, tet[0]] | bits[:, tet[1]] << 1 | bits[:, tet[2]] << 2 | bits[:, tet[3]] << 3
-        count = KUHN_COUNT[t, case]
-        for slot in (0, 1):
-            sel = rows[count > slot]
-            c = case[sel]
-            out.append(_grid_edge_key(corner_keys[sel[:, None], KUHN_CORNER[t, c, slot]], KUHN_CODE[t, c, slot]))
-            owner.append(sel)
-    if not out:
-        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
-    return np.concatenate(out), np.concatenate(owner)
+class _KeyIndex:
+    """Int64 keys numbered in the order first seen (the native ``implc_hash_index``), growing as needed."""
+
+    def __init__(self, runtime, expected: int):
+        self.runtime = runtime
+        self.bits = max(12, int(np.ceil(np.log2(max(expected, 1) * 2))))
+        self.state = np.zeros(2, np.int64)
+        self._allocate()
+
+    def _allocate(self):
+        self.table = np.full(2 << self.bits, -1, np.int64)
+        self.uniques = np.empty(self.limit + KUHN_NEW_KEYS, np.int64)
+
+    @property
+    def limit(self) -> int:
+        """Keys held before the table grows (half its slots)."""
+        return 1 << (self.bits - 1)
+
+    @property
+    def count(self) -> int:
+        return int(self.state[0])
+
+    def keys(self) -> np.ndarray:
+        return self.uniques[: self.count]
+
+    def _grow(self):
+        keys = self.keys().copy()
+        self.bits += 1
+        self._allocate()
+        self.state[0] = 0
+        self._call(keys, True)
+
+    def _call(self, keys, insert):
+        keys = np.ascontiguousarray(keys, dtype=np.int64)
+        numbers = np.empty(len(keys), np.int64)
+        self.runtime.hash_index(self.table.ctypes.data, self.bits, keys.ctypes.data, len(keys), int(insert),
+                                numbers.ctypes.data, self.uniques.ctypes.data, self.state.ctypes.data)
+        return numbers
+
+    def number(self, keys: np.ndarray, insert: bool = True) -> np.ndarray:
+        """The numbers of ``keys`` (absent ones inserted, or −1 with ``insert=False``)."""
+        while insert and self.count + keys.size > self.limit:
+            self._grow()
+        return self._call(keys.reshape(-1), insert).reshape(keys.shape)
+
+    def kuhn_triangles(self, grid, cells: np.ndarray, inside: np.ndarray):
+        """Marching tetrahedra over the Kuhn split of each cell (native), its vertices numbered here: the
+        triangles (T, 3) and the row of ``cells`` each came from."""
+        lowest = np.ascontiguousarray(grid.key(cells), dtype=np.int64)
+        flags = np.ascontiguousarray(inside, dtype=np.uint8)
+        offsets = np.ascontiguousarray(grid.key(CORNERS), dtype=np.int64)
+        faces, owners = [], []
+        start = 0
+        while start < len(cells):
+            count = min(KUHN_CHUNK, len(cells) - start)
+            out = np.empty((12 * count, 3), np.int64)
+            owner = np.empty(12 * count, np.int64)
+            self.state[1] = 0
+            done = self.runtime.kuhn_triangles(
+                lowest[start:].ctypes.data, offsets.ctypes.data, flags[start:].ctypes.data, count,
+                KUHN_PACKED.ctypes.data, self.table.ctypes.data, self.bits, self.uniques.ctypes.data, self.limit,
+                self.state.ctypes.data, out.ctypes.data, owner.ctypes.data)
+            written = int(self.state[1])
+            faces.append(out[:written])
+            owners.append(owner[:written] + start)
+            start += done
+            if done < count:
+                self._grow()
+        if not faces:
+            return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+        return np.concatenate(faces), np.concatenate(owners)
 
 
 def _face_ids(grid: _Grid, cells: np.ndarray, axis: int, side: int) -> np.ndarray:
@@ -468,37 +544,35 @@ def _qef(points, normals, mask, project_out=None):
     return mean + step
 
 
-def _feature_cells(grid, cells, tri_keys, tri_owner, unique, normals):
+def _feature_cells(runtime, cells, faces, tri_owner, normals):
     """Rows of ``cells`` where the normal at one of their triangles' vertices is further than
-    FEATURE_COSINE from the cell's mean normal (the sum over its triangles' vertices), or not defined."""
-    n = normals[np.searchsorted(unique, tri_keys)]  # (T, 3, 3)
-    owner = np.repeat(tri_owner, 3)
-    flat = n.reshape(-1, 3)
-    usable = np.isfinite(flat).all(1)
+    FEATURE_COSINE from the cell's mean normal (the sum over its triangles' vertices), or not defined
+    (native: ``implc_bent_cells``)."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    owner = np.ascontiguousarray(tri_owner, dtype=np.int64)
+    normals = np.ascontiguousarray(normals, dtype=np.float64)
     mean = np.zeros((len(cells), 3))
-    for k in range(3):
-        mean[:, k] = np.bincount(owner[usable], flat[usable, k], minlength=len(cells))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean /= np.linalg.norm(mean, axis=1)[:, None]
-    cosine = np.einsum("ti,ti->t", flat, mean[owner])
-    bent = ~(cosine >= FEATURE_COSINE)  # NaN normals count as bent
-    return np.unique(owner[bent])
+    bent = np.zeros(len(cells), np.uint8)
+    runtime.bent_cells(faces.ctypes.data, owner.ctypes.data, len(faces), normals.ctypes.data, len(cells),
+                       mean.ctypes.data, FEATURE_COSINE, bent.ctypes.data)
+    return np.flatnonzero(bent)
 
 
-def _edge_data(grid, keys, unique, positions, normals):
+def _edge_data(index: _KeyIndex, keys, positions, normals):
     """Positions, normals and presence of the vertices on the grid edges ``keys`` (absent: no crossing)."""
-    rows = np.minimum(np.searchsorted(unique, keys), len(unique) - 1)
-    present = unique[rows] == keys
+    rows = index.number(keys, insert=False)
+    present = rows >= 0
+    rows = np.maximum(rows, 0)
     ok = present & np.isfinite(normals[rows]).all(-1)
     return positions[rows], np.nan_to_num(normals[rows]), ok
 
 
-def _place_points(grid, feature_cells, fanned_cells, unique, positions, normals):
+def _place_points(grid, feature_cells, fanned_cells, index: _KeyIndex, positions, normals):
     """Cell points (the QEF point of each feature cell, the centre of every other fanned cell) and face
     points (the face's 2D QEF point, for every face of a feature cell), kept inside their cells and faces."""
     corner_keys = grid.key(feature_cells)[:, None] + grid.key(CORNERS)
     keys = np.stack([_grid_edge_key(corner_keys[:, u], code) for u, code in KUHN_EDGES], 1)
-    p, nrm, ok = _edge_data(grid, keys, unique, positions, normals)
+    p, nrm, ok = _edge_data(index, keys, positions, normals)
     lo = grid.world(feature_cells)
     hi = grid.world(feature_cells + 1)
     margin = (hi - lo) * POINT_MARGIN
@@ -518,7 +592,7 @@ def _place_points(grid, feature_cells, fanned_cells, unique, positions, normals)
             _, corner_keys = _face_corner_keys(grid, feature_cells, axis, side)
             pairs = [(0, 1), (1, 2), (3, 2), (0, 3), (0, 2)]
             keys = np.stack([_square_edge_key(corner_keys, axis, i, j) for i, j in pairs], 1)
-            p, nrm, ok = _edge_data(grid, keys, unique, positions, normals)
+            p, nrm, ok = _edge_data(index, keys, positions, normals)
             lo = grid.world(feature_cells + side * np.eye(3, dtype=np.int64)[axis])
             hi = lo.copy()
             span = grid.world(feature_cells + 1) - grid.world(feature_cells)
@@ -665,9 +739,10 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     stats = MeshStats()
     t0 = time.perf_counter()
     grid = _Grid(surface, depth, surface.bounds if bounds is None else bounds)
+    runtime = surface.runtime
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
     stats.cells = len(cells)
-    inside = grid.inside(cells[:, None, :] + CORNERS)
+    todo = _Cells(grid, runtime, cells)
     no_points = _Points(grid, np.zeros(0, np.int64), np.zeros((0, 3)))
 
     def never(c):
@@ -675,24 +750,23 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
 
     caps, seeds = _cap_triangles(grid, no_points, never)
     t1 = time.perf_counter()
-    cells, inside, stats.added_cells = _close(grid, cells, inside, seeds)
-    crossed = inside.any(1) & ~inside.all(1)
+    stats.added_cells = todo.close(seeds)
+    cells, inside, crossed = todo.cells, todo.inside, todo.crossed()
     stats.crossed_cells = int(crossed.sum())
-    kuhn, owner = _kuhn_triangles(grid, cells[crossed], inside[crossed])
-    unique, faces = np.unique(np.concatenate([kuhn, caps]), return_inverse=True)
+    index = _KeyIndex(runtime, 4 * stats.crossed_cells)
+    kuhn, owner = index.kuhn_triangles(grid, cells[crossed], inside[crossed])
+    faces = np.concatenate([kuhn, index.number(caps)])
     t2 = time.perf_counter()
-    vertices, on_surface, ends = _vertices(grid, unique, no_points, no_points)
+    vertices, on_surface, ends = _vertices(grid, index.keys(), no_points, no_points)
     normals = _unit_normals(surface, vertices, on_surface)
     t3 = time.perf_counter()
-    feature_rows = _feature_cells(grid, cells[crossed], kuhn, owner, unique, normals) if features else []
+    feature_rows = _feature_cells(runtime, cells[crossed], kuhn, owner, normals) if features else []
     stats.feature_cells = len(feature_rows)
+    stats.cap_triangles = len(caps)
     if len(feature_rows):
         vertices, normals, faces, on_surface, ends, cells_added, stats.cap_triangles = _with_features(
-            grid, cells, inside, crossed, feature_rows, unique, vertices, normals, on_surface, ends)
+            grid, todo, feature_rows, index, vertices, normals, on_surface, ends)
         stats.added_cells += cells_added
-    else:
-        faces = faces.reshape(-1, 3)
-        stats.cap_triangles = len(caps)
     normals = _fill_normals(normals, vertices, faces)
     t4 = time.perf_counter()
     stats.triangles, stats.vertices = len(faces), len(vertices)
@@ -703,10 +777,18 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     return mesh
 
 
-def _with_features(grid, cells, inside, crossed, feature_rows, unique, vertices, normals, on_surface, ends):
+def _corner_signs(grid: _Grid, runtime, cells: np.ndarray) -> np.ndarray:
+    """F < 0 at each corner of each cell, (n, 8): each distinct corner sampled once."""
+    keys = grid.key(cells)[:, None] + grid.key(CORNERS)
+    index = _KeyIndex(runtime, 2 * len(cells))
+    numbers = index.number(keys)
+    return (grid.values(grid.world(grid.unkey(index.keys()))) < 0)[numbers]
+
+
+def _with_features(grid, todo: _Cells, feature_rows, first: _KeyIndex, vertices, normals, on_surface, ends):
     """The mesh again with the feature cells and their neighbours fanned from cell and face points:
     (vertices, normals, faces, on_surface, witnesses, cells the signs added, cap triangles)."""
-    feature_cells = cells[crossed][feature_rows]
+    feature_cells = todo.cells[todo.crossed()][feature_rows]
     feature_keys = np.sort(grid.cell_key(feature_cells))
 
     def is_feature(c):
@@ -722,28 +804,31 @@ def _with_features(grid, cells, inside, crossed, feature_rows, unique, vertices,
             c[:, axis] += step
             neighbours.append(c[(c[:, axis] >= 0) & (c[:, axis] < grid.n)])
     fanned_keys = np.unique(grid.cell_key(np.concatenate(neighbours)))
-    cells, inside, _ = _add_cells(grid, cells, inside, grid.cell_unkey(fanned_keys))
-    cells, inside, closed = _close(grid, cells, inside, np.zeros((0, 3), np.int64))
-    keys = grid.cell_key(cells)
-    fanned = np.isin(keys, fanned_keys)
-    cell_points, face_points = _place_points(grid, feature_cells, grid.cell_unkey(fanned_keys), unique, vertices,
+    todo.add(grid.cell_unkey(fanned_keys))
+    closed = todo.close(np.zeros((0, 3), np.int64))
+    cells, inside = todo.cells, todo.inside
+    fanned = np.isin(grid.cell_key(cells), fanned_keys)
+    cell_points, face_points = _place_points(grid, feature_cells, grid.cell_unkey(fanned_keys), first, vertices,
                                              normals)
-    crossed = inside.any(1) & ~inside.all(1)
-    kuhn, _ = _kuhn_triangles(grid, cells[crossed & ~fanned], inside[crossed & ~fanned])
+    crossed = todo.crossed()
+    index = _KeyIndex(first.runtime, first.count + 16 * len(fanned_keys))
+    kuhn, _ = index.kuhn_triangles(grid, cells[crossed & ~fanned], inside[crossed & ~fanned])
     fan = _fan_triangles(grid, cells[fanned], inside[fanned], is_feature(cells[fanned]), cell_points, face_points,
                          is_feature)
     caps, _ = _cap_triangles(grid, face_points, is_feature)
-    keys, faces = np.unique(np.concatenate([kuhn, fan, caps]), return_inverse=True)
-    rows = np.minimum(np.searchsorted(unique, keys), len(unique) - 1)
-    known = unique[rows] == keys  # placed in the first pass: the same vertex
+    faces = np.concatenate([kuhn, index.number(fan), index.number(caps)])
+    keys = index.keys()
+    rows = first.number(keys, insert=False)
+    known = rows >= 0  # placed in the first pass: the same vertex
+    rows = rows[known]
     new_vertices, new_on, new_ends = _vertices(grid, keys[~known], cell_points, face_points)
     out_ends = np.empty((len(keys), 2, 3))
-    out_ends[known], out_ends[~known] = ends[rows[known]], new_ends
+    out_ends[known], out_ends[~known] = ends[rows], new_ends
     out_vertices = np.empty((len(keys), 3))
-    out_vertices[known], out_vertices[~known] = vertices[rows[known]], new_vertices
+    out_vertices[known], out_vertices[~known] = vertices[rows], new_vertices
     out_on = np.empty(len(keys), bool)
-    out_on[known], out_on[~known] = on_surface[rows[known]], new_on
+    out_on[known], out_on[~known] = on_surface[rows], new_on
     out_normals = np.empty((len(keys), 3))
-    out_normals[known] = normals[rows[known]]
+    out_normals[known] = normals[rows]
     out_normals[~known] = _unit_normals(grid.surface, new_vertices, new_on)
-    return out_vertices, out_normals, faces.reshape(-1, 3), out_on, out_ends, closed, len(caps)
+    return out_vertices, out_normals, faces, out_on, out_ends, closed, len(caps)

@@ -33,8 +33,8 @@ class TapeEngine:
 
 class Runtime:
     """The runtime module's entry points: ``subdivide``, ``normals``, ``tighten``, ``octree_insert``,
-    ``octree_traverse``, ``octree_mark_inside``, ``octree_subtree_rows`` and ``splat`` (signatures in
-    :mod:`implc.abi`)."""
+    ``octree_traverse``, ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``,
+    ``kuhn_triangles`` and ``bent_cells`` (signatures in :mod:`implc.abi`)."""
 
     _shared: Runtime | None = None
     _lock = threading.Lock()
@@ -49,6 +49,9 @@ class Runtime:
         self.octree_mark_inside = self.native.bind(abi.OCTREE_MARK_INSIDE)
         self.octree_subtree_rows = self.native.bind(abi.OCTREE_SUBTREE_ROWS)
         self.splat = self.native.bind(abi.SPLAT)
+        self.hash_index = self.native.bind(abi.HASH_INDEX)
+        self.kuhn_triangles = self.native.bind(abi.KUHN_TRIANGLES)
+        self.bent_cells = self.native.bind(abi.BENT_CELLS)
         self._tape_engines: dict[bool, TapeEngine] = {}
 
     def tape_engine(self, directed: bool) -> TapeEngine:

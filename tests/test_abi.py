@@ -59,7 +59,8 @@ def test_ctypes_prototypes_follow_the_declarations():
         proto = entry.ctypes_type()
         assert len(proto._argtypes_) == len(entry.params)
         for (name, kind), ctype in zip(entry.params, proto._argtypes_):
-            expected = {"i64": ctypes.c_int64, "i32": ctypes.c_int32}.get(kind, ctypes.c_void_p)
+            kinds = {"i64": ctypes.c_int64, "i32": ctypes.c_int32, "f64": ctypes.c_double}
+            expected = kinds.get(kind, ctypes.c_void_p)
             assert ctype is expected, (entry.name, name)
         assert proto._restype_ is {None: None, "i32": ctypes.c_int32, "i64": ctypes.c_int64}[entry.returns]
 

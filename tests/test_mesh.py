@@ -249,6 +249,22 @@ def test_creases_and_corners_of_csg_are_sharp():
     assert chamfered.max() > 0.3
 
 
+# -- the native pieces ------------------------------------------------------------------------------------
+def test_the_key_index_numbers_keys_in_first_seen_order_as_it_grows():
+    from implc.contour import _KeyIndex
+    from implc.runtime import Runtime
+    rng = np.random.default_rng(3)
+    keys = rng.integers(0, 1 << 40, 50_000) * 1_000_003 % (1 << 50)
+    keys = np.concatenate([keys, keys[::7]])  # repeats
+    index = _KeyIndex(Runtime.shared(), 16)  # grows many times
+    numbers = np.concatenate([index.number(chunk) for chunk in np.array_split(keys, 13)])
+    first = np.unique(keys, return_index=True)[1]
+    assert np.array_equal(index.keys(), keys[np.sort(first)])  # first-seen order, each once
+    assert np.array_equal(index.keys()[numbers], keys)
+    absent = np.array([5, (1 << 50) + 1])
+    assert np.array_equal(index.number(absent, insert=False), [-1, -1]) or 5 in keys
+
+
 # -- properties of the construction ------------------------------------------------------------------
 def test_the_same_mesh_for_every_worker_count():
     sc = load_scene("paper_blobs")

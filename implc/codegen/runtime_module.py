@@ -1,7 +1,7 @@
 """The generic runtime module: the native routines shared by every surface, in one LLVM module.
 
 Subdivision (:mod:`.subdivision`), normals (:mod:`.normals`), tightening (:mod:`.tighten`), the octree
-(:mod:`.octree_index`) and splatting (:mod:`.splat`); :class:`implc.runtime.Runtime` compiles it once per
+(:mod:`.octree_index`), splatting (:mod:`.splat`) and the contouring's cells (:mod:`.contour_cells`); :class:`implc.runtime.Runtime` compiles it once per
 process.
 """
 
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from llvmlite import ir
 
+from .contour_cells import emit_bent_cells, emit_hash_index, emit_kuhn_triangles
 from .normals import emit_normals
 from .octree_index import (
     emit_octree_insert,
@@ -32,4 +33,7 @@ def build_runtime() -> str:
     emit_octree_mark_inside(module)
     emit_octree_subtree_rows(module)
     emit_splat(module)
+    emit_hash_index(module)
+    emit_kuhn_triangles(module)
+    emit_bent_cells(module)
     return str(module)

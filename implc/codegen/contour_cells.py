@@ -1,0 +1,156 @@
+"""The contouring's per-cell work: a hash index of int64 keys (``implc_hash_index``), marching
+tetrahedra over the Kuhn split of each cell with its vertices numbered through that index
+(``implc_kuhn_triangles``), and the cells whose normals disagree (``implc_bent_cells``).
+
+The index is open addressing with linear probing over ``2^bits`` slots of two words (key, number); an
+empty slot holds key −1. Keys are numbered in the order they are first seen, so a run over the same
+cells in the same order numbers them alike, and growing the table (inserting its keys again, in number
+order) keeps every number.
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from .. import abi
+from .control import I64, Local, at, const, define, for_range, if_, intrinsic, load_at, store_at, while_true
+
+GOLDEN = 0x9E3779B97F4A7C15
+"""Fibonacci hashing: the key times 2^64/φ, its top ``bits`` bits the slot."""
+
+
+def _signed(value: int) -> int:
+    return value - (1 << 64) if value >= 1 << 63 else value
+
+
+def _number(b: ir.IRBuilder, table, bits, key, insert, count: Local, uniques):
+    """The number of ``key`` in the index (inserted with the next number when absent and ``insert`` is
+    non-zero; −1 when absent otherwise)."""
+    shift = b.sub(const(I64, 64), bits)
+    mask = b.sub(b.shl(const(I64, 1), bits), const(I64, 1))
+    slot = Local(b, I64, b.lshr(b.mul(key, const(I64, _signed(GOLDEN))), shift), "slot")
+    result = Local(b, I64, -1, "number")
+    with while_true(b) as loop:
+        s = slot.get()
+        at_key = b.mul(s, const(I64, 2))
+        k = load_at(b, table, at_key)
+        found = b.icmp_signed("==", k, key)
+        empty = b.icmp_signed("==", k, const(I64, -1))
+        with if_(b, found):
+            result.set(load_at(b, table, b.add(at_key, const(I64, 1))))
+        with if_(b, b.and_(empty, b.icmp_signed("!=", insert, const(I64, 0)))):
+            number = count.get()
+            store_at(b, key, table, at_key)
+            store_at(b, number, table, b.add(at_key, const(I64, 1)))
+            store_at(b, key, uniques, number)
+            count.set(b.add(number, const(I64, 1)))
+            result.set(number)
+        loop.break_if(b.or_(found, empty))
+        slot.set(b.and_(b.add(s, const(I64, 1)), mask))
+    return result.get()
+
+
+def emit_hash_index(module: ir.Module):
+    """``implc_hash_index(table, bits, keys, n, insert, numbers, uniques, state)``: numbers[i] = the number
+    of keys[i] (see :func:`_number`); state[0] counts the keys in the index. Returns state[0]."""
+    fn, b = define(module, abi.HASH_INDEX)
+    table, bits, keys, n, insert, numbers, uniques, state = fn.args
+    count = Local(b, I64, load_at(b, state, 0), "count")
+    with for_range(b, n) as i:
+        store_at(b, _number(b, table, bits, load_at(b, keys, i), insert, count, uniques), numbers, i)
+    store_at(b, count.get(), state, 0)
+    b.ret(count.get())
+
+
+def emit_kuhn_triangles(module: ir.Module):
+    """``implc_kuhn_triangles(lowest, offsets, inside, n, tables, table, bits, uniques, limit, state, faces,
+    owner)``: marching tetrahedra over the Kuhn split of cells (``lowest``: each cell's lowest corner key,
+    ``offsets``: the 8 corners' key offsets, ``inside``: 8 bytes per cell, F < 0 at each corner).
+
+    ``tables``: the six tetrahedra's corners (6 × 4), then per (tetrahedron, case) the triangle count
+    (96), then per (tetrahedron, case, triangle, vertex) the edge's lower corner and code (2 × 576, see
+    :func:`implc.contour._kuhn_tables`). Each vertex key ((corner key × 8 + code) × 8) is numbered through
+    the index; faces get three numbers per triangle, owner the cell's row. state[0]: keys in the index,
+    state[1]: triangles written. Stops before a cell when the index holds ``limit`` keys or more; returns
+    the cells done."""
+    fn, b = define(module, abi.KUHN_TRIANGLES)
+    lowest, offsets, inside, n, tables, table, bits, uniques, limit, state, faces, owner = fn.args
+    count = Local(b, I64, load_at(b, state, 0), "count")
+    written = Local(b, I64, load_at(b, state, 1), "written")
+    done = Local(b, I64, n, "done")
+    one = const(I64, 1)
+    insert = const(I64, 1)
+    with for_range(b, n) as c:
+        full = b.icmp_signed(">=", count.get(), limit)
+        with if_(b, b.and_(full, b.icmp_signed("==", done.get(), n))):
+            done.set(c)  # the first cell not done; the rest are skipped
+        with if_(b, b.icmp_signed("==", done.get(), n)):
+            signs = Local(b, I64, 0, "signs")
+            with for_range(b, const(I64, 8)) as j:
+                bit = b.zext(load_at(b, inside, b.add(b.mul(c, const(I64, 8)), j)), I64)
+                signs.set(b.or_(signs.get(), b.shl(b.and_(bit, one), j)))
+            mixed = b.and_(b.icmp_signed("!=", signs.get(), const(I64, 0)),
+                           b.icmp_signed("!=", signs.get(), const(I64, 255)))
+            with if_(b, mixed):
+                base = load_at(b, lowest, c)
+                with for_range(b, const(I64, 6)) as t:
+                    case = Local(b, I64, 0, "case")
+                    with for_range(b, const(I64, 4)) as v:
+                        corner = load_at(b, tables, b.add(b.mul(t, const(I64, 4)), v))
+                        bit = b.and_(b.lshr(signs.get(), corner), one)
+                        case.set(b.or_(case.get(), b.shl(bit, v)))
+                    row = b.add(b.mul(t, const(I64, 16)), case.get())
+                    triangles = load_at(b, tables, b.add(const(I64, 24), row))
+                    with for_range(b, triangles) as s:
+                        with for_range(b, const(I64, 3)) as v:
+                            slot = b.add(b.mul(b.add(b.mul(row, const(I64, 2)), s), const(I64, 3)), v)
+                            corner = load_at(b, tables, b.add(const(I64, 24 + 96), slot))
+                            code = load_at(b, tables, b.add(const(I64, 24 + 96 + 576), slot))
+                            key = b.add(b.mul(b.add(base, load_at(b, offsets, corner)), const(I64, 8)), code)
+                            key = b.mul(key, const(I64, 8))
+                            number = _number(b, table, bits, key, insert, count, uniques)
+                            store_at(b, number, faces, b.add(b.mul(written.get(), const(I64, 3)), v))
+                        store_at(b, c, owner, written.get())
+                        written.set(b.add(written.get(), one))
+    store_at(b, count.get(), state, 0)
+    store_at(b, written.get(), state, 1)
+    b.ret(done.get())
+
+
+
+def emit_bent_cells(module: ir.Module):
+    """``implc_bent_cells(faces, owner, n, normals, cells, mean, cosine, bent)``: for n triangles (three
+    vertex numbers each, ``owner`` the cell row of each), sum the vertices' unit ``normals`` (three doubles
+    each) per cell into ``mean`` (cells × 3, zeroed by the caller), then set bent[cell] = 1 where a
+    vertex's normal meets the cell's mean direction at a cosine below ``cosine`` (or is not a number)."""
+    fn, b = define(module, abi.BENT_CELLS)
+    faces, owner, n, normals, cells, mean, cosine, bent = fn.args
+    three = const(I64, 3)
+
+    def normal(vertex, axis):
+        return load_at(b, normals, b.add(b.mul(vertex, three), const(I64, axis)))
+
+    with for_range(b, n) as t:
+        cell = load_at(b, owner, t)
+        with for_range(b, three) as v:
+            vertex = load_at(b, faces, b.add(b.mul(t, three), v))
+            values = [normal(vertex, axis) for axis in range(3)]
+            finite = b.fcmp_ordered("ord", values[0], values[1])
+            finite = b.and_(finite, b.fcmp_ordered("ord", values[2], values[2]))
+            with if_(b, finite):
+                for axis in range(3):
+                    slot = at(b, mean, b.add(b.mul(cell, three), const(I64, axis)))
+                    b.store(b.fadd(b.load(slot), values[axis]), slot)
+    with for_range(b, n) as t:
+        cell = load_at(b, owner, t)
+        m = [load_at(b, mean, b.add(b.mul(cell, three), const(I64, axis))) for axis in range(3)]
+        length = b.call(intrinsic(module, "llvm.sqrt.f64", 1), [b.fadd(b.fadd(b.fmul(m[0], m[0]), b.fmul(m[1], m[1])),
+                                                                          b.fmul(m[2], m[2]))])
+        with for_range(b, three) as v:
+            vertex = load_at(b, faces, b.add(b.mul(t, three), v))
+            dot = b.fadd(b.fadd(b.fmul(normal(vertex, 0), m[0]), b.fmul(normal(vertex, 1), m[1])),
+                         b.fmul(normal(vertex, 2), m[2]))
+            straight = b.fcmp_ordered(">=", dot, b.fmul(cosine, length))  # false for NaN
+            with if_(b, b.not_(straight)):
+                store_at(b, const(ir.IntType(8), 1), bent, cell)
+    b.ret_void()
