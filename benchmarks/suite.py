@@ -650,9 +650,161 @@ def viewer(args, out):
     return md
 
 
+MC_RUN = """
+import json, resource, sys, time
+import numpy as np
+sys.path.insert(0, sys.argv[4])
+from suite import mesh_surface
+from skimage.measure import marching_cubes
+surface, bounds, _ = mesh_surface(sys.argv[1], sys.argv[2])
+depth = int(sys.argv[3])
+n = (1 << depth) + 1
+t0 = time.process_time()
+axes = [np.linspace(lo, hi, n) for lo, hi in bounds]
+values = np.empty((n, n, n), np.float32)
+for i in range(n):  # one slab at a time, through implc's compiled point kernel
+    yz = np.stack(np.meshgrid(axes[1], axes[2], indexing="ij"), -1).reshape(-1, 2)
+    values[i] = surface.eval(np.column_stack([np.full(len(yz), axes[0][i]), yz])).reshape(n, n)
+t1 = time.process_time()
+spacing = tuple((hi - lo) / (n - 1) for lo, hi in bounds)
+verts, faces, _, _ = marching_cubes(np.nan_to_num(values, nan=1.0), 0.0, spacing=spacing)
+t2 = time.process_time()
+verts += np.array([lo for lo, _ in bounds])
+np.savez(sys.argv[5], v=verts, f=faces[:, ::-1])
+print(json.dumps({"sample_cpu_s": t1 - t0, "mc_cpu_s": t2 - t1, "triangles": len(faces),
+                  "peak_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
+"""
+
+
+def mesh_surface(name, models_dir):
+    """A scene's or peer model's compiled surface, its bounds and a numpy F of it (for the quality figures)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import vm_sampling
+    path = Path(models_dir) / f"{name}.vm"
+    if path.is_file():
+        rows = vm_sampling.parse(path.read_text())
+        model = implc.load_vm(path)
+        expr, _, extrude = _peer_surface(model, rows)
+        s = implc.compile(expr, model.bounds)
+
+        def f(p):
+            v = vm_sampling.evaluate(rows, p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy())
+            return v if extrude is None else np.maximum(v, np.abs(p[:, 2]) - extrude)
+        return s, s.bounds, f
+    sc = scene.load(name)
+    s = implc.compile(sc.surface, sc.bounds)
+    return s, s.bounds, numpy_evaluator(sc.surface)
+
+
+def mesh_quality(vertices, faces, surface, cell, self_intersections: bool) -> dict:
+    """The figures the mesh table reports: closed and oriented (edges counted), manifold3d's status,
+    pymeshlab's self-intersecting faces, the largest first-order distance |F| / |∇F| of a vertex from
+    F = 0 in cells, and the angle between each vertex's area-weighted normal and ∇F there."""
+    m = implc.Mesh(vertices, faces)
+    check = m.check()
+    row = {"open_edges": check["open_edges"] + check["overused_edges"],
+           "flipped_edges": check["repeated_directed_edges"], "degenerate": check["degenerate"]}
+    try:
+        import manifold3d
+        solid = manifold3d.Manifold(manifold3d.Mesh(vert_properties=vertices.astype(np.float32),
+                                                    tri_verts=faces.astype(np.uint32)))
+        row["manifold3d"] = str(solid.status()).split(".")[-1]
+    except ImportError:
+        row["manifold3d"] = None
+    row["self_intersecting"] = None
+    if self_intersections:
+        try:
+            import pymeshlab
+            ms = pymeshlab.MeshSet()
+            ms.add_mesh(pymeshlab.Mesh(vertex_matrix=vertices, face_matrix=faces.astype(np.int32)))
+            ms.compute_selection_by_self_intersections_per_face()
+            row["self_intersecting"] = int(ms.current_mesh().selected_face_number())
+        except ImportError:
+            pass
+    values, grads = surface.value_and_gradient(vertices)
+    length = np.linalg.norm(grads, axis=1)
+    with np.errstate(all="ignore"):
+        distance = np.abs(values) / length / cell
+    row["max_distance_cells"] = float(np.nanmax(distance)) if len(distance) else 0.0
+    p = vertices[faces]
+    area = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    summed = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(summed, faces[:, k], area)
+    with np.errstate(all="ignore"):
+        cosine = np.einsum("ij,ij->i", summed, grads) / np.linalg.norm(summed, axis=1) / length
+    angle = np.degrees(np.arccos(np.clip(cosine[np.isfinite(cosine)], -1, 1)))
+    row["normal_deviation_median_deg"] = float(np.median(angle)) if len(angle) else 0.0
+    row["normal_deviation_p99_deg"] = float(np.percentile(angle, 99)) if len(angle) else 0.0
+    return row
+
+
+def mesh(args, out):
+    """implc.mesh against scikit-image's marching cubes on the dense grid (sampled through implc's point
+    kernel, in a fresh process for its peak memory): CPU time (voxelizing and contouring apart), triangles,
+    and the quality figures of :func:`mesh_quality` (self-intersections up to --mesh-quality-depth)."""
+    names = [n for n in args.mesh_scenes.split(",") if n]
+    names += [n for n in args.mesh_models.split(",") if n and (Path(args.models_dir) / f"{n}.vm").is_file()]
+    rows = []
+    for name in names:
+        surface, bounds, _ = mesh_surface(name, args.models_dir)
+        for depth in args.mesh_depths:
+            cell = max(hi - lo for lo, hi in bounds) / (1 << depth)
+            implc.voxelize(surface, depth).mesh()  # warm: kernels compiled, pages touched
+            vox_cpu, mesh_cpu, m = [], [], None
+            for _ in range(args.repeats):
+                t0 = time.process_time()
+                voxels = implc.voxelize(surface, depth)
+                t1 = time.process_time()
+                m = voxels.mesh()
+                t2 = time.process_time()
+                vox_cpu.append(t1 - t0)
+                mesh_cpu.append(t2 - t1)
+            quality = depth <= args.mesh_quality_depth
+            row = {"surface": name, "depth": depth, "voxelize_cpu_s": statistics.median(vox_cpu),
+                   "mesh_cpu_s": statistics.median(mesh_cpu), "triangles": len(m.faces),
+                   "feature_cells": m.stats.feature_cells,
+                   "implc": mesh_quality(m.vertices, m.faces, surface, cell, quality)}
+            try:
+                import skimage  # noqa: F401
+                with tempfile.TemporaryDirectory() as tmp:
+                    done = subprocess.run([sys.executable, "-c", MC_RUN, name, args.models_dir, str(depth),
+                                           str(Path(__file__).resolve().parent), str(Path(tmp) / "mc.npz")],
+                                          capture_output=True, text=True, check=True)
+                    mc = json.loads(done.stdout.strip().splitlines()[-1])
+                    data = np.load(Path(tmp) / "mc.npz")
+                    mc["quality"] = mesh_quality(data["v"], data["f"], surface, cell, quality)
+                row["marching_cubes"] = mc
+            except ImportError:
+                row["marching_cubes"] = None
+            rows.append(row)
+    out["mesh"] = rows
+    md = ["### Meshes: implc.mesh against scikit-image's marching cubes on the dense grid (CPU seconds, medians)", "",
+          "| surface | grid | voxelize s | mesh s | mesh / voxelize | triangles | open, flipped, degenerate | manifold3d "
+          "| self-intersecting | max distance (cells) | normal vs ∇F median, p99 ° | marching cubes: sample + mc s "
+          "| peak GiB | triangles | open edges | manifold3d | self-intersecting | max distance |",
+          "|---" * 18 + "|"]
+    fmt = lambda v: "–" if v is None else str(v)  # noqa: E731
+    for r in rows:
+        q, mc = r["implc"], r["marching_cubes"]
+        cells = (f" {mc['sample_cpu_s']:.2f} + {mc['mc_cpu_s']:.2f} | {mc['peak_bytes'] / 2**30:.2f} | "
+                 f"{mc['triangles']} | {mc['quality']['open_edges']} | {fmt(mc['quality']['manifold3d'])} | "
+                 f"{fmt(mc['quality']['self_intersecting'])} | {mc['quality']['max_distance_cells']:.3f} |"
+                 if mc else " – | – | – | – | – | – | – |")
+        md.append(f"| {r['surface']} | {1 << r['depth']}³ | {r['voxelize_cpu_s']:.3f} | {r['mesh_cpu_s']:.3f} | "
+                  f"{r['mesh_cpu_s'] / r['voxelize_cpu_s']:.1f}× | {r['triangles']} | {q['open_edges']}, "
+                  f"{q['flipped_edges']}, {q['degenerate']} | {fmt(q['manifold3d'])} | {fmt(q['self_intersecting'])} | "
+                  f"{q['max_distance_cells']:.3f} | {q['normal_deviation_median_deg']:.1f}, "
+                  f"{q['normal_deviation_p99_deg']:.1f} |{cells}")
+    md += ["", "Distance: |F| / |∇F| at each vertex (first order), in cells. Open edges: edges not in exactly two "
+           "triangles (marching cubes leaves the solid open where it meets the grid's faces). Self-intersections "
+           f"counted by pymeshlab up to {1 << args.mesh_quality_depth}³ (– above)."]
+    return md
+
+
 SECTIONS = {"table1": table1, "techniques": techniques, "baselines": baselines, "growth": growth,
             "tightness": tightness, "kernels": kernels, "models": models, "solids": solids, "viewer": viewer,
-            "scale": scale}
+            "scale": scale, "mesh": mesh}
 
 
 def parser():
@@ -683,6 +835,12 @@ def parser():
                    help="scenes for the 'viewer' section")
     p.add_argument("--viewer-depths", default="9,11", help="grid depths for the 'viewer' section (512³, 2048³)")
     p.add_argument("--solid-depths", default="9,10", help="grid depths for the 'solids' section (default 512³, 1024³)")
+    p.add_argument("--mesh-scenes", default="paper_blobs,paper_sin4_sin8,paper_sin3_sin4,csg_part",
+                   help="scenes for the 'mesh' section")
+    p.add_argument("--mesh-models", default="bear,colonnade", help="peer models (in --models-dir) for 'mesh'")
+    p.add_argument("--mesh-depths", default="8,9", help="grid depths for the 'mesh' section (256³, 512³)")
+    p.add_argument("--mesh-quality-depth", type=int, default=8,
+                   help="deepest grid whose meshes pymeshlab checks for self-intersections (slow above)")
     p.add_argument("--out", default="implc-bench", help="folder for latest.md/.json (default ./implc-bench)")
     return p
 
@@ -699,6 +857,7 @@ def main(argv=None) -> int:
     args.solid_depths = [int(d) for d in args.solid_depths.split(",")]
     args.viewer_depths = [int(d) for d in args.viewer_depths.split(",")]
     args.scale_depths = [int(d) for d in args.scale_depths.split(",")]
+    args.mesh_depths = [int(d) for d in args.mesh_depths.split(",")]
     args.tightness_scenes = args.tightness_scenes.split(",") if args.tightness_scenes else scene.available()
     sections = args.sections.split(",")
     unknown = [s for s in sections if s not in SECTIONS]
