@@ -238,9 +238,10 @@ def cmd_view(args) -> int:
         if given:
             raise UsageError(f"{', '.join(given)} cannot apply to a voxel file ({args.scene}): it is shown as saved")
         voxels, name, view = voxel_files.load_npz(args.scene), Path(args.scene).stem, None
-    elif suffix in (".ply", ".npy"):
+    elif suffix in (".ply", ".npy", ".stl", ".obj", ".glb", ".3mf"):
         raise UsageError(f"{args.scene} is a {suffix} file: 'implc view' shows scenes, formulas, .vm models and "
-                         "the .npz voxel files implc writes")
+                         "the .npz voxel files implc writes (a mesh opens in any mesh viewer; 'implc info' "
+                         "describes it)")
     else:
         _check_surface_options(args)
         name, surface, sc = _surface_from_args(args)
@@ -293,10 +294,12 @@ def _color(text):
 
 
 def cmd_mesh(args) -> int:
+    from .contour import MAX_DEPTH
     from .triangle_mesh import MESH_SUFFIXES
     out = Path(args.output)
     _check_writable(out, MESH_SUFFIXES)
     _check_surface_options(args)
+    _check_range(args.depth, "--depth", 1, MAX_DEPTH)
     name, surface, sc = _surface_from_args(args)
     depth = args.depth if args.depth is not None else (sc.depth if sc else 8)
     voxels, seconds = _voxelize(surface, depth, args.workers, args.quiet, tightness=args.tightness)

@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from . import big_arrays
+from .contour import MAX_DEPTH as MESH_MAX_DEPTH
 from .contour import contour
 from .triangle_mesh import Mesh
 from .storage import bytes_per_voxel, make_backend
@@ -351,6 +352,8 @@ def mesh(surface, depth=8, *, workers=None, progress=False, features=True, witne
     >>> m.check()["open_edges"], m.volume > 0
     (0, True)
     """
+    if isinstance(depth, (int, np.integer)) and not isinstance(depth, bool) and not 1 <= depth <= MESH_MAX_DEPTH:
+        raise ValueError(f"meshes are made at depth 1 to {MESH_MAX_DEPTH}, not {depth}")
     voxels = voxelize(surface, depth, workers=workers, progress=progress, **options)
     return voxels.mesh(features=features, witnesses=witnesses)
 

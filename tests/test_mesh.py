@@ -356,6 +356,16 @@ def test_the_mesh_command_refuses_bad_input_in_one_line(tmp_path, capsys):
     assert not (tmp_path / "t.xyz").exists()
 
 
+def test_depths_beyond_the_mesher_are_refused_up_front(tmp_path, capsys):
+    with pytest.raises(ValueError, match="depth 1 to 14"):
+        implc.mesh(implc.compile(x**2 + y**2 + z**2 - 1), 15)
+    assert main(["mesh", "torus", "--depth", "15", "-o", str(tmp_path / "t.stl")]) == 2
+    assert "--depth must be an integer from 1 to 14" in capsys.readouterr().err
+    assert main(["view", str(tmp_path / "t.stl"), "--no-browser"]) == 2
+    assert "mesh" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+
+
 def test_a_voxel_point_cloud_ply_is_still_described_as_voxels(tmp_path, capsys):
     expr, bounds = SURFACES["ball"]
     implc.voxel_files.save(implc.voxelize(implc.compile(expr, bounds), 4), tmp_path / "v.ply")
