@@ -252,7 +252,7 @@ class _Points:
     def __init__(self, grid: _Grid, ids: np.ndarray, positions: np.ndarray):
         order = np.argsort(ids)
         self.ids, self.positions = ids[order], positions[order]
-        self.inside = grid.values(self.positions) < 0 if len(ids) else np.zeros(0, bool)
+        self.inside = grid.values(self.positions) < 0 if len(ids) else np.zeros(0, bool)  # grid: None if empty
 
     def find(self, ids: np.ndarray) -> np.ndarray:
         """The rows of ``ids`` (each must be present)."""
@@ -290,10 +290,11 @@ class _Cells:
         self.inside = np.concatenate([self.inside, _corner_signs(self.grid, self.index.runtime, cells)])
         return len(fresh)
 
-    def close(self, seeds: np.ndarray) -> int:
+    def close(self, seeds: np.ndarray, start: int = 0) -> int:
         """Add the ``seeds`` and every cell that the surface of the sampled signs enters across a face from
-        a cell here, until none is missing; returns how many were added."""
-        added, start = self.add(seeds), 0
+        a cell here (from row ``start`` on: the earlier ones are closed already), until none is missing;
+        returns how many were added."""
+        added = self.add(seeds)
         while True:
             inside = self.inside[start:]
             crossed = inside.any(1) & ~inside.all(1)
@@ -654,14 +655,15 @@ def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points:
     return a, b
 
 
-def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points):
+def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points, witnesses: bool):
     """Positions of the vertices named by ``keys`` (sorted, unique): a point itself, or the root of F on
     its edge, refined by regula falsi and kept inside the edge. Returns (positions, on_surface mask,
-    witnesses: (V, 2, 3) the edge's ends, the one where F < 0 first; a point named by itself twice)."""
+    witnesses: (V, 2, 3) the edge's ends, the one where F < 0 first, a point named by itself twice; None
+    unless ``witnesses``)."""
     a, b = _endpoints(grid, keys, cell_points, face_points)
     on_edge = np.any(a != b, axis=1)
     positions = a.copy()
-    witnesses = np.stack([a, b], 1)
+    ends = np.stack([a, b], 1) if witnesses else None
     a, b = a[on_edge], b[on_edge]
     fa, fb = grid.values(a), grid.values(b)
     swap = ~(fa < 0)  # make a the inside end
@@ -673,8 +675,9 @@ def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: 
     hashed = (keys[on_edge].astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(11)
     t = np.clip(t + NUDGE * (hashed.astype(np.float64) / 2.0**52 - 1.0), EDGE_MARGIN, 1 - EDGE_MARGIN)
     positions[on_edge] = a + t[:, None] * (b - a)
-    witnesses[on_edge, 0], witnesses[on_edge, 1] = a, b
-    return positions, on_edge, witnesses
+    if witnesses:
+        ends[on_edge, 0], ends[on_edge, 1] = a, b
+    return positions, on_edge, ends
 
 
 def _edge_roots(grid: _Grid, a, b, fa, fb) -> np.ndarray:
@@ -743,38 +746,67 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
     stats.cells = len(cells)
     todo = _Cells(grid, runtime, cells)
-    no_points = _Points(grid, np.zeros(0, np.int64), np.zeros((0, 3)))
-
-    def never(c):
-        return np.zeros(len(c), bool)
-
-    caps, seeds = _cap_triangles(grid, no_points, never)
+    caps, seeds = _cap_triangles(grid, _NO_POINTS, _never)
     t1 = time.perf_counter()
     stats.added_cells = todo.close(seeds)
-    cells, inside, crossed = todo.cells, todo.inside, todo.crossed()
-    stats.crossed_cells = int(crossed.sum())
-    index = _KeyIndex(runtime, 4 * stats.crossed_cells)
-    kuhn, owner = index.kuhn_triangles(grid, cells[crossed], inside[crossed])
-    faces = np.concatenate([kuhn, index.number(caps)])
+    crossed = np.flatnonzero(todo.crossed())
+    stats.crossed_cells = len(crossed)
+    index = _KeyIndex(runtime, 4 * len(crossed))
+    kuhn, owner = index.kuhn_triangles(grid, todo.cells[crossed], todo.inside[crossed])
+    owner = crossed[owner]  # rows of todo.cells
+    caps = index.number(caps)
     t2 = time.perf_counter()
-    vertices, on_surface, ends = _vertices(grid, index.keys(), no_points, no_points)
+    vertices, on_surface, ends = _vertices(grid, index.keys(), _NO_POINTS, _NO_POINTS, witnesses)
     normals = _unit_normals(surface, vertices, on_surface)
     t3 = time.perf_counter()
-    feature_rows = _feature_cells(runtime, cells[crossed], kuhn, owner, normals) if features else []
+    feature_rows = _feature_cells(runtime, todo.cells, kuhn, owner, normals) if features else []
     stats.feature_cells = len(feature_rows)
-    stats.cap_triangles = len(caps)
+    mesh = _Pieces(vertices, normals, ends, kuhn, owner, caps)
     if len(feature_rows):
-        vertices, normals, faces, on_surface, ends, cells_added, stats.cap_triangles = _with_features(
-            grid, todo, feature_rows, index, vertices, normals, on_surface, ends)
-        stats.added_cells += cells_added
+        stats.added_cells += _with_features(grid, todo, feature_rows, index, mesh)
+    vertices, normals, faces, ends = mesh.compacted()
+    stats.cap_triangles = len(mesh.caps)
     normals = _fill_normals(normals, vertices, faces)
     t4 = time.perf_counter()
     stats.triangles, stats.vertices = len(faces), len(vertices)
     stats.seconds = {"signs": t1 - t0, "triangles": t2 - t1, "vertices": t3 - t2, "features": t4 - t3,
                      "total": t4 - t0}
-    mesh = Mesh(vertices, faces, normals, stats=stats, bounds=tuple(zip(grid.lo.tolist(), grid.hi.tolist())))
-    mesh.witnesses = ends if witnesses else None
-    return mesh
+    result = Mesh(vertices, faces, normals, stats=stats, bounds=tuple(zip(grid.lo.tolist(), grid.hi.tolist())))
+    result.witnesses = ends
+    return result
+
+
+def _never(cells):
+    return np.zeros(len(cells), bool)
+
+
+_NO_POINTS = _Points(None, np.zeros(0, np.int64), np.zeros((0, 3)))
+
+
+class _Pieces:
+    """The mesh as it is assembled: vertices (numbered by the vertex index) with their normals and
+    witnesses (or None); the cells' triangles with the row of the cell each came from; the caps'."""
+
+    def __init__(self, vertices, normals, ends, faces, owner, caps):
+        self.vertices, self.normals, self.ends = vertices, normals, ends
+        self.faces, self.owner, self.caps = faces, owner, caps
+        self.orphans = False  # vertices no triangle uses (after the feature pass)
+
+    def add_vertices(self, vertices, normals, ends):
+        self.vertices = np.concatenate([self.vertices, vertices])
+        self.normals = np.concatenate([self.normals, normals])
+        if self.ends is not None:
+            self.ends = np.concatenate([self.ends, ends])
+
+    def compacted(self):
+        """(vertices, normals, faces, witnesses) with the vertices no triangle uses left out."""
+        faces = np.concatenate([self.faces, self.caps])
+        if not self.orphans:
+            return self.vertices, self.normals, faces, self.ends
+        used = np.bincount(faces.reshape(-1), minlength=len(self.vertices)) > 0
+        renumber = np.cumsum(used) - 1
+        ends = None if self.ends is None else self.ends[used]
+        return self.vertices[used], self.normals[used], renumber[faces], ends
 
 
 def _corner_signs(grid: _Grid, runtime, cells: np.ndarray) -> np.ndarray:
@@ -785,10 +817,11 @@ def _corner_signs(grid: _Grid, runtime, cells: np.ndarray) -> np.ndarray:
     return (grid.values(grid.world(grid.unkey(index.keys()))) < 0)[numbers]
 
 
-def _with_features(grid, todo: _Cells, feature_rows, first: _KeyIndex, vertices, normals, on_surface, ends):
-    """The mesh again with the feature cells and their neighbours fanned from cell and face points:
-    (vertices, normals, faces, on_surface, witnesses, cells the signs added, cap triangles)."""
-    feature_cells = todo.cells[todo.crossed()][feature_rows]
+def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pieces) -> int:
+    """Fan the feature cells (rows of ``todo``) and their neighbours from cell and face points in place of
+    their Kuhn split: their triangles in ``mesh`` replaced, the caps made again where a feature cell
+    touches the bounds, new vertices numbered on in ``index``. Returns the cells the signs added."""
+    feature_cells = todo.cells[feature_rows]
     feature_keys = np.sort(grid.cell_key(feature_cells))
 
     def is_feature(c):
@@ -804,31 +837,29 @@ def _with_features(grid, todo: _Cells, feature_rows, first: _KeyIndex, vertices,
             c[:, axis] += step
             neighbours.append(c[(c[:, axis] >= 0) & (c[:, axis] < grid.n)])
     fanned_keys = np.unique(grid.cell_key(np.concatenate(neighbours)))
+    before = len(todo.cells)
     todo.add(grid.cell_unkey(fanned_keys))
-    closed = todo.close(np.zeros((0, 3), np.int64))
-    cells, inside = todo.cells, todo.inside
-    fanned = np.isin(grid.cell_key(cells), fanned_keys)
-    cell_points, face_points = _place_points(grid, feature_cells, grid.cell_unkey(fanned_keys), first, vertices,
-                                             normals)
-    crossed = todo.crossed()
-    index = _KeyIndex(first.runtime, first.count + 16 * len(fanned_keys))
-    kuhn, _ = index.kuhn_triangles(grid, cells[crossed & ~fanned], inside[crossed & ~fanned])
-    fan = _fan_triangles(grid, cells[fanned], inside[fanned], is_feature(cells[fanned]), cell_points, face_points,
-                         is_feature)
-    caps, _ = _cap_triangles(grid, face_points, is_feature)
-    faces = np.concatenate([kuhn, index.number(fan), index.number(caps)])
-    keys = index.keys()
-    rows = first.number(keys, insert=False)
-    known = rows >= 0  # placed in the first pass: the same vertex
-    rows = rows[known]
-    new_vertices, new_on, new_ends = _vertices(grid, keys[~known], cell_points, face_points)
-    out_ends = np.empty((len(keys), 2, 3))
-    out_ends[known], out_ends[~known] = ends[rows], new_ends
-    out_vertices = np.empty((len(keys), 3))
-    out_vertices[known], out_vertices[~known] = vertices[rows], new_vertices
-    out_on = np.empty(len(keys), bool)
-    out_on[known], out_on[~known] = on_surface[rows], new_on
-    out_normals = np.empty((len(keys), 3))
-    out_normals[known] = normals[rows]
-    out_normals[~known] = _unit_normals(grid.surface, new_vertices, new_on)
-    return out_vertices, out_normals, faces, out_on, out_ends, closed, len(caps)
+    added = todo.close(np.zeros((0, 3), np.int64), start=before)
+    fanned = np.zeros(len(todo.cells), bool)
+    fanned[todo.index.number(fanned_keys, insert=False)] = True
+    cell_points, face_points = _place_points(grid, feature_cells, grid.cell_unkey(fanned_keys), index,
+                                             mesh.vertices, mesh.normals)
+    first_new = index.count
+    keep = ~fanned[mesh.owner]
+    fresh = np.arange(before, len(todo.cells))
+    new_inside = todo.inside[before:]
+    fresh = fresh[~fanned[fresh] & new_inside.any(1) & ~new_inside.all(1)]  # added by the signs: Kuhn
+    kuhn, owner = index.kuhn_triangles(grid, todo.cells[fresh], todo.inside[fresh])
+    rows = np.flatnonzero(fanned)
+    fan = index.number(_fan_triangles(grid, todo.cells[rows], todo.inside[rows], is_feature(todo.cells[rows]),
+                                      cell_points, face_points, is_feature))
+    mesh.faces = np.concatenate([mesh.faces[keep], kuhn, fan])
+    mesh.owner = np.concatenate([mesh.owner[keep], fresh[owner], np.full(len(fan), -1)])
+    boundary = (feature_cells == 0) | (feature_cells == grid.n - 1)
+    if boundary.any():
+        mesh.caps = index.number(_cap_triangles(grid, face_points, is_feature)[0])
+    keys = index.keys()[first_new:]
+    vertices, on_surface, ends = _vertices(grid, keys, cell_points, face_points, mesh.ends is not None)
+    mesh.add_vertices(vertices, _unit_normals(grid.surface, vertices, on_surface), ends)
+    mesh.orphans = True
+    return added

@@ -3,7 +3,9 @@ tetrahedra over the Kuhn split of each cell with its vertices numbered through t
 (``implc_kuhn_triangles``), and the cells whose normals disagree (``implc_bent_cells``).
 
 The index is open addressing with linear probing over ``2^bits`` slots of two words (key, number); an
-empty slot holds key −1. Keys are numbered in the order they are first seen, so a run over the same
+empty slot holds key −1. A key's first slot is its low bits folded with the next ``bits``: keys of
+neighbouring cells land near each other (measured: 30% faster than Fibonacci hashing on csg_part at
+512³, whose table of 2^24 slots does not fit in cache). Keys are numbered in the order they are first seen, so a run over the same
 cells in the same order numbers them alike, and growing the table (inserting its keys again, in number
 order) keeps every number.
 """
@@ -15,20 +17,12 @@ from llvmlite import ir
 from .. import abi
 from .control import I64, Local, at, const, define, for_range, if_, intrinsic, load_at, store_at, while_true
 
-GOLDEN = 0x9E3779B97F4A7C15
-"""Fibonacci hashing: the key times 2^64/φ, its top ``bits`` bits the slot."""
-
-
-def _signed(value: int) -> int:
-    return value - (1 << 64) if value >= 1 << 63 else value
-
 
 def _number(b: ir.IRBuilder, table, bits, key, insert, count: Local, uniques):
     """The number of ``key`` in the index (inserted with the next number when absent and ``insert`` is
     non-zero; −1 when absent otherwise)."""
-    shift = b.sub(const(I64, 64), bits)
     mask = b.sub(b.shl(const(I64, 1), bits), const(I64, 1))
-    slot = Local(b, I64, b.lshr(b.mul(key, const(I64, _signed(GOLDEN))), shift), "slot")
+    slot = Local(b, I64, b.and_(b.xor(key, b.lshr(key, bits)), mask), "slot")
     result = Local(b, I64, -1, "number")
     with while_true(b) as loop:
         s = slot.get()
