@@ -785,7 +785,8 @@ def mesh(args, out):
             rows.append(row)
     out["mesh"] = rows
     md = ["### Meshes: implc.mesh against scikit-image's marching cubes on the dense grid (CPU seconds, medians)", "",
-          "| surface | grid | voxelize s | mesh s | mesh / voxelize | triangles | open, flipped, degenerate | manifold3d "
+          "| surface | grid | voxelize s | mesh s | mesh / voxelize | triangles | open, flipped, degenerate "
+          "| manifold3d "
           "| self-intersecting | max distance (cells) | normal vs ∇F median, p99 ° | marching cubes: sample + mc s "
           "| peak GiB | triangles | open edges | manifold3d | self-intersecting | max distance |",
           "|---" * 18 + "|"]

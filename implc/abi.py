@@ -93,8 +93,9 @@ OCTREE_MARK_INSIDE = _entry("implc_octree_mark_inside", "nodes:i32* node_capacit
 SPLAT = _entry("implc_splat", "px:i64* py:i64* sizes:i64* depth:f64* n:i64 size:i64 zbuf:f64* winner:i64*")
 HASH_INDEX = _entry("implc_hash_index", "table:i64* bits:i64 keys:i64* n:i64 insert:i64 numbers:i64* uniques:i64* "
                                         "state:i64*", "i64")
-KUHN_TRIANGLES = _entry("implc_kuhn_triangles", "lowest:i64* offsets:i64* inside:i8* n:i64 tables:i64* table:i64* "
-                                                "bits:i64 uniques:i64* limit:i64 state:i64* faces:i64* owner:i64*", "i64")
+KUHN_TRIANGLES = _entry("implc_kuhn_triangles", "lowest:i64* offsets:i64* inside:i8* n:i64 tables:i64* "
+                                                "table:i64* bits:i64 uniques:i64* limit:i64 state:i64* faces:i64* "
+                                                "owner:i64*", "i64")
 BENT_CELLS = _entry("implc_bent_cells", "faces:i64* owner:i64* n:i64 normals:f64* cells:i64 mean:f64* cosine:f64 "
                                         "bent:i8*")
 RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, TIGHTEN, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS,

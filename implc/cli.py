@@ -467,8 +467,8 @@ def _parser():
     r.add_argument("--color", help="surface colour R,G,B in 0..1")
     r.set_defaults(run=cmd_render)
 
-    i = sub.add_parser("info", help="describe a voxel file (.npz, .ply, .npy, .vdb, .zarr), a mesh (.stl, .obj, .ply, .glb, .3mf) "
-                                    "or a model (.vm)")
+    i = sub.add_parser("info", help="describe a voxel file (.npz, .ply, .npy, .vdb, .zarr), a mesh "
+                                    "(.stl, .obj, .ply, .glb, .3mf) or a model (.vm)")
     i.add_argument("file")
     i.set_defaults(run=cmd_info)
 

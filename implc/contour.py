@@ -210,6 +210,9 @@ class _Grid:
 
     def __init__(self, surface, depth: int, bounds):
         self.surface = surface
+        self.runtime = surface.runtime
+        self._corners: _KeyIndex | None = None  # the corners sampled so far, and F there
+        self._corner_values = np.zeros(0)
         self.n = 1 << depth
         self.k = self.n + 1  # corners per axis
         self.lo = np.array([float(lo) for lo, _ in bounds])
@@ -241,18 +244,30 @@ class _Grid:
     def values(self, points: np.ndarray) -> np.ndarray:
         return self.surface.eval(np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64))
 
+    def corner_values(self, keys: np.ndarray) -> np.ndarray:
+        """F at the corners ``keys``, each sampled once for the whole contouring (and remembered)."""
+        if self._corners is None:
+            self._corners = _KeyIndex(self.runtime, max(1 << 16, keys.size))
+        before = self._corners.count
+        numbers = self._corners.number(keys)
+        if self._corners.count > before:
+            fresh = self._corners.keys()[before:]
+            self._corner_values = np.concatenate([self._corner_values, self.values(self.world(self.unkey(fresh)))])
+        return self._corner_values[numbers]
+
     def inside(self, ijk: np.ndarray) -> np.ndarray:
         """Whether the sampled F is negative at each corner (NaN counts as outside)."""
         return (self.values(self.world(ijk)) < 0).reshape(ijk.shape[:-1])
 
 
 class _Points:
-    """Points added to the tetrahedralization (cell points or face points): sorted ids, positions, signs."""
+    """Points added to the tetrahedralization (cell points or face points): sorted ids, positions, F there."""
 
     def __init__(self, grid: _Grid, ids: np.ndarray, positions: np.ndarray):
         order = np.argsort(ids)
         self.ids, self.positions = ids[order], positions[order]
-        self.inside = grid.values(self.positions) < 0 if len(ids) else np.zeros(0, bool)  # grid: None if empty
+        self.values = grid.values(self.positions) if len(ids) else np.zeros(0)  # grid: None if empty
+        self.inside = self.values < 0
 
     def find(self, ids: np.ndarray) -> np.ndarray:
         """The rows of ``ids`` (each must be present)."""
@@ -287,7 +302,7 @@ class _Cells:
         self.index.number(fresh)
         cells = self.grid.cell_unkey(fresh)
         self.cells = np.concatenate([self.cells, cells])
-        self.inside = np.concatenate([self.inside, _corner_signs(self.grid, self.index.runtime, cells)])
+        self.inside = np.concatenate([self.inside, _corner_signs(self.grid, cells)])
         return len(fresh)
 
     def close(self, seeds: np.ndarray, start: int = 0) -> int:
@@ -415,8 +430,9 @@ def _square_edge_key(corner_keys, axis: int, i: int, j: int):
 
 def _face_triangles(grid, cells, axis, side, split4, face_points: _Points, inside):
     """The triangles of the cells' faces on (axis, side), counter-clockwise seen from outside the cells:
-    yields (rows of cells, vertex inside flags (m, 3), vertex self keys (m, 3), vertex ids for fan edges,
-    edge keys (m, 3) for edges 0-1, 1-2, 2-0). Faces with ``split4`` are fanned from their face point."""
+    yields (rows of cells, the triangle's shape (("c", square corner) or ("f", 0) for the face point,
+    three times), its vertices' inside flags (m, 3), the vertices' own keys (m, 3), the keys of its edges
+    0-1, 1-2, 2-0 (m, 3)). Faces with ``split4`` are fanned from their face point."""
     local, corner_keys = _face_corner_keys(grid, cells, axis, side)
     face_ids = _face_ids(grid, cells, axis, side)
     flip = _reversed_face(axis, side)
@@ -612,47 +628,57 @@ def _place_points(grid, feature_cells, fanned_cells, index: _KeyIndex, positions
 
 # -- vertices ----------------------------------------------------------------------------------------
 def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points):
-    """The two ends of the edge each key names (a point named by itself: both ends the same)."""
+    """The two ends of the edge each key names and F there, (a, b, fa, fb) (a point named by itself: both
+    ends the same, its values not looked up)."""
     kind, payload = keys & 7, keys >> 3
-    a = np.empty((len(keys), 3))
-    b = np.empty((len(keys), 3))
-    grid_kind = kind == GRID
-    start = grid.unkey(payload[grid_kind] >> 3)
-    a[grid_kind] = grid.world(start)
-    b[grid_kind] = grid.world(start + CORNERS[payload[grid_kind] & 7])
-    for k in (FACE_CORNER, FACE_POINT):
-        sel = kind == k
-        if sel.any():
-            face = payload[sel] // 4 if k == FACE_CORNER else payload[sel]
-            a[sel] = face_points.positions[face_points.find(face)]
-            if k == FACE_POINT:
-                b[sel] = a[sel]
-                continue
-            axis = face % 3
-            lowest = grid.unkey(face // 3)
-            step = np.array(SQUARE)[payload[sel] % 4]
-            for ax in range(3):
-                b_ax, c_ax = _face_axes(ax)
-                on = axis == ax
-                lowest[on, b_ax] += step[on, 0]
-                lowest[on, c_ax] += step[on, 1]
-            b[sel] = grid.world(lowest)
+    a, b = np.empty((len(keys), 3)), np.empty((len(keys), 3))
+    fa, fb = np.zeros(len(keys)), np.zeros(len(keys))
+
+    def corner(sel, ijk):
+        b[sel] = grid.world(ijk)
+        fb[sel] = grid.corner_values(grid.key(ijk))
+
+    sel = (kind == GRID) & (payload & 7 != 0)
+    start = grid.unkey(payload[sel] >> 3)
+    a[sel], fa[sel] = grid.world(start), grid.corner_values(payload[sel] >> 3)
+    corner(sel, start + CORNERS[payload[sel] & 7])
+    sel = (kind == GRID) & (payload & 7 == 0)
+    a[sel] = b[sel] = grid.world(grid.unkey(payload[sel] >> 3))
+    sel = kind == FACE_POINT
+    a[sel] = b[sel] = face_points.positions[face_points.find(payload[sel])]
+    sel = kind == FACE_CORNER
+    if sel.any():
+        face = payload[sel] // 4
+        rows = face_points.find(face)
+        a[sel], fa[sel] = face_points.positions[rows], face_points.values[rows]
+        axis = face % 3
+        lowest = grid.unkey(face // 3)
+        step = np.array(SQUARE)[payload[sel] % 4]
+        for ax in range(3):
+            b_ax, c_ax = _face_axes(ax)
+            on = axis == ax
+            lowest[on, b_ax] += step[on, 0]
+            lowest[on, c_ax] += step[on, 1]
+        corner(sel, lowest)
     sel = kind == CELL_CORNER
     if sel.any():
         cell = payload[sel] // 8
-        a[sel] = cell_points.positions[cell_points.find(cell)]
-        b[sel] = grid.world(grid.cell_unkey(cell) + CORNERS[payload[sel] % 8])
+        rows = cell_points.find(cell)
+        a[sel], fa[sel] = cell_points.positions[rows], cell_points.values[rows]
+        corner(sel, grid.cell_unkey(cell) + CORNERS[payload[sel] % 8])
     sel = kind == FACE_CELL
     if sel.any():
         cell, face = payload[sel] // 6, payload[sel] % 6
-        a[sel] = cell_points.positions[cell_points.find(cell)]
+        rows = cell_points.find(cell)
+        a[sel], fa[sel] = cell_points.positions[rows], cell_points.values[rows]
         cells = grid.cell_unkey(cell)
         ids = np.empty(len(cell), np.int64)
         for f in range(6):
             on = face == f
             ids[on] = _face_ids(grid, cells[on], f // 2, f % 2)
-        b[sel] = face_points.positions[face_points.find(ids)]
-    return a, b
+        rows = face_points.find(ids)
+        b[sel], fb[sel] = face_points.positions[rows], face_points.values[rows]
+    return a, b, fa, fb
 
 
 def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points, witnesses: bool):
@@ -660,12 +686,11 @@ def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: 
     its edge, refined by regula falsi and kept inside the edge. Returns (positions, on_surface mask,
     witnesses: (V, 2, 3) the edge's ends, the one where F < 0 first, a point named by itself twice; None
     unless ``witnesses``)."""
-    a, b = _endpoints(grid, keys, cell_points, face_points)
+    a, b, fa, fb = _endpoints(grid, keys, cell_points, face_points)
     on_edge = np.any(a != b, axis=1)
     positions = a.copy()
     ends = np.stack([a, b], 1) if witnesses else None
-    a, b = a[on_edge], b[on_edge]
-    fa, fb = grid.values(a), grid.values(b)
+    a, b, fa, fb = a[on_edge], b[on_edge], fa[on_edge], fb[on_edge]
     swap = ~(fa < 0)  # make a the inside end
     a[swap], b[swap] = b[swap].copy(), a[swap].copy()
     fa[swap], fb[swap] = fb[swap].copy(), fa[swap].copy()
@@ -781,6 +806,7 @@ def _never(cells):
 
 
 _NO_POINTS = _Points(None, np.zeros(0, np.int64), np.zeros((0, 3)))
+"""No cell or face points: the first pass, every cell split the Kuhn way."""
 
 
 class _Pieces:
@@ -809,12 +835,9 @@ class _Pieces:
         return self.vertices[used], self.normals[used], renumber[faces], ends
 
 
-def _corner_signs(grid: _Grid, runtime, cells: np.ndarray) -> np.ndarray:
+def _corner_signs(grid: _Grid, cells: np.ndarray) -> np.ndarray:
     """F < 0 at each corner of each cell, (n, 8): each distinct corner sampled once."""
-    keys = grid.key(cells)[:, None] + grid.key(CORNERS)
-    index = _KeyIndex(runtime, 2 * len(cells))
-    numbers = index.number(keys)
-    return (grid.values(grid.world(grid.unkey(index.keys()))) < 0)[numbers]
+    return grid.corner_values(grid.key(cells)[:, None] + grid.key(CORNERS)) < 0
 
 
 def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pieces) -> int:

@@ -177,7 +177,8 @@ def describe(path) -> list[str]:
         f"{len(merged.vertices)} distinct vertices",
         "extent: " + ", ".join(f"[{a:.6g}, {b:.6g}]" for a, b in zip(lo, hi)),
         f"closed: {'yes' if closed else 'no'} ({report['open_edges']} open, {report['overused_edges']} "
-        f"non-manifold edges); orientation: {'consistent' if report['repeated_directed_edges'] == 0 else 'inconsistent'}"
+        f"non-manifold edges); orientation: "
+        f"{'consistent' if report['repeated_directed_edges'] == 0 else 'inconsistent'}"
         f"; degenerate triangles: {report['degenerate']}; pinched vertices: {report['split_vertices']}",
         f"volume: {report['volume']:.9g}, area: {merged.area:.9g}",
     ]

@@ -16,12 +16,12 @@ import numpy as np
 from . import big_arrays
 from .contour import MAX_DEPTH as MESH_MAX_DEPTH
 from .contour import contour
-from .triangle_mesh import Mesh
 from .storage import bytes_per_voxel, make_backend
 from .storage.grid import dense_bytes
 from .storage.octree import Octree, OctreeAssembly, OctreeBuilder
 from .subdivide import Subdivider, SubdivisionStats, default_workers
 from .surface import Surface
+from .triangle_mesh import Mesh
 
 MIN_DEPTH, MAX_DEPTH = 1, 21
 

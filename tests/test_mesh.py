@@ -8,7 +8,6 @@ measures and self-intersection selection, trimesh's watertightness and winding, 
 
 from __future__ import annotations
 
-import itertools
 import subprocess
 import sys
 from pathlib import Path
@@ -21,9 +20,9 @@ import implc
 from benchmarks import vm_sampling
 from implc import x, y, z
 from implc.cli import main
-from implc.triangle_mesh import Mesh, is_mesh_file
 from implc.scene import load as load_scene
 from implc.symbols import cartesian_form
+from implc.triangle_mesh import Mesh, is_mesh_file
 from implc.vm import parse_vm
 
 from .test_vm import CSG

@@ -5,9 +5,9 @@ tetrahedra over the Kuhn split of each cell with its vertices numbered through t
 The index is open addressing with linear probing over ``2^bits`` slots of two words (key, number); an
 empty slot holds key −1. A key's first slot is its low bits folded with the next ``bits``: keys of
 neighbouring cells land near each other (measured: 30% faster than Fibonacci hashing on csg_part at
-512³, whose table of 2^24 slots does not fit in cache). Keys are numbered in the order they are first seen, so a run over the same
-cells in the same order numbers them alike, and growing the table (inserting its keys again, in number
-order) keeps every number.
+512³, whose table of 2^24 slots does not fit in cache). Keys are numbered in the order they are first
+seen, so a run over the same cells in the same order numbers them alike, and growing the table
+(inserting its keys again, in number order) keeps every number.
 """
 
 from __future__ import annotations
