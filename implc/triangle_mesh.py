@@ -60,7 +60,8 @@ class Mesh:
         degenerate triangles: ``open_edges`` and ``overused_edges`` (undirected edges in fewer or more
         than two faces), ``repeated_directed_edges`` (an oriented edge used twice: inconsistent
         orientation), ``degenerate`` (triangles with a repeated vertex or zero area), ``split_vertices``
-        (vertices whose faces form more than one fan), and ``volume``."""
+        (vertices whose faces form more than one fan; None where the edges are not manifold and
+        oriented), and ``volume``."""
         f = self.faces
         directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
         nv = max(len(self.vertices), 1)
@@ -96,40 +97,35 @@ class Mesh:
         return path
 
 
-def _split_vertices(faces: np.ndarray, count: int) -> int:
-    """How many vertices have faces that form more than one fan (joined through shared edges at the
-    vertex): a closed edge-manifold mesh can still be pinched at a vertex, which this counts."""
+def _split_vertices(faces: np.ndarray, count: int) -> int | None:
+    """How many vertices have faces that form more than one fan: a closed edge-manifold mesh can still be
+    pinched at a vertex, which this counts (None where the edges are not manifold and oriented, so fans
+    are not defined).
+
+    At each corner of each face the link edge (next vertex -> previous vertex) is one step of a walk
+    around the vertex; on an oriented edge-manifold mesh the steps at a vertex form cycles, one per fan.
+    The cycles are labelled by pointer jumping (each round takes the least label within twice the
+    distance, until the distance covers the longest walk), all vertices at once."""
     if not len(faces):
         return 0
-    # each face contributes, at each of its corners, the link edge (next, previous) of that corner
     center = faces.reshape(-1)
-    nxt = np.roll(faces, -1, axis=1).reshape(-1)
-    prv = np.roll(faces, 1, axis=1).reshape(-1)
-    order = np.argsort(center, kind="stable")
-    center, nxt, prv = center[order], nxt[order], prv[order]
-    starts = np.flatnonzero(np.r_[True, center[1:] != center[:-1]])
-    ends = np.r_[starts[1:], len(center)]
-    split = 0
-    # union-find over each vertex's link edges: a single fan is one connected link
-    parent = {}
-
-    def find(a):
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    for s, e in zip(starts, ends):
-        parent.clear()
-        for a, b in zip(nxt[s:e].tolist(), prv[s:e].tolist()):
-            parent.setdefault(a, a)
-            parent.setdefault(b, b)
-            ra, rb = find(a), find(b)
-            if ra != rb:
-                parent[ra] = rb
-        roots = {find(a) for a in parent}
-        split += len(roots) > 1
-    return split
+    start = np.roll(faces, -1, axis=1).reshape(-1)
+    end = np.roll(faces, 1, axis=1).reshape(-1)
+    count = max(count, 1)
+    key = center * count + start
+    order = np.argsort(key)
+    wanted = center * count + end
+    rows = np.minimum(np.searchsorted(key[order], wanted), len(key) - 1)
+    if np.any(key[order][rows] != wanted) or np.any(np.diff(key[order]) == 0):
+        return None
+    step = order[rows]  # the entry that continues the walk
+    label = np.arange(len(key))
+    longest = int(np.bincount(center).max())  # no walk is longer than its vertex's corners
+    for _ in range(int(np.ceil(np.log2(longest))) + 1):
+        label = np.minimum(label, label[step])
+        step = step[step]
+    fans = np.bincount(center[label == np.arange(len(key))], minlength=count)
+    return int(np.sum(fans > 1))
 
 
 def is_mesh_file(path) -> bool:
@@ -179,6 +175,7 @@ def describe(path) -> list[str]:
         f"closed: {'yes' if closed else 'no'} ({report['open_edges']} open, {report['overused_edges']} "
         f"non-manifold edges); orientation: "
         f"{'consistent' if report['repeated_directed_edges'] == 0 else 'inconsistent'}"
-        f"; degenerate triangles: {report['degenerate']}; pinched vertices: {report['split_vertices']}",
+        f"; degenerate triangles: {report['degenerate']}; pinched vertices: "
+        f"{'not counted' if report['split_vertices'] is None else report['split_vertices']}",
         f"volume: {report['volume']:.9g}, area: {merged.area:.9g}",
     ]

@@ -318,6 +318,16 @@ def test_check_counts_each_defect():
     pinched_v = np.vstack([v, v2[:3]])
     f2 = np.where(f2 == 3, 0, f2 + 4)
     assert Mesh(pinched_v, np.vstack([f, f2])).check()["split_vertices"] == 1
+    assert Mesh(v, f[1:]).check()["split_vertices"] is None  # fans are not defined on an open mesh
+    import trimesh
+    ball = trimesh.creation.icosphere(3)  # two balls touching at one vertex: long fans, one pinch
+    other = ball.vertices * [-1, 1, 1] + 2 * ball.vertices[0] * [1, 0, 0]
+    other_faces = ball.faces[:, ::-1] + len(ball.vertices)
+    twins = Mesh(np.vstack([ball.vertices, other]), np.vstack([ball.faces, other_faces]))
+    assert twins.check()["split_vertices"] == 0  # not joined yet: two separate balls
+    shared = np.where(other_faces == len(ball.vertices), 0, other_faces)
+    pinched = Mesh(np.vstack([ball.vertices, other]), np.vstack([ball.faces, shared]))
+    assert pinched.check()["split_vertices"] == 1
 
 
 # -- files and the command -------------------------------------------------------------------------------
