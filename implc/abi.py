@@ -98,8 +98,10 @@ KUHN_TRIANGLES = _entry("implc_kuhn_triangles", "lowest:i64* offsets:i64* inside
                                                 "owner:i64*", "i64")
 BENT_CELLS = _entry("implc_bent_cells", "faces:i64* owner:i64* n:i64 normals:f64* cells:i64 mean:f64* cosine:f64 "
                                         "bent:i8*")
+EDGE_ENDS = _entry("implc_edge_ends", "keys:i64* n:i64 geometry:f64* table:i64* bits:i64 values:f64* a:f64* b:f64* "
+                                      "fa:f64* fb:f64*", "i64")
 RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, TIGHTEN, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS,
-                   SPLAT, HASH_INDEX, KUHN_TRIANGLES, BENT_CELLS)
+                   SPLAT, HASH_INDEX, KUHN_TRIANGLES, BENT_CELLS, EDGE_ENDS)
 
 # -- the tape engine (implc.codegen.tape_engine_module): one interpreter for every program -----------------
 # (``program``: a program header, implc.tape_program; ``slots``: TAPE_SLOT_DOUBLES per slot of the full

@@ -255,6 +255,24 @@ class _Grid:
             self._corner_values = np.concatenate([self._corner_values, self.values(self.world(self.unkey(fresh)))])
         return self._corner_values[numbers]
 
+    def edge_ends(self, keys: np.ndarray):
+        """For vertex keys of grid edges: the edges' corners in world coordinates and F there, (a, b, fa, fb),
+        from the corners sampled so far (native: ``implc_edge_ends``): every such corner is a corner of a
+        cell contoured, a cap's included."""
+        keys = np.ascontiguousarray(keys, dtype=np.int64)
+        a, b = np.empty((len(keys), 3)), np.empty((len(keys), 3))
+        fa, fb = np.empty(len(keys)), np.empty(len(keys))
+        if not len(keys):
+            return a, b, fa, fb
+        geometry = np.concatenate([[self.k, self.n], self.lo, self.step, self.hi]).astype(np.float64)
+        index = self._corners
+        missing = self.runtime.edge_ends(keys.ctypes.data, len(keys), geometry.ctypes.data, index.table.ctypes.data,
+                                         index.bits, self._corner_values.ctypes.data, a.ctypes.data, b.ctypes.data,
+                                         fa.ctypes.data, fb.ctypes.data)
+        if missing:
+            raise AssertionError(f"{missing} corners of surface vertices' edges were never sampled")
+        return a, b, fa, fb
+
     def inside(self, ijk: np.ndarray) -> np.ndarray:
         """Whether the sampled F is negative at each corner (NaN counts as outside)."""
         return (self.values(self.world(ijk)) < 0).reshape(ijk.shape[:-1])
@@ -639,9 +657,7 @@ def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points:
         fb[sel] = grid.corner_values(grid.key(ijk))
 
     sel = (kind == GRID) & (payload & 7 != 0)
-    start = grid.unkey(payload[sel] >> 3)
-    a[sel], fa[sel] = grid.world(start), grid.corner_values(payload[sel] >> 3)
-    corner(sel, start + CORNERS[payload[sel] & 7])
+    a[sel], b[sel], fa[sel], fb[sel] = grid.edge_ends(keys[sel])
     sel = (kind == GRID) & (payload & 7 == 0)
     a[sel] = b[sel] = grid.world(grid.unkey(payload[sel] >> 3))
     sel = kind == FACE_POINT

@@ -34,7 +34,7 @@ class TapeEngine:
 class Runtime:
     """The runtime module's entry points: ``subdivide``, ``normals``, ``tighten``, ``octree_insert``,
     ``octree_traverse``, ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``,
-    ``kuhn_triangles`` and ``bent_cells`` (signatures in :mod:`implc.abi`)."""
+    ``kuhn_triangles``, ``bent_cells`` and ``edge_ends`` (signatures in :mod:`implc.abi`)."""
 
     _shared: Runtime | None = None
     _lock = threading.Lock()
@@ -52,6 +52,7 @@ class Runtime:
         self.hash_index = self.native.bind(abi.HASH_INDEX)
         self.kuhn_triangles = self.native.bind(abi.KUHN_TRIANGLES)
         self.bent_cells = self.native.bind(abi.BENT_CELLS)
+        self.edge_ends = self.native.bind(abi.EDGE_ENDS)
         self._tape_engines: dict[bool, TapeEngine] = {}
 
     def tape_engine(self, directed: bool) -> TapeEngine:

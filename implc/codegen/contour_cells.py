@@ -1,6 +1,7 @@
 """The contouring's per-cell work: a hash index of int64 keys (``implc_hash_index``), marching
 tetrahedra over the Kuhn split of each cell with its vertices numbered through that index
-(``implc_kuhn_triangles``), and the cells whose normals disagree (``implc_bent_cells``).
+(``implc_kuhn_triangles``), the cells whose normals disagree (``implc_bent_cells``), and the corners
+and sampled values at the ends of grid edges (``implc_edge_ends``).
 
 The index is open addressing with linear probing over ``2^bits`` slots of two words (key, number); an
 empty slot holds key −1. A key's first slot is its low bits folded with the next ``bits``: keys of
@@ -148,3 +149,46 @@ def emit_bent_cells(module: ir.Module):
             with if_(b, b.not_(straight)):
                 store_at(b, const(ir.IntType(8), 1), bent, cell)
     b.ret_void()
+
+
+def emit_edge_ends(module: ir.Module):
+    """``implc_edge_ends(keys, n, geometry, table, bits, values, a, b, fa, fb)``: for n vertex keys of grid
+    edges ((corner key × 8 + code) × 8, code ≠ 0), the edge's two corners in world coordinates (three
+    doubles each into ``a`` and ``b``) and F there (``fa``, ``fb``), looked up in the corner index
+    (``table``, ``bits``) and its ``values``. ``geometry``: corners per axis, cells per axis (as doubles),
+    then lo, step and hi per axis; a corner at index ``cells`` sits at hi exactly, any other at lo + i·step.
+    Returns how many corners were not in the index (their values left NaN)."""
+    fn, b = define(module, abi.EDGE_ENDS)
+    keys, n, geometry, table, bits, values, out_a, out_b, out_fa, out_fb = fn.args
+    k = b.fptosi(load_at(b, geometry, 0), I64)
+    cells = b.fptosi(load_at(b, geometry, 1), I64)
+    missing = Local(b, I64, 0, "missing")
+    count = Local(b, I64, 0, "unused")  # the lookups never insert
+    nan = const(ir.DoubleType(), float("nan"))
+    seven, one, three = const(I64, 7), const(I64, 1), const(I64, 3)
+
+    def corner(index, key, out_xyz, out_f):
+        ijk = [b.sdiv(key, b.mul(k, k)), b.srem(b.sdiv(key, k), k), b.srem(key, k)]
+        for axis, i in enumerate(ijk):
+            lo = load_at(b, geometry, 2 + axis)
+            step = load_at(b, geometry, 5 + axis)
+            hi = load_at(b, geometry, 8 + axis)
+            inner = b.fadd(lo, b.fmul(b.sitofp(i, ir.DoubleType()), step))
+            store_at(b, b.select(b.icmp_signed("==", i, cells), hi, inner), out_xyz,
+                     b.add(b.mul(index, three), const(I64, axis)))
+        number = _number(b, table, bits, key, const(I64, 0), count, table)  # never inserts: no uniques written
+        found = b.icmp_signed(">=", number, const(I64, 0))
+        with if_(b, b.not_(found)):
+            missing.set(b.add(missing.get(), one))
+        safe = b.select(found, number, const(I64, 0))
+        store_at(b, b.select(found, load_at(b, values, safe), nan), out_f, index)
+        return ijk
+
+    with for_range(b, n) as i:
+        payload = b.ashr(load_at(b, keys, i), three)
+        start = b.ashr(payload, three)
+        code = b.and_(payload, seven)
+        ijk = corner(i, start, out_a, out_fa)
+        end = [b.add(ijk[axis], b.and_(b.lshr(code, const(I64, axis)), one)) for axis in range(3)]
+        corner(i, b.add(b.mul(b.add(b.mul(end[0], k), end[1]), k), end[2]), out_b, out_fb)
+    b.ret(missing.get())

@@ -1,15 +1,15 @@
 """The generic runtime module: the native routines shared by every surface, in one LLVM module.
 
 Subdivision (:mod:`.subdivision`), normals (:mod:`.normals`), tightening (:mod:`.tighten`), the octree
-(:mod:`.octree_index`), splatting (:mod:`.splat`) and the contouring's cells (:mod:`.contour_cells`); :class:`implc.runtime.Runtime` compiles it once per
-process.
+(:mod:`.octree_index`), splatting (:mod:`.splat`) and the contouring's cells (:mod:`.contour_cells`);
+:class:`implc.runtime.Runtime` compiles it once per process.
 """
 
 from __future__ import annotations
 
 from llvmlite import ir
 
-from .contour_cells import emit_bent_cells, emit_hash_index, emit_kuhn_triangles
+from .contour_cells import emit_bent_cells, emit_edge_ends, emit_hash_index, emit_kuhn_triangles
 from .normals import emit_normals
 from .octree_index import (
     emit_octree_insert,
@@ -36,4 +36,5 @@ def build_runtime() -> str:
     emit_hash_index(module)
     emit_kuhn_triangles(module)
     emit_bent_cells(module)
+    emit_edge_ends(module)
     return str(module)
