@@ -24,7 +24,8 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
                    "--tightness-models", "ball",
                    "--models-dir", str(tmp_path / "models"), "--models-depths", "5,6", "--solid-depths", "5,6",
                    "--viewer-scenes", "torus", "--viewer-depths", "7", "--scale-scenes", "torus",
-                   "--scale-depths", "6,7"])
+                   "--scale-depths", "6,7", "--mesh-scenes", "torus", "--mesh-models", "ball", "--mesh-depths", "5",
+                   "--mesh-quality-depth", "5"])
     assert status == 0
     assert "Table 1 at 32³" in capsys.readouterr().out
     assert {p.name: p.read_bytes() for p in results.iterdir()} == quoted
@@ -56,6 +57,12 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
     assert 0 <= large["storage_s"] < large["wall_s"] and 0 < large["yield"] <= 1.5
     (view,) = data["viewer"]
     assert view["chunks"] >= 1 and view["voxels"] > 0 and (view["points"] is None or view["points"] > 0)
+    for r in data["mesh"]:  # closed, manifold meshes from implc; marching cubes' figures beside them
+        assert r["surface"] in ("torus", "ball") and r["triangles"] > 0
+        quality = r["implc"]
+        assert (quality["open_edges"], quality["flipped_edges"], quality["degenerate"]) == (0, 0, 0)
+        assert quality["manifold3d"] == "NoError" and quality["self_intersecting"] == 0
+        assert quality["max_distance_cells"] < 1 and r["marching_cubes"]["triangles"] > 0
     growth = data["growth"]
     assert growth[1]["voxels"] > growth[0]["voxels"]
     assert (tmp_path / "latest.md").read_text().startswith("## implc benchmarks")
