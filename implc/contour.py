@@ -242,7 +242,14 @@ class _Grid:
         return out
 
     def values(self, points: np.ndarray) -> np.ndarray:
-        return self.surface.eval(np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64))
+        """F at points: the point kernel, or on the tape engine (whose point entry computes the gradient
+        too) the midpoint of its interval over the point, 1.7× cheaper there and within a few ulps."""
+        points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
+        if self.surface.engine != "tape":
+            return self.surface.eval(points)
+        lo, hi = self.surface.interval(points, points)
+        with np.errstate(invalid="ignore", over="ignore"):
+            return lo / 2 + hi / 2  # NaN where F may be undefined (the whole line): outside, as for eval
 
     def corner_values(self, keys: np.ndarray) -> np.ndarray:
         """F at the corners ``keys``, each sampled once for the whole contouring (and remembered)."""
