@@ -250,8 +250,11 @@ class Surface:
 
         def call(*args):
             slots = slot_scratch(program.slot_count)
-            scratch = (np.empty(len(program) * 8, dtype=np.uint8).ctypes.data,) if choices else ()
-            function(program.header.ctypes.data, slots.ctypes.data, *scratch, *args)
+            # the choices' scratch is held by a name for the whole call: an address taken from a temporary
+            # array points at freed memory, which the engine then wrote (a heap corruption seen as aborts)
+            scratch = np.empty(len(program) * 8, dtype=np.uint8) if choices else None
+            function(program.header.ctypes.data, slots.ctypes.data,
+                     *((scratch.ctypes.data,) if choices else ()), *args)
         return call
 
     def _value_and_gradient(self, points):
