@@ -280,10 +280,6 @@ class _Grid:
             raise AssertionError(f"{missing} corners of surface vertices' edges were never sampled")
         return a, b, fa, fb
 
-    def inside(self, ijk: np.ndarray) -> np.ndarray:
-        """Whether the sampled F is negative at each corner (NaN counts as outside)."""
-        return (self.values(self.world(ijk)) < 0).reshape(ijk.shape[:-1])
-
 
 class _Points:
     """Points added to the tetrahedralization (cell points or face points): sorted ids, positions, F there."""
@@ -302,6 +298,11 @@ class _Points:
         return rows
 
 
+def _both_signs(flags: np.ndarray) -> np.ndarray:
+    """Rows of sign flags (one row per cell, face or square) that hold both signs: the surface crosses it."""
+    return flags.any(1) & ~flags.all(1)
+
+
 def _grid_edge_key(corner_keys, code):
     return (corner_keys * 8 + code) * 8 + GRID
 
@@ -311,11 +312,11 @@ class _Cells:
     """The cells being contoured: their indices, F < 0 at their corners, and an index of their keys
     (numbered by row)."""
 
-    def __init__(self, grid: _Grid, runtime, cells: np.ndarray):
+    def __init__(self, grid: _Grid, cells: np.ndarray):
         self.grid = grid
         self.cells = np.zeros((0, 3), np.int64)
         self.inside = np.zeros((0, 8), bool)
-        self.index = _KeyIndex(runtime, 2 * len(cells) + 1024)
+        self.index = _KeyIndex(grid.runtime, 2 * len(cells) + 1024)
         self.add(cells)
 
     def add(self, more: np.ndarray) -> int:
@@ -337,13 +338,12 @@ class _Cells:
         added = self.add(seeds)
         while True:
             inside = self.inside[start:]
-            crossed = inside.any(1) & ~inside.all(1)
+            crossed = _both_signs(inside)
             candidates = []
             for axis in range(3):
                 for side in (0, 1):
                     face = [c for c in range(8) if (c >> axis) & 1 == side]
-                    sub = inside[:, face]
-                    neighbours = self.cells[start:][crossed & sub.any(1) & ~sub.all(1)]
+                    neighbours = self.cells[start:][crossed & _both_signs(inside[:, face])]
                     neighbours[:, axis] += 1 if side else -1
                     candidates.append(neighbours[(neighbours[:, axis] >= 0) & (neighbours[:, axis] < self.grid.n)])
             start = len(self.cells)
@@ -353,7 +353,7 @@ class _Cells:
             added += fresh
 
     def crossed(self) -> np.ndarray:
-        return self.inside.any(1) & ~self.inside.all(1)
+        return _both_signs(self.inside)
 
 
 # -- triangles ---------------------------------------------------------------------------------------
@@ -541,15 +541,13 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
             corners = np.zeros((n + 1, n + 1, 3), np.int64)
             corners[..., axis] = side * n
             corners[..., b], corners[..., c] = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-            signs = grid.inside(corners)
+            signs = grid.corner_values(grid.key(corners)) < 0  # remembered: a second pass samples nothing
             if not signs.any():
                 continue
             inside = np.zeros((len(cells), 8), bool)
             for k, (du, dv) in enumerate(SQUARE):
                 inside[:, local[k]] = signs[cells[:, b] + du, cells[:, c] + dv]
-            face_in = inside[:, local]
-            mixed = face_in.any(1) & ~face_in.all(1)
-            seeds.append(cells[mixed])
+            seeds.append(cells[_both_signs(inside[:, local])])
             split4 = is_feature(cells)
             for sel, shape, flags, selves, edges in _face_triangles(grid, cells, axis, side, split4, face_points,
                                                                     inside):
@@ -705,7 +703,7 @@ def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points:
 
 
 def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points, witnesses: bool):
-    """Positions of the vertices named by ``keys`` (sorted, unique): a point itself, or the root of F on
+    """Positions of the vertices named by ``keys`` (unique): a point itself, or the root of F on
     its edge, refined by regula falsi and kept inside the edge. Returns (positions, on_surface mask,
     witnesses: (V, 2, 3) the edge's ends, the one where F < 0 first, a point named by itself twice; None
     unless ``witnesses``)."""
@@ -793,7 +791,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     runtime = surface.runtime
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
     stats.cells = len(cells)
-    todo = _Cells(grid, runtime, cells)
+    todo = _Cells(grid, cells)
     caps, seeds = _cap_triangles(grid, _NO_POINTS, _never)
     t1 = time.perf_counter()
     stats.added_cells = todo.close(seeds)
@@ -859,7 +857,7 @@ class _Pieces:
 
 
 def _corner_signs(grid: _Grid, cells: np.ndarray) -> np.ndarray:
-    """F < 0 at each corner of each cell, (n, 8): each distinct corner sampled once."""
+    """F < 0 at each corner of each cell, (n, 8): each distinct corner sampled once (NaN counts as outside)."""
     return grid.corner_values(grid.key(cells)[:, None] + grid.key(CORNERS)) < 0
 
 
@@ -893,8 +891,7 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
     first_new = index.count
     keep = ~fanned[mesh.owner]
     fresh = np.arange(before, len(todo.cells))
-    new_inside = todo.inside[before:]
-    fresh = fresh[~fanned[fresh] & new_inside.any(1) & ~new_inside.all(1)]  # added by the signs: Kuhn
+    fresh = fresh[~fanned[fresh] & _both_signs(todo.inside[before:])]  # added by the signs: Kuhn
     kuhn, owner = index.kuhn_triangles(grid, todo.cells[fresh], todo.inside[fresh])
     rows = np.flatnonzero(fanned)
     fan = index.number(_fan_triangles(grid, todo.cells[rows], todo.inside[rows], is_feature(todo.cells[rows]),

@@ -352,7 +352,7 @@ def mesh(surface, depth=8, *, workers=None, progress=False, features=True, witne
     >>> m.check()["open_edges"], m.volume > 0
     (0, True)
     """
-    if isinstance(depth, (int, np.integer)) and not isinstance(depth, bool) and not 1 <= depth <= MESH_MAX_DEPTH:
+    if _check_depth(depth) > MESH_MAX_DEPTH:  # refused before the voxelization, not after it
         raise ValueError(f"meshes are made at depth 1 to {MESH_MAX_DEPTH}, not {depth}")
     voxels = voxelize(surface, depth, workers=workers, progress=progress, **options)
     return voxels.mesh(features=features, witnesses=witnesses)
