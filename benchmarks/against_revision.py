@@ -1,4 +1,4 @@
-"""Voxelization time of this working tree against an older git revision, measured in one run.
+"""Voxelization (or meshing) time of this working tree against an older git revision, measured in one run.
 
 Each case runs in a fresh process per revision (its own JIT cache), the two revisions interleaved so
 that the machine's drift hits both alike; the table shows medians and their ratio. Example, the state
@@ -8,6 +8,9 @@ before the issue "tighter and faster" against now::
 
 With ``--workers 1,2`` each process times every worker count in turn, and the table adds the parallel
 yield t1 / (n · tn) of each revision (the wall-time yield of the paper's Table 1).
+
+With ``--task mesh`` each process voxelizes once and times ``Voxels.mesh()`` in CPU seconds (the
+contouring, which runs on one thread), the count column then being triangles.
 
 A case is a scene name, "union of 50 spheres" or the path of a ``.vm`` model (read with ``implc.load_vm``
 where the revision has it, else converted to SymPy with ``evaluate=False``, keeping the DAG).
@@ -32,6 +35,7 @@ import sympy, implc
 from implc import scene, shapes
 case, depth, repeats = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 workers = [int(w) for w in sys.argv[4].split(",")]
+task = sys.argv[5]
 if case == "union of 50 spheres":
     rng = random.Random(7)
     centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
@@ -75,8 +79,14 @@ elif case.endswith(".vm"):  # a peer model: load_vm where the revision has it, e
 else:
     sc = scene.load(case)
     s = implc.compile(sc.surface, sc.bounds)
-implc.voxelize(s, depth, workers=1)  # warm: runtime module, memory
+v = implc.voxelize(s, depth, workers=1)  # warm: runtime module, memory
 times = {w: [] for w in workers}
+if task == "mesh":
+    v.mesh()  # warm
+    for _ in range(repeats):
+        t0 = time.process_time(); n = len(v.mesh().faces); times[workers[0]].append(time.process_time() - t0)
+    print(json.dumps({"seconds": {w: statistics.median(t) for w, t in times.items() if t}, "voxels": n}))
+    sys.exit(0)
 for _ in range(repeats):
     for w in workers:  # interleaved, so that drift hits every worker count alike
         t0 = time.perf_counter(); v = implc.voxelize(s, depth, workers=w); times[w].append(time.perf_counter() - t0)
@@ -88,9 +98,10 @@ print(json.dumps({"seconds": {w: statistics.median(t) for w, t in times.items()}
 CASES = ("paper_blobs", "union of 50 spheres", "paper_sin4_sin8", "paper_sin3_sin4")
 
 
-def run(tree: Path, case: str, depth: int, repeats: int, workers: list, cache: Path) -> dict:
+def run(tree: Path, case: str, depth: int, repeats: int, workers: list, cache: Path, task: str) -> dict:
     env = dict(os.environ, PYTHONPATH=str(tree), IMPLC_CACHE_DIR=str(cache))
-    out = subprocess.run([sys.executable, "-c", PROBE, case, str(depth), str(repeats), ",".join(map(str, workers))],
+    out = subprocess.run([sys.executable, "-c", PROBE, case, str(depth), str(repeats), ",".join(map(str, workers)),
+                          task],
                          env=env, check=True, capture_output=True, text=True, cwd=tree)
     return json.loads(out.stdout)
 
@@ -103,8 +114,12 @@ def main(argv=None) -> int:
     p.add_argument("--rounds", type=int, default=3, help="processes per revision and case, interleaved")
     p.add_argument("--cases", default=",".join(CASES))
     p.add_argument("--workers", default="1", help="worker counts, comma-separated (e.g. 1,2: adds the yield)")
+    p.add_argument("--task", choices=("voxelize", "mesh"), default="voxelize",
+                   help="what is timed: voxelize (wall seconds) or mesh (Voxels.mesh(), CPU seconds)")
     args = p.parse_args(argv)
     workers = [int(w) for w in args.workers.split(",")]
+    if args.task == "mesh":
+        workers = workers[:1]
     with tempfile.TemporaryDirectory() as tmp:
         old = Path(tmp) / "old"
         subprocess.run(["git", "worktree", "add", "--detach", str(old), args.revision], cwd=ROOT, check=True,
@@ -116,7 +131,7 @@ def main(argv=None) -> int:
                 voxels = {}
                 for _ in range(args.rounds):
                     for label, tree in (("old", old), ("new", ROOT)):
-                        r = run(tree, case, args.depth, args.repeats, workers, Path(tmp) / f"cache-{label}")
+                        r = run(tree, case, args.depth, args.repeats, workers, Path(tmp) / f"cache-{label}", args.task)
                         for w in workers:
                             times[label, w].append(r["seconds"][str(w)])
                         voxels[label] = r["voxels"]
@@ -125,14 +140,16 @@ def main(argv=None) -> int:
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, capture_output=True,
                            check=False)  # best effort: the temporary folder goes anyway
-    print(f"### Voxelize at {1 << args.depth}³: {args.revision} against this tree "
+    what = "Voxelize (wall s)" if args.task == "voxelize" else "Mesh (CPU s)"
+    print(f"### {what} at {1 << args.depth}³: {args.revision} against this tree "
           f"(medians of {args.rounds} processes x {args.repeats} runs)\n")
     header = ["case"]
     for w in workers:
         header += [f"{w}w {args.revision} s", f"{w}w now s", f"{w}w speedup"]
         if w > 1 and workers[0] == 1:
             header += [f"{w}w yield {args.revision}", f"{w}w yield now"]
-    print("| " + " | ".join(header + ["voxels then", "voxels now"]) + " |")
+    count = "voxels" if args.task == "voxelize" else "triangles"
+    print("| " + " | ".join(header + [f"{count} then", f"{count} now"]) + " |")
     print("|" + "---|" * (len(header) + 2))
     for case, m, v_old, v_new in rows:
         cells = [case]

@@ -141,16 +141,19 @@ def _kuhn_tables():
 
 
 KUHN_TETS, KUHN_COUNT, KUHN_CORNER, KUHN_CODE = _kuhn_tables()
-KUHN_PACKED = np.ascontiguousarray(np.concatenate([KUHN_TETS.ravel(), KUHN_COUNT.ravel(), KUHN_CORNER.ravel(),
-                                                   KUHN_CODE.ravel()]), dtype=np.int64)
+KUHN_EDGES = [(u, v & ~u) for u in range(8) for v in range(8) if u != v and u & v == u]
+"""The 19 edges of a cell's Kuhn split, as (lower corner, code)."""
+KUHN_SLOT = np.array([KUHN_EDGES.index(edge) if edge[1] else 0  # (0, 0): past the case's triangles
+                      for edge in zip(KUHN_CORNER.ravel().tolist(), KUHN_CODE.ravel().tolist())])
+KUHN_SLOT = KUHN_SLOT.reshape(KUHN_CORNER.shape)
+"""Each triangle vertex's edge as a row of :data:`KUHN_EDGES`."""
+KUHN_PACKED = np.ascontiguousarray(np.concatenate([KUHN_TETS.ravel(), KUHN_COUNT.ravel(), KUHN_SLOT.ravel(),
+                                                   np.array(KUHN_EDGES).T.ravel()]), dtype=np.int64)
 """The tables as ``implc_kuhn_triangles`` reads them."""
 KUHN_CHUNK = 1 << 16
 """Cells per call of the native marching tetrahedra (Ctrl-C is seen between calls)."""
 KUHN_NEW_KEYS = 64
 """Room past the index's limit: the keys one cell can add after the check."""
-KUHN_EDGES = [(u, v & ~u) for u in range(8) for v in range(8) if u != v and u & v == u]
-"""The 19 edges of a cell's Kuhn split, as (lower corner, code)."""
-
 FAN_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (2, 3), (1, 3))
 """A fan tetrahedron (cell point, p, q, r)'s six edges, in the order its edge keys are listed."""
 
@@ -213,6 +216,7 @@ class _Grid:
         self.runtime = surface.runtime
         self._corners: _KeyIndex | None = None  # the corners sampled so far, and F there
         self._corner_values = np.zeros(0)
+        self._faces = {}  # (axis, side): F at the corners of that face of the bounds
         self.n = 1 << depth
         self.k = self.n + 1  # corners per axis
         self.lo = np.array([float(lo) for lo, _ in bounds])
@@ -251,16 +255,49 @@ class _Grid:
         with np.errstate(invalid="ignore", over="ignore"):
             return lo / 2 + hi / 2  # NaN where F may be undefined (the whole line): outside, as for eval
 
+    @property
+    def geometry(self) -> np.ndarray:
+        """The grid as the native corner routines read it: corners and cells per axis, lo, step, hi."""
+        return np.concatenate([[self.k, self.n], self.lo, self.step, self.hi]).astype(np.float64)
+
+    def corner_points(self, keys: np.ndarray) -> np.ndarray:
+        """World coordinates of corner keys (native: ``implc_corner_points``)."""
+        keys = np.ascontiguousarray(keys, dtype=np.int64)
+        points = np.empty((len(keys), 3))
+        self.runtime.corner_points(keys.ctypes.data, len(keys), self.geometry.ctypes.data, points.ctypes.data)
+        return points
+
+    def _corner_index(self, expected: int) -> _KeyIndex:
+        if self._corners is None:
+            self._corners = _KeyIndex(self.runtime, max(1 << 16, expected))
+        return self._corners
+
     def corner_values(self, keys: np.ndarray) -> np.ndarray:
         """F at the corners ``keys``, each sampled once for the whole contouring (and remembered)."""
-        if self._corners is None:
-            self._corners = _KeyIndex(self.runtime, max(1 << 16, keys.size))
-        before = self._corners.count
-        numbers = self._corners.number(keys)
-        if self._corners.count > before:
-            fresh = self._corners.keys()[before:]
-            self._corner_values = np.concatenate([self._corner_values, self.values(self.world(self.unkey(fresh)))])
+        index = self._corner_index(keys.size // 3)
+        before = index.count
+        numbers = index.number(keys)
+        if index.count > before:
+            fresh = self.values(self.corner_points(index.keys()[before:]))
+            self._corner_values = np.concatenate([self._corner_values, fresh])
         return self._corner_values[numbers]
+
+    def face_values(self, axis: int, side: int, keys: np.ndarray | None) -> np.ndarray:
+        """F at the corners ``keys`` of a face of the bounds, sampled once (and remembered by the face): most
+        faces are outside the solid everywhere, and their corners never enter the corner index."""
+        if (axis, side) not in self._faces:
+            self._faces[axis, side] = self.values(self.corner_points(keys.reshape(-1))).reshape(keys.shape)
+        return self._faces[axis, side]
+
+    def remember(self, keys: np.ndarray, values: np.ndarray):
+        """Keep F's ``values`` sampled at the corners ``keys`` (those not sampled yet)."""
+        index = self._corner_index(keys.size)
+        before = index.count
+        numbers = index.number(keys)
+        fresh = np.empty(index.count - before)
+        new = numbers >= before
+        fresh[numbers[new] - before] = values[new]
+        self._corner_values = np.concatenate([self._corner_values, fresh])
 
     def edge_ends(self, keys: np.ndarray):
         """For vertex keys of grid edges: the edges' corners in world coordinates and F there, (a, b, fa, fb),
@@ -271,11 +308,10 @@ class _Grid:
         fa, fb = np.empty(len(keys)), np.empty(len(keys))
         if not len(keys):
             return a, b, fa, fb
-        geometry = np.concatenate([[self.k, self.n], self.lo, self.step, self.hi]).astype(np.float64)
         index = self._corners
-        missing = self.runtime.edge_ends(keys.ctypes.data, len(keys), geometry.ctypes.data, index.table.ctypes.data,
-                                         index.bits, self._corner_values.ctypes.data, a.ctypes.data, b.ctypes.data,
-                                         fa.ctypes.data, fb.ctypes.data)
+        missing = self.runtime.edge_ends(keys.ctypes.data, len(keys), self.geometry.ctypes.data,
+                                         index.table.ctypes.data, index.bits, self._corner_values.ctypes.data,
+                                         a.ctypes.data, b.ctypes.data, fa.ctypes.data, fb.ctypes.data)
         if missing:
             raise AssertionError(f"{missing} corners of surface vertices' edges were never sampled")
         return a, b, fa, fb
@@ -320,12 +356,13 @@ class _Cells:
         self.add(cells)
 
     def add(self, more: np.ndarray) -> int:
-        """Append the cells of ``more`` not yet here (their corners sampled); returns how many."""
-        keys = self.grid.cell_key(more)
-        fresh = np.unique(keys[self.index.number(keys, insert=False) < 0])
+        """Append the cells of ``more`` not yet here (their corners sampled), in the order of their keys;
+        returns how many."""
+        before = self.index.count
+        self.index.number(np.sort(self.grid.cell_key(more)))
+        fresh = self.index.keys()[before:]
         if not len(fresh):
             return 0
-        self.index.number(fresh)
         cells = self.grid.cell_unkey(fresh)
         self.cells = np.concatenate([self.cells, cells])
         self.inside = np.concatenate([self.inside, _corner_signs(self.grid, cells)])
@@ -541,9 +578,10 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
             corners = np.zeros((n + 1, n + 1, 3), np.int64)
             corners[..., axis] = side * n
             corners[..., b], corners[..., c] = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-            signs = grid.corner_values(grid.key(corners)) < 0  # remembered: a second pass samples nothing
+            signs = grid.face_values(axis, side, grid.key(corners)) < 0
             if not signs.any():
                 continue
+            grid.remember(grid.key(corners).reshape(-1), grid.face_values(axis, side, None).reshape(-1))
             inside = np.zeros((len(cells), 8), bool)
             for k, (du, dv) in enumerate(SQUARE):
                 inside[:, local[k]] = signs[cells[:, b] + du, cells[:, c] + dv]
@@ -654,6 +692,9 @@ def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points:
     """The two ends of the edge each key names and F there, (a, b, fa, fb) (a point named by itself: both
     ends the same, its values not looked up)."""
     kind, payload = keys & 7, keys >> 3
+    grid_edge = (kind == GRID) & (payload & 7 != 0)
+    if grid_edge.all():  # the first pass, where no cap reaches the bounds: every key a grid edge's
+        return grid.edge_ends(keys)
     a, b = np.empty((len(keys), 3)), np.empty((len(keys), 3))
     fa, fb = np.zeros(len(keys)), np.zeros(len(keys))
 
@@ -661,8 +702,7 @@ def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points:
         b[sel] = grid.world(ijk)
         fb[sel] = grid.corner_values(grid.key(ijk))
 
-    sel = (kind == GRID) & (payload & 7 != 0)
-    a[sel], b[sel], fa[sel], fb[sel] = grid.edge_ends(keys[sel])
+    a[grid_edge], b[grid_edge], fa[grid_edge], fb[grid_edge] = grid.edge_ends(keys[grid_edge])
     sel = (kind == GRID) & (payload & 7 == 0)
     a[sel] = b[sel] = grid.world(grid.unkey(payload[sel] >> 3))
     sel = kind == FACE_POINT
@@ -711,42 +751,33 @@ def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: 
     on_edge = np.any(a != b, axis=1)
     positions = a.copy()
     ends = np.stack([a, b], 1) if witnesses else None
-    a, b, fa, fb = a[on_edge], b[on_edge], fa[on_edge], fb[on_edge]
-    swap = ~(fa < 0)  # make a the inside end
-    a[swap], b[swap] = b[swap].copy(), a[swap].copy()
-    fa[swap], fb[swap] = fb[swap].copy(), fa[swap].copy()
-    if not np.all(fa < 0) or np.any(fb < 0):
-        raise AssertionError("a surface vertex's edge does not change sign: the samples are not repeatable")
-    t = _edge_roots(grid, a, b, fa, fb)
-    hashed = (keys[on_edge].astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(11)
-    t = np.clip(t + NUDGE * (hashed.astype(np.float64) / 2.0**52 - 1.0), EDGE_MARGIN, 1 - EDGE_MARGIN)
-    positions[on_edge] = a + t[:, None] * (b - a)
+    if on_edge.all():
+        positions = _edge_roots(grid, keys, a, b, fa, fb)  # a and b: the inside end first
+    else:
+        a, b, fa, fb = a[on_edge], b[on_edge], fa[on_edge], fb[on_edge]
+        positions[on_edge] = _edge_roots(grid, keys[on_edge], a, b, fa, fb)
     if witnesses:
         ends[on_edge, 0], ends[on_edge, 1] = a, b
     return positions, on_edge, ends
 
 
-def _edge_roots(grid: _Grid, a, b, fa, fb) -> np.ndarray:
-    """Where on each edge a (F < 0) to b (F >= 0 or NaN) F crosses 0, as t in [EDGE_MARGIN, 1 - EDGE_MARGIN]:
-    regula falsi (Illinois), bisection where a value is not finite."""
-    t_in, t_out = np.zeros(len(a)), np.ones(len(a))
-    f_in, f_out = fa.copy(), fb.copy()
-    for _ in range(ROOT_STEPS):
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            guess = t_in - f_in * (t_out - t_in) / (f_out - f_in)
-        ok = np.isfinite(guess) & (guess > t_in) & (guess < t_out)
-        guess = np.where(ok, guess, (t_in + t_out) / 2)
-        f = grid.values(a + guess[:, None] * (b - a))
-        neg = f < 0
-        # Illinois: halve the value kept at the end that did not move, so the steps do not stall
-        f_out = np.where(neg, f_out / 2, f)
-        f_in = np.where(neg, f, f_in / 2)
-        t_in = np.where(neg, guess, t_in)
-        t_out = np.where(neg, t_out, guess)
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        t = t_in - f_in * (t_out - t_in) / (f_out - f_in)
-    t = np.where(np.isfinite(t) & (t >= t_in) & (t <= t_out), t, (t_in + t_out) / 2)
-    return np.clip(t, EDGE_MARGIN, 1 - EDGE_MARGIN)
+def _edge_roots(grid: _Grid, keys, a, b, fa, fb) -> np.ndarray:
+    """The surface vertex on each edge (a, b) with values (fa, fb) of opposite signs: regula falsi
+    (Illinois, :data:`ROOT_STEPS` samples of F), kept :data:`EDGE_MARGIN` inside the edge and nudged by
+    the hash of its key (native: ``implc_edge_roots``). Swaps the ends in place so that F(a) < 0."""
+    n = len(keys)
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    state, points = np.empty((5, n)), np.empty((n, 3))
+    if not n:
+        return points
+    run = grid.runtime.edge_roots
+    pointers = [keys.ctypes.data, a.ctypes.data, b.ctypes.data, fa.ctypes.data, fb.ctypes.data, state.ctypes.data]
+    if run(0, n, *pointers, None, points.ctypes.data, EDGE_MARGIN, NUDGE):
+        raise AssertionError("a surface vertex's edge does not change sign: the samples are not repeatable")
+    for step in range(ROOT_STEPS):
+        f = np.ascontiguousarray(grid.values(points), dtype=np.float64)
+        run(2 if step == ROOT_STEPS - 1 else 1, n, *pointers, f.ctypes.data, points.ctypes.data, EDGE_MARGIN, NUDGE)
+    return points
 
 
 def _unit_normals(surface, vertices, on_surface) -> np.ndarray:

@@ -34,7 +34,8 @@ class TapeEngine:
 class Runtime:
     """The runtime module's entry points: ``subdivide``, ``normals``, ``tighten``, ``octree_insert``,
     ``octree_traverse``, ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``,
-    ``kuhn_triangles``, ``bent_cells`` and ``edge_ends`` (signatures in :mod:`implc.abi`)."""
+    ``kuhn_triangles``, ``bent_cells``, ``edge_ends``, ``edge_roots`` and ``corner_points`` (signatures in
+    :mod:`implc.abi`)."""
 
     _shared: Runtime | None = None
     _lock = threading.Lock()
@@ -53,6 +54,8 @@ class Runtime:
         self.kuhn_triangles = self.native.bind(abi.KUHN_TRIANGLES)
         self.bent_cells = self.native.bind(abi.BENT_CELLS)
         self.edge_ends = self.native.bind(abi.EDGE_ENDS)
+        self.edge_roots = self.native.bind(abi.EDGE_ROOTS)
+        self.corner_points = self.native.bind(abi.CORNER_POINTS)
         self._tape_engines: dict[bool, TapeEngine] = {}
 
     def tape_engine(self, directed: bool) -> TapeEngine:

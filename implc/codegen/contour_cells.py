@@ -18,7 +18,20 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I64, Local, at, const, define, for_range, if_, intrinsic, load_at, store_at, while_true
+from .control import (
+    I64,
+    Local,
+    at,
+    const,
+    define,
+    for_range,
+    if_,
+    intrinsic,
+    load_at,
+    local_array,
+    store_at,
+    while_true,
+)
 
 GOLDEN = 0x9E3779B97F4A7C15
 """2^64/φ: Fibonacci hashing of a key's corner (its bits above the low six)."""
@@ -69,11 +82,11 @@ def emit_kuhn_triangles(module: ir.Module):
     ``offsets``: the 8 corners' key offsets, ``inside``: 8 bytes per cell, F < 0 at each corner).
 
     ``tables``: the six tetrahedra's corners (6 × 4), then per (tetrahedron, case) the triangle count
-    (96), then per (tetrahedron, case, triangle, vertex) the edge's lower corner and code (2 × 576, see
-    :func:`implc.contour._kuhn_tables`). Each vertex key ((corner key × 8 + code) × 8) is numbered through
-    the index; faces get three numbers per triangle, owner the cell's row. state[0]: keys in the index,
-    state[1]: triangles written. Stops before a cell when the index holds ``limit`` keys or more; returns
-    the cells done."""
+    (96), then per (tetrahedron, case, triangle, vertex) the vertex's edge as a row of the cell's 19 edges
+    (576), then those edges' lower corners (19) and codes (19) (see :func:`implc.contour._kuhn_tables`).
+    Each vertex key ((corner key × 8 + code) × 8) is numbered through the index once per cell; faces get
+    three numbers per triangle, owner the cell's row. state[0]: keys in the index, state[1]: triangles
+    written. Stops before a cell when the index holds ``limit`` keys or more; returns the cells done."""
     fn, b = define(module, abi.KUHN_TRIANGLES)
     lowest, offsets, inside, n, tables, table, bits, uniques, limit, state, faces, owner = fn.args
     count = Local(b, I64, load_at(b, state, 0), "count")
@@ -94,6 +107,9 @@ def emit_kuhn_triangles(module: ir.Module):
                            b.icmp_signed("!=", signs.get(), const(I64, 255)))
             with if_(b, mixed):
                 base = load_at(b, lowest, c)
+                numbers = local_array(b, I64, 19, "numbers")  # the cell's edges' vertex numbers, −1: not yet
+                with for_range(b, const(I64, 19)) as e:
+                    store_at(b, const(I64, -1), numbers, e)
                 with for_range(b, const(I64, 6)) as t:
                     case = Local(b, I64, 0, "case")
                     with for_range(b, const(I64, 4)) as v:
@@ -104,13 +120,16 @@ def emit_kuhn_triangles(module: ir.Module):
                     triangles = load_at(b, tables, b.add(const(I64, 24), row))
                     with for_range(b, triangles) as s:
                         with for_range(b, const(I64, 3)) as v:
-                            slot = b.add(b.mul(b.add(b.mul(row, const(I64, 2)), s), const(I64, 3)), v)
-                            corner = load_at(b, tables, b.add(const(I64, 24 + 96), slot))
-                            code = load_at(b, tables, b.add(const(I64, 24 + 96 + 576), slot))
-                            key = b.add(b.mul(b.add(base, load_at(b, offsets, corner)), const(I64, 8)), code)
-                            key = b.mul(key, const(I64, 8))
-                            number = _number(b, table, bits, key, insert, count, uniques)
-                            store_at(b, number, faces, b.add(b.mul(written.get(), const(I64, 3)), v))
+                            vertex = b.add(b.mul(b.add(b.mul(row, const(I64, 2)), s), const(I64, 3)), v)
+                            edge = load_at(b, tables, b.add(const(I64, 24 + 96), vertex))
+                            with if_(b, b.icmp_signed("<", load_at(b, numbers, edge), const(I64, 0))):
+                                corner = load_at(b, tables, b.add(const(I64, 24 + 96 + 576), edge))
+                                code = load_at(b, tables, b.add(const(I64, 24 + 96 + 576 + 19), edge))
+                                key = b.add(b.mul(b.add(base, load_at(b, offsets, corner)), const(I64, 8)), code)
+                                key = b.mul(key, const(I64, 8))
+                                store_at(b, _number(b, table, bits, key, insert, count, uniques), numbers, edge)
+                            store_at(b, load_at(b, numbers, edge), faces,
+                                     b.add(b.mul(written.get(), const(I64, 3)), v))
                         store_at(b, c, owner, written.get())
                         written.set(b.add(written.get(), one))
     store_at(b, count.get(), state, 0)
@@ -157,6 +176,32 @@ def emit_bent_cells(module: ir.Module):
     b.ret_void()
 
 
+def _corner_point(b: ir.IRBuilder, geometry, k, cells, key, out, index):
+    """Writes the world coordinates of corner ``key`` to out[3 index ...] (see :func:`emit_edge_ends` for
+    ``geometry``); returns its indices (i, j, k)."""
+    ijk = [b.sdiv(key, b.mul(k, k)), b.srem(b.sdiv(key, k), k), b.srem(key, k)]
+    for axis, i in enumerate(ijk):
+        lo = load_at(b, geometry, 2 + axis)
+        step = load_at(b, geometry, 5 + axis)
+        hi = load_at(b, geometry, 8 + axis)
+        inner = b.fadd(lo, b.fmul(b.sitofp(i, ir.DoubleType()), step))
+        store_at(b, b.select(b.icmp_signed("==", i, cells), hi, inner), out, b.add(b.mul(index, const(I64, 3)),
+                                                                                  const(I64, axis)))
+    return ijk
+
+
+def emit_corner_points(module: ir.Module):
+    """``implc_corner_points(keys, n, geometry, points)``: the world coordinates of n corner keys (three
+    doubles each; ``geometry`` as for :func:`emit_edge_ends`)."""
+    fn, b = define(module, abi.CORNER_POINTS)
+    keys, n, geometry, points = fn.args
+    k = b.fptosi(load_at(b, geometry, 0), I64)
+    cells = b.fptosi(load_at(b, geometry, 1), I64)
+    with for_range(b, n) as i:
+        _corner_point(b, geometry, k, cells, load_at(b, keys, i), points, i)
+    b.ret_void()
+
+
 def emit_edge_ends(module: ir.Module):
     """``implc_edge_ends(keys, n, geometry, table, bits, values, a, b, fa, fb)``: for n vertex keys of grid
     edges ((corner key × 8 + code) × 8, code ≠ 0), the edge's two corners in world coordinates (three
@@ -174,14 +219,7 @@ def emit_edge_ends(module: ir.Module):
     seven, one, three = const(I64, 7), const(I64, 1), const(I64, 3)
 
     def corner(index, key, out_xyz, out_f):
-        ijk = [b.sdiv(key, b.mul(k, k)), b.srem(b.sdiv(key, k), k), b.srem(key, k)]
-        for axis, i in enumerate(ijk):
-            lo = load_at(b, geometry, 2 + axis)
-            step = load_at(b, geometry, 5 + axis)
-            hi = load_at(b, geometry, 8 + axis)
-            inner = b.fadd(lo, b.fmul(b.sitofp(i, ir.DoubleType()), step))
-            store_at(b, b.select(b.icmp_signed("==", i, cells), hi, inner), out_xyz,
-                     b.add(b.mul(index, three), const(I64, axis)))
+        ijk = _corner_point(b, geometry, k, cells, key, out_xyz, index)
         number = _number(b, table, bits, key, const(I64, 0), count, table)  # never inserts: no uniques written
         found = b.icmp_signed(">=", number, const(I64, 0))
         with if_(b, b.not_(found)):
@@ -198,3 +236,85 @@ def emit_edge_ends(module: ir.Module):
         end = [b.add(ijk[axis], b.and_(b.lshr(code, const(I64, axis)), one)) for axis in range(3)]
         corner(i, b.add(b.mul(b.add(b.mul(end[0], k), end[1]), k), end[2]), out_b, out_fb)
     b.ret(missing.get())
+
+
+def emit_edge_roots(module: ir.Module):
+    """``implc_edge_roots(phase, n, keys, a, b, fa, fb, state, f, points, margin, nudge)``: regula falsi
+    (Illinois) for the root of F on n edges from a to b (three doubles per end), one phase per call, F
+    sampled by the caller at ``points`` between calls. ``state``: five rows of n doubles (the bracket's
+    t and F at its inside and outside ends, the last guess).
+
+    - phase 0: puts each edge's inside end (F < 0) first, swapping a with b and fa with fb in place,
+      opens the bracket [0, 1] and writes the first guesses to ``points``; returns how many edges do not
+      change sign (F < 0 at neither end or at both, NaN counting as outside);
+    - phase 1: reads F at the guesses in ``f``, narrows the brackets and writes the next guesses;
+    - phase 2: as phase 1, then the root t (the secant through the bracket, its middle where that is not
+      finite), kept in [margin, 1 − margin] and moved by up to ``nudge`` by the Fibonacci hash of the
+      edge's key: ``points`` receives the vertices. Returns 0 after phases 1 and 2.
+
+    A guess outside its bracket (or not finite) is the bracket's middle."""
+    fn, b = define(module, abi.EDGE_ROOTS)
+    phase, n, keys, a, bb, fa, fb, state, f, points, margin, nudge = fn.args
+    double = ir.DoubleType()
+    zero, one_d, half = const(double, 0.0), const(double, 1.0), const(double, 0.5)
+    three = const(I64, 3)
+    bad = Local(b, I64, 0, "bad")
+
+    def row(r, i):
+        return at(b, state, b.add(b.mul(const(I64, r), n), i))
+
+    def secant(t_in, t_out, f_in, f_out):
+        return b.fsub(t_in, b.fdiv(b.fmul(f_in, b.fsub(t_out, t_in)), b.fsub(f_out, f_in)))
+
+    def clip(t, lo, hi):
+        t = b.select(b.fcmp_ordered(">", t, lo), t, lo)
+        return b.select(b.fcmp_ordered("<", t, hi), t, hi)
+
+    def write_point(i, t):
+        for axis in range(3):
+            k = b.add(b.mul(i, three), const(I64, axis))
+            p, q = load_at(b, a, k), load_at(b, bb, k)
+            store_at(b, b.fadd(p, b.fmul(t, b.fsub(q, p))), points, k)
+
+    with for_range(b, n) as i:
+        with if_(b, b.icmp_signed("==", phase, const(I64, 0))):
+            with if_(b, b.not_(b.fcmp_ordered("<", load_at(b, fa, i), zero))):
+                for ptr_a, ptr_b, count in ((a, bb, 3), (fa, fb, 1)):
+                    for axis in range(count):
+                        k = b.add(b.mul(i, const(I64, count)), const(I64, axis)) if count > 1 else i
+                        p, q = load_at(b, ptr_a, k), load_at(b, ptr_b, k)
+                        store_at(b, q, ptr_a, k)
+                        store_at(b, p, ptr_b, k)
+            crosses = b.and_(b.fcmp_ordered("<", load_at(b, fa, i), zero),
+                             b.not_(b.fcmp_ordered("<", load_at(b, fb, i), zero)))
+            with if_(b, b.not_(crosses)):
+                bad.set(b.add(bad.get(), const(I64, 1)))
+            b.store(zero, row(0, i))
+            b.store(one_d, row(1, i))
+            b.store(load_at(b, fa, i), row(2, i))
+            b.store(load_at(b, fb, i), row(3, i))
+        with if_(b, b.icmp_signed("!=", phase, const(I64, 0))):
+            value, guess = load_at(b, f, i), b.load(row(4, i))
+            neg = b.fcmp_ordered("<", value, zero)  # false for NaN: outside
+            t_in, t_out, f_in, f_out = (b.load(row(r, i)) for r in range(4))
+            b.store(b.select(neg, guess, t_in), row(0, i))
+            b.store(b.select(neg, t_out, guess), row(1, i))
+            b.store(b.select(neg, value, b.fmul(f_in, half)), row(2, i))  # Illinois: halve the end that stays
+            b.store(b.select(neg, b.fmul(f_out, half), value), row(3, i))
+        t_in, t_out, f_in, f_out = (b.load(row(r, i)) for r in range(4))
+        middle = b.fmul(b.fadd(t_in, t_out), half)
+        with if_(b, b.icmp_signed("!=", phase, const(I64, 2))):
+            guess = secant(t_in, t_out, f_in, f_out)
+            inner = b.and_(b.fcmp_ordered(">", guess, t_in), b.fcmp_ordered("<", guess, t_out))
+            guess = b.select(inner, guess, middle)
+            b.store(guess, row(4, i))
+            write_point(i, guess)
+        with if_(b, b.icmp_signed("==", phase, const(I64, 2))):
+            t = secant(t_in, t_out, f_in, f_out)
+            inner = b.and_(b.fcmp_ordered(">=", t, t_in), b.fcmp_ordered("<=", t, t_out))
+            top = b.fsub(one_d, margin)
+            t = clip(b.select(inner, t, middle), margin, top)
+            hashed = b.lshr(b.mul(load_at(b, keys, i), const(I64, GOLDEN - (1 << 64))), const(I64, 11))
+            unit = b.fsub(b.fmul(b.uitofp(hashed, double), const(double, 2.0 ** -52)), one_d)
+            write_point(i, clip(b.fadd(t, b.fmul(nudge, unit)), margin, top))
+    b.ret(bad.get())

@@ -9,7 +9,14 @@ from __future__ import annotations
 
 from llvmlite import ir
 
-from .contour_cells import emit_bent_cells, emit_edge_ends, emit_hash_index, emit_kuhn_triangles
+from .contour_cells import (
+    emit_bent_cells,
+    emit_corner_points,
+    emit_edge_ends,
+    emit_edge_roots,
+    emit_hash_index,
+    emit_kuhn_triangles,
+)
 from .normals import emit_normals
 from .octree_index import (
     emit_octree_insert,
@@ -37,4 +44,6 @@ def build_runtime() -> str:
     emit_kuhn_triangles(module)
     emit_bent_cells(module)
     emit_edge_ends(module)
+    emit_edge_roots(module)
+    emit_corner_points(module)
     return str(module)
