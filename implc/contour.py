@@ -881,10 +881,12 @@ class _Pieces:
         faces = np.concatenate([self.faces, self.caps])
         if not self.orphans:
             return self.vertices, self.normals, faces, self.ends
-        used = np.bincount(faces.reshape(-1), minlength=len(self.vertices)) > 0
+        used = np.zeros(len(self.vertices), bool)
+        used[faces.reshape(-1)] = True
         renumber = np.cumsum(used) - 1
-        ends = None if self.ends is None else self.ends[used]
-        return self.vertices[used], self.normals[used], renumber[faces], ends
+        rows = np.flatnonzero(used)  # np.take of rows: several times faster than a boolean mask on (V, 3)
+        ends = None if self.ends is None else np.take(self.ends, rows, axis=0)
+        return np.take(self.vertices, rows, axis=0), np.take(self.normals, rows, axis=0), np.take(renumber, faces), ends
 
 
 def _corner_signs(grid: _Grid, cells: np.ndarray) -> np.ndarray:
