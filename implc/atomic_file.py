@@ -6,6 +6,11 @@ flushed to disk and renamed over the target in one step (``os.replace``), so a r
 or SIGTERM sees either the old file or the whole new one. On any exception the temporary file is removed
 and the target is untouched. :func:`replacing_folder` does the same for a folder (a Zarr store, a slice
 stack): the old folder is moved aside, the new one renamed into place, then the old one removed.
+
+The new file gets the mode a plain write would give it (the umask's), or the old file's mode when it
+replaces one; an error while writing (a full disk) names the target; the renaming and its record in
+:data:`COMPLETED` happen with SIGINT and SIGTERM held, so a signal that comes after it is seen after the
+record (the CLI then reports the output complete, not a failure).
 """
 
 from __future__ import annotations
@@ -13,8 +18,62 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import signal
+import stat
 import tempfile
+import threading
 from pathlib import Path
+
+COMPLETED: list[Path] = []
+"""Every target this process has put in place, in order (see the module's docstring)."""
+
+
+def _umask() -> int:
+    try:
+        with open("/proc/self/status") as f:  # Linux: read without changing it (os.umask would, for a moment)
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _mode_for(path: Path, folder: bool) -> int:
+    """The mode a new file (or folder) at ``path`` gets: the existing one's, or the umask's."""
+    try:
+        return stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        return (0o777 if folder else 0o666) & ~_umask()
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """SIGINT and SIGTERM held for the block (in the main thread; elsewhere they go to it anyway)."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def _named(exc: OSError, path: Path) -> OSError:
+    """``exc`` with the target's name where it names no file (ENOSPC, EIO while writing)."""
+    if exc.filename is None and exc.strerror:
+        return type(exc)(exc.errno, exc.strerror, str(path))
+    return exc
+
+
+def _put_in_place(tmp: Path, path: Path):
+    with _signals_held():
+        os.replace(tmp, path)
+        COMPLETED.append(path)
 
 
 @contextlib.contextmanager
@@ -28,10 +87,14 @@ def replacing(path):
     os.close(fd)
     tmp = Path(name)
     try:
-        yield tmp
-        with open(tmp, "rb+") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+        try:
+            yield tmp
+            with open(tmp, "rb+") as f:
+                os.fsync(f.fileno())
+            os.chmod(tmp, _mode_for(path, folder=False))
+        except OSError as exc:
+            raise _named(exc, path) from None
+        _put_in_place(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
@@ -48,14 +111,19 @@ def replacing_folder(path):
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent))
     try:
-        yield tmp
+        try:
+            yield tmp
+            os.chmod(tmp, _mode_for(path, folder=True))
+        except OSError as exc:
+            raise _named(exc, path) from None
         if path.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
-            path.rename(old / path.name)
-            tmp.rename(path)
+            with _signals_held():  # the old folder aside and the new one in, as one step for a signal
+                path.rename(old / path.name)
+                _put_in_place(tmp, path)
             shutil.rmtree(old, ignore_errors=True)
         else:
-            tmp.rename(path)
+            _put_in_place(tmp, path)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

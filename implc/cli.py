@@ -50,8 +50,8 @@ def _numbers(text, count, what, example):
     except ValueError:
         values = []
     if len(values) != count:
-        raise UsageError(f"{what} must be {_COUNT_WORDS[count]} numbers '{example}', got "
-                         f"{shorten(text, quoted=True)}")
+        amount = "a number" if count == 1 else f"{_COUNT_WORDS[count]} numbers"
+        raise UsageError(f"{what} must be {amount} '{example}', got {shorten(text, quoted=True)}")
     if not all(math.isfinite(v) for v in values):
         raise UsageError(f"{what} must be finite numbers, got {shorten(text, quoted=True)}")
     return values
@@ -74,6 +74,17 @@ def _check_writable(path: Path, suffixes):
         raise UsageError(f"cannot write {path}: folder {parent} does not exist")
     if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
         raise UsageError(f"cannot write {path}: permission denied")
+
+
+def _check_render_size(size):
+    """--size: 16 to the renderer's largest image, and its working memory available."""
+    from .render import BYTES_PER_PIXEL, MAX_SIZE
+    from .voxelization import available_memory
+    _check_range(size, "--size", 16, MAX_SIZE)
+    need = BYTES_PER_PIXEL * size * size
+    if need > available_memory():
+        raise UsageError(f"--size {size} needs about {need / 2**30:.1f} GiB to render, more than the "
+                         f"{available_memory() / 2**30:.1f} GiB available")
 
 
 def _check_range(value, name, lo, hi):
@@ -138,10 +149,11 @@ def cmd_scenes(args) -> int:
     return 0
 
 
-def _check_folder_writable(path: Path):
-    """A folder of slices: new, or an existing folder to replace; its parent must exist and be writable."""
+def _check_folder_writable(path: Path, what: str):
+    """A folder ``what`` goes to (slices, a static viewer): new, or an existing folder to replace; its
+    parent must exist and be writable."""
     if path.exists() and not path.is_dir():
-        raise UsageError(f"cannot write slices to {path}: it is a file (name a folder)")
+        raise UsageError(f"cannot write {what} to {path}: it is a file (name a folder)")
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         raise UsageError(f"cannot write {path}: folder {parent} does not exist")
@@ -153,7 +165,7 @@ def cmd_voxelize(args) -> int:
     from . import voxel_files
     out = Path(args.output)
     if args.slices:
-        _check_folder_writable(out)
+        _check_folder_writable(out, "slices")
     else:
         _check_writable(out, voxel_files.SUFFIXES)
     _check_surface_options(args)
@@ -189,7 +201,7 @@ def cmd_render(args) -> int:
     from .render import Style, View, render_voxels, save_png
     out = Path(args.output)
     _check_writable(out, (".png",))
-    _check_range(args.size, "--size", 16, 16384)
+    _check_render_size(args.size)
     _check_surface_options(args)
     view_angles = _numbers(args.view, 2, "--view", "azimuth,elevation") if args.view else None
     style = Style(color=_color(args.color)) if args.color else Style()
@@ -229,8 +241,8 @@ def cmd_view(args) -> int:
     if args.budget is not None:
         _check_range(args.budget, "--budget", 1000, 1_000_000_000)
     budget = args.budget or 1_000_000
-    if args.export:
-        _check_folder_writable(Path(args.export))
+    if args.export is not None:
+        _check_folder_writable(Path(args.export), "a static viewer")
     suffix = Path(args.scene).suffix.lower() if args.scene else ""
     if suffix == ".npz":
         given = [flag for flag, value in (("--expr", args.expr), ("--depth", args.depth), ("--bounds", args.bounds),
@@ -249,7 +261,7 @@ def cmd_view(args) -> int:
         voxels, _ = _voxelize(surface, depth, args.workers, args.quiet, tightness=args.tightness)
         view = sc.view if sc else None
     chunks = lod_chunks(voxels, name=name, view=view)
-    if args.export:
+    if args.export is not None:
         export(chunks, args.export, budget=budget)
         if not args.quiet:
             print(f"wrote a static viewer of {name} ({len(voxels)} voxels at {1 << voxels.depth}³) to {args.export}: "
@@ -377,7 +389,7 @@ def cmd_demo(args) -> int:
     from .scene import load as load_scene
     from .surface import compile as compile_surface
     _check_range(args.depth, "--depth", 1, 21)
-    _check_range(args.size, "--size", 16, 16384)
+    _check_render_size(args.size)
     out_dir = Path(args.out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise UsageError(f"--out-dir {out_dir} exists and is not a folder")
@@ -524,14 +536,45 @@ def _on_sigterm(signum, frame):
 def _run(argv) -> int:
     if argv[:1] == ["bench"]:  # the suite parses its own options
         return cmd_bench(argv[1:])
-    args = _parser().parse_args(_attach_negative_values(argv))
+    parser = _parser()
+    args = parser.parse_args(_attach_negative_values(argv))
+    _check_no_empty_values(parser, args)
+    global _output
+    _output = getattr(args, "output", None) or getattr(args, "export", None)
     return args.run(args)
+
+
+_output: str | None = None
+"""The file or folder the running command writes last (None for commands that write none or several)."""
+
+
+def _output_complete(done_before: int) -> str | None:
+    """The command's output if it was put in place during this run (a signal came after that)."""
+    atomic_file = sys.modules.get("implc.atomic_file")  # not imported: nothing was written
+    if _output is None or atomic_file is None:
+        return None
+    done = atomic_file.COMPLETED[done_before:]
+    return _output if any(Path(p) == Path(_output) for p in done) else None
+
+
+def _check_no_empty_values(parser, args):
+    """An option given an empty value (``--export ''``, ``--bounds ''``) is an error, never 'not given'."""
+    actions = [a for a in parser._actions if a.option_strings]
+    for sub in parser._subparsers._group_actions if parser._subparsers else []:
+        for command in sub.choices.values():
+            actions += [a for a in command._actions if a.option_strings]
+    for action in actions:
+        value = getattr(args, action.dest, None)
+        if isinstance(value, str) and not value.strip():
+            raise UsageError(f"{max(action.option_strings, key=len)} is empty: give it a value or leave it out")
 
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main_thread else None
+    atomic_file = sys.modules.get("implc.atomic_file")
+    done_before = len(atomic_file.COMPLETED) if atomic_file else 0
     try:
         return _run(argv)
     except (UsageError, ValueError, MemoryError, OSError, RecursionError) as exc:
@@ -545,12 +588,13 @@ def main(argv=None) -> int:
             message = message[: MESSAGE_LIMIT - 3] + "..."
         print(f"implc: error: {message}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("implc: interrupted", file=sys.stderr)
-        return 130
-    except _Terminated:
-        print("implc: terminated", file=sys.stderr)
-        return 143
+    except (KeyboardInterrupt, _Terminated) as exc:
+        complete = _output_complete(done_before)
+        if complete is not None:  # the save finished first: the output is whole, the command succeeded
+            print(f"implc: {complete} was written in full before the signal", file=sys.stderr)
+            return 0
+        print(f"implc: {'interrupted' if isinstance(exc, KeyboardInterrupt) else 'terminated'}", file=sys.stderr)
+        return 130 if isinstance(exc, KeyboardInterrupt) else 143
     finally:
         if in_main_thread:
             signal.signal(signal.SIGTERM, previous)

@@ -8,6 +8,9 @@ even powers are tight), theta = atan2(sqrt(x²+y²), z) and phi = atan2(y, x). W
 
 from __future__ import annotations
 
+import contextlib
+import signal
+import threading
 from fractions import Fraction
 
 import sympy
@@ -60,15 +63,54 @@ def is_periodic_in_phi(expr: sympy.Expr) -> bool:
     return seen_phi
 
 
+BINARY_EXPONENT_LIMIT = 4000
+"""A float's binary magnitude is clamped to ±this before its exact rational is built: beyond it the value
+lies far outside the doubles' range either way (above 1.8e308 or below 4.9e-324), and its enclosure is the
+same; without the clamp exp(exp(exp(9))) would be a power of two with about 10^3500 digits."""
+
+
 def _fraction_of_float(value: sympy.Float) -> Fraction:
     man_sign, man, exp, _ = value._mpf_
-    f = Fraction(int(man)) * (Fraction(2) ** int(exp))
+    man, exp = int(man), int(exp)
+    magnitude = exp + man.bit_length()
+    if magnitude > BINARY_EXPONENT_LIMIT:
+        exp = BINARY_EXPONENT_LIMIT - man.bit_length()
+    elif magnitude < -BINARY_EXPONENT_LIMIT:
+        exp = -BINARY_EXPONENT_LIMIT - man.bit_length()
+    f = Fraction(man) * (Fraction(2) ** exp)
     return -f if man_sign else f
 
 
 _UNEVALUATED = (sympy.Integral, sympy.Sum, sympy.Product, sympy.Limit, sympy.Derivative)
 PRECISION = 60
 """Decimal digits a numeric constant is evaluated to; it must agree with an evaluation at 80 to 50."""
+
+
+EVALUATION_SECONDS = 20.0
+"""The time one numeric constant's evaluation may take (enforced in the main thread, where the signal
+that interrupts it can be delivered)."""
+
+
+@contextlib.contextmanager
+def _time_limit(seconds: float):
+    """TimeoutError in the block after ``seconds`` (in the main thread, through SIGALRM; elsewhere, or
+    where a timer is already set, no limit)."""
+    usable = (hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
+              and signal.getitimer(signal.ITIMER_REAL)[0] == 0)
+    if not usable:
+        yield
+        return
+
+    def expired(signum, frame):
+        raise TimeoutError
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def number_bounds(expr: sympy.Expr) -> tuple[float, float, float]:
@@ -88,8 +130,12 @@ def number_bounds(expr: sympy.Expr) -> tuple[float, float, float]:
                                "value carries no guarantee: give it in closed form or as a literal")
         return number_bounds(closed)
     try:
-        value = expr.evalf(PRECISION, strict=True)
-        check = expr.evalf(PRECISION + 20, strict=True)
+        with _time_limit(EVALUATION_SECONDS):
+            value = expr.evalf(PRECISION, strict=True)
+            check = expr.evalf(PRECISION + 20, strict=True)
+    except TimeoutError:
+        raise CompileError(f"evaluating the number {shorten(expr)} took more than {EVALUATION_SECONDS:g} s: give "
+                           "it in a simpler closed form or as a literal") from None
     except sympy.core.evalf.PrecisionExhausted:
         raise CompileError(f"the number {shorten(expr)} cannot be evaluated to {PRECISION} certified digits") from None
     except (OverflowError, MemoryError, RecursionError):

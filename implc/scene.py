@@ -19,6 +19,7 @@ import sympy
 from .abi import MAX_DEPTH
 from .errors import CompileError, shorten
 from .surface import check_bounds
+from .untrusted import regular_file
 
 
 def _scenes_dir() -> Path:
@@ -60,9 +61,10 @@ def load(name_or_path: str) -> Scene:
     path = Path(name_or_path)
     if path.suffix != ".py":
         path = SCENES_DIR / f"{name_or_path}.py"
-    if not path.is_file():
+    if not path.exists():
         raise SceneError(f"no scene {name_or_path!r} (known: {', '.join(available())}; or a path to a .py "
                          "scene file)")
+    regular_file(path, SceneError, "scene file")  # a folder, a FIFO or a device: refused before it is run
     try:
         namespace = runpy.run_path(str(path))
     except Exception as exc:  # the scene's own error, reported with its file

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic_file import replacing
+from .untrusted import ply_elements, ply_header, printable, regular_file
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb", ".3mf")
 
@@ -134,6 +135,8 @@ def is_mesh_file(path) -> bool:
     path = Path(path)
     if path.suffix.lower() != ".ply":
         return path.suffix.lower() in MESH_SUFFIXES
+    if not path.is_file():  # a FIFO is never opened here (the reader that comes next refuses it)
+        return False
     try:
         with open(path, "rb") as f:
             header = f.read(4096)
@@ -145,13 +148,14 @@ def is_mesh_file(path) -> bool:
 def load(path) -> Mesh:
     """Read a mesh file (any format trimesh reads) as a :class:`Mesh`; one clear error if it is not one."""
     path = Path(path)
-    if not path.is_file():
-        raise MeshFileError(f"cannot read {path}: {'it is a folder' if path.is_dir() else 'no such file'}")
+    regular_file(path, MeshFileError, "mesh file")
+    if path.suffix.lower() == ".ply":  # counts checked against the file's length before trimesh allocates
+        ply_elements(path, *ply_header(path, MeshFileError), MeshFileError)
     import trimesh
     try:
         loaded = trimesh.load(str(path), force="mesh", process=False)
     except Exception as error:  # trimesh raises many kinds for a bad file
-        raise MeshFileError(f"cannot read {path} as a mesh: {error}") from None
+        raise MeshFileError(f"cannot read {path} as a mesh: {printable(str(error), 160)}") from None
     vertices, faces = np.asarray(loaded.vertices), np.asarray(loaded.faces)
     if vertices.ndim != 2 or len(faces) == 0:
         raise MeshFileError(f"{path} holds no triangles")

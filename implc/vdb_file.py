@@ -21,6 +21,7 @@ renamed into place.
 
 from __future__ import annotations
 
+import os
 import struct
 import uuid
 from pathlib import Path
@@ -28,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic_file import replacing
+from .untrusted import printable
 
 FILE_VERSION = 224  # OPENVDB_FILE_VERSION_MULTIPASS_IO; format of OpenVDB 6-11
 LIBRARY_VERSION = (10, 0)
@@ -347,8 +349,21 @@ def save_vdb(voxels, path) -> Path:
 
 
 class _Reader:
+    """Reads an OpenVDB file it does not trust: every count and length is checked against the bytes left
+    before anything is read or allocated by it."""
+
+    _FIXED = {"vec3i": "<iii", "vec3s": "<fff", "vec3d": "<ddd", "bool": "<?", "int64": "<q", "int32": "<i",
+              "float": "<f", "double": "<d"}
+
     def __init__(self, f, path):
         self.f, self.path = f, path
+        self.size = os.fstat(f.fileno()).st_size
+
+    def damaged(self, what: str) -> ValueError:
+        return ValueError(f"{self.path}: damaged OpenVDB file ({what})")
+
+    def left(self) -> int:
+        return self.size - self.f.tell()
 
     def unpack(self, fmt: str):
         size = struct.calcsize("<" + fmt)
@@ -357,33 +372,42 @@ class _Reader:
             raise ValueError(f"{self.path}: truncated OpenVDB file")
         return struct.unpack("<" + fmt, data)
 
+    def bytes(self, n: int, what: str) -> bytes:
+        if n > self.left():
+            raise self.damaged(f"{what} of {n} bytes, {self.left()} left in the file")
+        return self.f.read(n)
+
     def string(self) -> str:
         (n,) = self.unpack("I")
-        if n > 1 << 20:
-            raise ValueError(f"{self.path}: damaged OpenVDB file (a string of {n} bytes)")
-        data = self.f.read(n)
-        if len(data) != n:
-            raise ValueError(f"{self.path}: truncated OpenVDB file")
-        return data.decode(errors="replace")
+        return self.bytes(n, "a string").decode(errors="replace")
 
     def metadata(self) -> dict:
         (count,) = self.unpack("I")
+        if count * 12 > self.left():  # each entry takes at least three 4-byte lengths
+            raise self.damaged(f"{count} metadata entries")
         out = {}
         for _ in range(count):
             name, type_name = self.string(), self.string()
             (n,) = self.unpack("I")
-            data = self.f.read(n)
-            decode = {"string": lambda d: d.decode(errors="replace"), "vec3i": lambda d: struct.unpack("<iii", d),
-                      "bool": lambda d: bool(d[0]), "int64": lambda d: struct.unpack("<q", d)[0],
-                      "int32": lambda d: struct.unpack("<i", d)[0], "float": lambda d: struct.unpack("<f", d)[0],
-                      "double": lambda d: struct.unpack("<d", d)[0]}.get(type_name)
-            out[name] = decode(data) if decode is not None and len(data) == n else f"({type_name}, {n} bytes)"
+            data = self.bytes(n, f"metadata {printable(name, 40)}")
+            fmt = self._FIXED.get(type_name)
+            if fmt is not None:
+                if n != struct.calcsize(fmt):
+                    raise self.damaged(f"metadata {printable(name, 40)} of type {printable(type_name, 20)} has "
+                                       f"{n} bytes, not {struct.calcsize(fmt)}")
+                values = struct.unpack(fmt, data)
+                out[name] = values[0] if len(values) == 1 else values
+            elif type_name == "string":
+                out[name] = printable(data.decode(errors="replace"))
+            else:
+                out[name] = f"({printable(type_name, 40)}, {n} bytes)"
         return out
 
 
 def describe_vdb(path) -> list[str]:
     """Lines describing an OpenVDB file (its header, grids, their metadata and transforms) for
-    ``implc info``; ValueError if it is not one this can read (format 222 or later)."""
+    ``implc info``; ValueError if it is not one this can read (format 222 or later). Text from the file
+    is printed escaped (:func:`implc.untrusted.printable`)."""
     path = Path(path)
     with open(path, "rb") as f:
         r = _Reader(f, path)
@@ -395,23 +419,29 @@ def describe_vdb(path) -> list[str]:
         if version < 222 or not offsets:
             raise ValueError(f"{path}: OpenVDB format {version}{'' if offsets else ' without grid offsets'}; "
                              "implc describes format 222 and later")
-        f.read(36)  # the file's UUID
+        r.bytes(36, "the file's UUID")
         meta = r.metadata()
         (count,) = r.unpack("i")
-        lines = [f"file     {path} ({path.stat().st_size / 2**20:.1f} MiB), OpenVDB format {version} "
-                 f"(library {major}.{minor}){', by ' + meta['creator'] if 'creator' in meta else ''}"]
+        if not 0 <= count <= r.left() // 36:  # a grid's descriptor takes 36 bytes at least
+            raise r.damaged(f"a grid count of {count}")
+        creator = f", by {printable(str(meta['creator']), 80)}" if "creator" in meta else ""
+        lines = [f"file     {path} ({r.size / 2**20:.1f} MiB), OpenVDB format {version} "
+                 f"(library {major}.{minor}){creator}"]
         for _ in range(count):
             name, grid_type, _parent = r.string(), r.string(), r.string()
             grid_pos, _block_pos, end_pos = r.unpack("qqq")
+            here = f.tell()
+            if not here <= grid_pos < end_pos <= r.size:  # offsets only move forward: the walk ends
+                raise r.damaged(f"grid {printable(name, 40)} at offsets {grid_pos}..{end_pos}")
             f.seek(grid_pos)
             r.unpack("I")  # compression flags
             grid_meta = r.metadata()
             map_type = r.string()
             translation, scale = r.unpack("ddd"), r.unpack("ddd")
             box = (grid_meta.get("file_bbox_min"), grid_meta.get("file_bbox_max"))
-            lines.append(f"grid     {name}: {grid_type}, class {grid_meta.get('class', '?')}, "
-                         f"index box {box[0]} .. {box[1]}")
-            lines.append(f"         {map_type}: voxel size {tuple(scale)}, "
+            lines.append(f"grid     {printable(name, 80)}: {printable(grid_type, 80)}, class "
+                         f"{printable(str(grid_meta.get('class', '?')), 40)}, index box {box[0]} .. {box[1]}")
+            lines.append(f"         {printable(map_type, 80)}: voxel size {tuple(scale)}, "
                          f"voxel (0, 0, 0) centred at {tuple(translation)}")
             f.seek(end_pos)
     return lines

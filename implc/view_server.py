@@ -1,8 +1,11 @@
 """``implc view``'s local HTTP server: the viewer page and its chunks, to this machine only.
 
-It binds 127.0.0.1, answers only requests whose Host header names that address (or localhost) with its
-port (against DNS rebinding), and only under a random token that starts every path, as Jupyter's does
-(``http://127.0.0.1:PORT/TOKEN/``). Its routes are the page's files, ``meta.json``,
+It binds 127.0.0.1, answers only requests with exactly one Host header naming that address (or localhost)
+with its port (against DNS rebinding) and an origin-form target (``/TOKEN/...``, not
+``http://host/...``), and only under a random token that starts every path, as Jupyter's does
+(``http://127.0.0.1:PORT/TOKEN/``). A connection that sends nothing for :data:`READ_TIMEOUT` seconds is
+closed, at most :data:`MAX_CONNECTIONS` are served at once (others wait in the listen queue), and a client
+that hangs up early is forgotten without a traceback. Its routes are the page's files, ``meta.json``,
 ``chunks/<level>-<i>-<j>-<k>.bin`` and ``sections/<axis>-<index>-<level>.bin``, all served from memory:
 no file system path is ever read, anything
 else is 404 (a path with ``..`` or ``.`` segments, encoded or not, included), a missing or wrong token
@@ -13,6 +16,7 @@ from __future__ import annotations
 
 import re
 import secrets
+import sys
 import threading
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -23,6 +27,10 @@ from .viewer import ASSET_TYPES, asset
 
 DEFAULT_PORT = 8765
 PORT_TRIES = 20
+READ_TIMEOUT = 10.0
+"""Seconds a connection may stay silent before it is closed (a slow client holds no thread for ever)."""
+MAX_CONNECTIONS = 32
+"""Connections served at once; more wait until one ends."""
 CHUNK_PATH = re.compile(r"chunks/(\d{1,2})-(\d{1,7})-(\d{1,7})-(\d{1,7})\.bin")
 SECTION_PATH = re.compile(r"sections/(\d)-(\d{1,7})-(\d{1,2})\.bin")
 
@@ -39,7 +47,7 @@ class ViewServer:
         candidates = [port] if port is not None else [DEFAULT_PORT + i for i in range(PORT_TRIES)] + [0]
         for i, candidate in enumerate(candidates):
             try:
-                self.httpd = ThreadingHTTPServer(("127.0.0.1", candidate), handler)
+                self.httpd = _Server(("127.0.0.1", candidate), handler)
                 break
             except OSError:
                 if i == len(candidates) - 1:
@@ -92,11 +100,41 @@ class ViewServer:
         return None
 
 
+class _Server(ThreadingHTTPServer):
+    """One thread per connection, at most :data:`MAX_CONNECTIONS` at once; a client's hang-up is not an
+    error worth a traceback."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._slots = threading.BoundedSemaphore(MAX_CONNECTIONS)
+
+    def process_request(self, request, client_address):
+        self._slots.acquire()
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self._slots.release()
+            raise
+
+    def process_request_thread(self, request, client_address):
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._slots.release()
+
+    def handle_error(self, request, client_address):
+        exc = sys.exc_info()[1]
+        if isinstance(exc, (ConnectionError, TimeoutError, OSError)):
+            return  # the client went away (or was too slow): nothing to report
+        super().handle_error(request, client_address)
+
+
 class _Handler(BaseHTTPRequestHandler):
     owner: ViewServer
     server_version = "implc-view"
     sys_version = ""
     protocol_version = "HTTP/1.1"
+    timeout = READ_TIMEOUT  # the socket's timeout: a silent client's connection is closed
 
     def log_message(self, format, *args):  # noqa: A002 - the base class's name
         pass
@@ -115,8 +153,11 @@ class _Handler(BaseHTTPRequestHandler):
 
     def do_GET(self):
         owner = self.owner
-        if self.headers.get("Host", "") not in owner.hosts:
+        hosts = self.headers.get_all("Host") or []
+        if len(hosts) != 1 or hosts[0] not in owner.hosts:
             return self._send(HTTPStatus.FORBIDDEN, b"this server answers only to 127.0.0.1\n")
+        if not self.path.startswith("/") or self.path.startswith("//"):  # absolute, authority or scheme-relative
+            return self._send(HTTPStatus.BAD_REQUEST, b"origin-form request targets only\n")
         path = unquote(urlsplit(self.path).path)
         segments = path.split("/")
         if any(s in (".", "..") for s in segments) or "\\" in path or "\x00" in path:

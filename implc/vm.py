@@ -12,6 +12,7 @@ render setting) suggests the bounds [-1/S, 1/S]³; otherwise [-1, 1]³.
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass
 from fractions import Fraction
@@ -21,6 +22,10 @@ import sympy
 
 from .errors import CompileError
 from .ir import Tape, const_attr_from_fraction
+from .untrusted import decimal, printable, read_text
+
+MAX_BYTES = 1 << 30
+"""The largest ``.vm`` file read (fidget's models are a few MiB)."""
 
 
 class VmError(CompileError):
@@ -59,11 +64,9 @@ def load_vm(path) -> VmModel:
     """Read a ``.vm`` file; :class:`VmError` for an unknown op, an undefined or redefined name, a bad
     argument count or constant, an empty file."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise VmError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from None
-    return parse_vm(text, name=path.stem, where=str(path))
+    text = read_text(path, MAX_BYTES, VmError, "model file")
+    where = str(path) if not path.is_symlink() else f"{path} (a link to {os.path.realpath(path)})"
+    return parse_vm(text, name=path.stem, where=where)
 
 
 def parse_vm(text: str, name: str = "model", where: str = "<vm>") -> VmModel:
@@ -82,10 +85,10 @@ def parse_vm(text: str, name: str = "model", where: str = "<vm>") -> VmModel:
         if not words:
             continue
         if len(words) < 2:
-            raise VmError(f"{where}:{number}: expected 'NAME OP ARG...', got {line.strip()!r}")
+            raise VmError(f"{where}:{number}: expected 'NAME OP ARG...', got '{printable(line.strip(), 40)}'")
         target, op, args = words[0], words[1], words[2:]
         if target in names:
-            raise VmError(f"{where}:{number}: {target!r} is defined twice (a .vm tape is SSA)")
+            raise VmError(f"{where}:{number}: '{printable(target, 40)}' is defined twice (a .vm tape is SSA)")
         names[target] = last = _instruction(tape, names, op, args, where, number)
         count += 1
     if last is None:
@@ -93,15 +96,26 @@ def parse_vm(text: str, name: str = "model", where: str = "<vm>") -> VmModel:
     tape.outputs = [last]
     tape = tape.compacted()
     tape.verify()
-    half = 1.0 if scale is None or not scale > 0 else float(1 / scale)
+    half = _half_width(scale, where)
     return VmModel(name, tape, ((-half, half),) * 3, count)
+
+
+def _half_width(scale: Fraction | None, where) -> float:
+    """The bounds' half width 1/S for a header's ``--scale S`` (1 without one): VmError unless it is a
+    positive double the grid can be divided by."""
+    if scale is None:
+        return 1.0
+    if not Fraction(1, 10**300) <= scale <= 10**300:
+        raise VmError(f"{where}: the header's --scale is {'not positive' if scale <= 0 else 'out of range'} (it "
+                      "gives the bounds [-1/S, 1/S]³: S must be from 1e-300 to 1e300)")
+    return float(1 / scale)
 
 
 def _number(text, where, number) -> Fraction:
     try:
-        return Fraction(text)
-    except (ValueError, ZeroDivisionError):
-        raise VmError(f"{where}:{number}: {text!r} is not a number") from None
+        return decimal(text)
+    except ValueError as exc:
+        raise VmError(f"{where}:{number}: {exc}") from None
 
 
 def _instruction(tape: Tape, names, op, args, where, number) -> int:
@@ -113,12 +127,12 @@ def _instruction(tape: Tape, names, op, args, where, number) -> int:
         value = _number(args[0], where, number)
         return tape.const_bounds(*const_attr_from_fraction(value))
     if op not in _UNARY and op not in _BINARY:
-        raise VmError(f"{where}:{number}: unknown op {op!r} (known: {', '.join(OPS)})")
+        raise VmError(f"{where}:{number}: unknown op '{printable(op, 40)}' (known: {', '.join(OPS)})")
     _arity(op, args, 1 if op in _UNARY else 2, where, number)
     operands = []
     for arg in args:
         if arg not in names:
-            raise VmError(f"{where}:{number}: {arg!r} is not defined before its use")
+            raise VmError(f"{where}:{number}: '{printable(arg, 40)}' is not defined before its use")
         operands.append(names[arg])
     if op == "neg":
         return tape.neg(operands[0])

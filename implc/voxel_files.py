@@ -17,8 +17,12 @@ import numpy as np
 
 from .abi import MAX_DEPTH
 from .atomic_file import replacing
+from .errors import CompileError
+from .morton import morton_codes
+from .surface import check_bounds
+from .untrusted import ply_elements, ply_header, printable, regular_file
 from .vdb_file import describe_vdb, save_vdb
-from .voxelization import Voxels
+from .voxelization import Voxels, available_memory
 
 FORMAT_VERSION = 1
 SUFFIXES = (".npz", ".ply", ".npy", ".vdb", ".zarr")
@@ -70,9 +74,13 @@ def sniff(path) -> str:
     return next((fmt for magic, fmt in _MAGIC.items() if head.startswith(magic)), "")
 
 
+MAX_RATIO = 200
+"""The most an ``.npz`` member may inflate beyond 64 MiB (a Morton-ordered one deflates about 3×): more
+is a zip bomb, refused before it is inflated."""
+
+
 def _check_readable(path: Path) -> str:
-    if not path.is_file():
-        raise VoxelFileError(f"cannot read {path}: no such file")
+    regular_file(path, VoxelFileError)
     try:
         fmt = sniff(path)
     except OSError as exc:
@@ -92,20 +100,87 @@ def load_npz(path) -> Voxels:
         what = {".ply": "a PLY point cloud", ".npy": "a dense .npy occupancy grid", ".vdb": "an OpenVDB file"}[fmt]
         raise VoxelFileError(f"{path} is {what}: voxels are read back from the .npz files implc writes")
     try:
+        _check_inflation(path)
         with np.load(path, allow_pickle=False) as data:
             if "implc_voxels" not in data:
                 raise VoxelFileError(f"{path} is not an implc voxel file (no 'implc_voxels' entry)")
             missing = [k for k in ("coords", "normals", "depth", "bounds") if k not in data]
             if missing:
                 raise VoxelFileError(f"{path}: damaged implc voxel file, missing {', '.join(missing)}")
-            coords, normals, depth, bounds = data["coords"], data["normals"], data["depth"], data["bounds"]
-            inside = data["inside"] if "inside" in data else None
+            arrays = {k: data[k] for k in ("coords", "normals", "depth", "bounds", "inside") if k in data}
     except VoxelFileError:
         raise
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
-        raise VoxelFileError(f"cannot read {path}: damaged or truncated ({type(exc).__name__}: {exc})") from None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError) as exc:
+        raise VoxelFileError(f"cannot read {path}: damaged or truncated ({type(exc).__name__}: "
+                             f"{printable(str(exc), 120)})") from None
+    for name, value in arrays.items():
+        if not isinstance(value, np.ndarray):  # a member that is not a .npy array comes back as bytes
+            raise VoxelFileError(f"{path}: damaged implc voxel file, {name} is not an array")
+    coords, normals, depth, bounds = (arrays[k] for k in ("coords", "normals", "depth", "bounds"))
+    inside = arrays.get("inside")
     coords, normals, depth, bounds = _validated(path, coords, normals, depth, bounds)
-    return Voxels(coords, normals, depth, bounds, stats=None, inside=_validated_inside(path, inside, depth))
+    inside = _validated_inside(path, inside, depth)
+    _check_disjoint(path, coords, inside, depth)
+    return Voxels(coords, normals, depth, bounds, stats=None, inside=inside)
+
+
+def _check_inflation(path):
+    """VoxelFileError for an ``.npz`` whose members would inflate past :data:`MAX_RATIO` times their
+    stored size (beyond 64 MiB), or past the memory there is, before anything is inflated."""
+    with zipfile.ZipFile(path) as archive:
+        members = archive.infolist()
+        for m in members:
+            if m.file_size > (64 << 20) and m.file_size > MAX_RATIO * max(m.compress_size, 1):
+                raise VoxelFileError(f"{path}: member {printable(m.filename, 60)} would inflate from "
+                                     f"{m.compress_size} to {m.file_size} bytes (a zip bomb, or damaged)")
+        total = sum(m.file_size for m in members)
+        if total > available_memory():
+            raise VoxelFileError(f"{path}: its arrays take {total / 2**30:.1f} GiB, more than the memory "
+                                 f"available ({available_memory() / 2**30:.1f} GiB)")
+        for m in members:
+            if m.filename.endswith(".npy"):
+                with archive.open(m) as f:
+                    _check_npy_header(path, m, f)
+
+
+def _check_npy_header(path, member, f):
+    """VoxelFileError where a member's .npy header claims more bytes than the member holds (numpy would
+    allocate what the header says before finding the data missing)."""
+    from numpy.lib import format as npy
+    version = npy.read_magic(f)
+    shape, _, dtype = (npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0)(f)
+    if dtype.hasobject:
+        raise VoxelFileError(f"{path}: member {printable(member.filename, 60)} holds Python objects")
+    claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if claimed > member.file_size:
+        raise VoxelFileError(f"{path}: member {printable(member.filename, 60)} claims {claimed} bytes of array "
+                             f"in {member.file_size} (damaged)")
+
+
+def _octant_ranges(inside: np.ndarray, depth: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each inside octant's cells as a range [start, end) of Morton codes at ``depth``."""
+    levels = inside[:, 3].astype(np.int64)
+    shift = (3 * (depth - levels)).astype(np.uint64)
+    start = morton_codes(inside[:, :3].astype(np.uint32)) << shift
+    return start, start + (np.uint64(1) << shift)
+
+
+def _check_disjoint(path, coords, inside, depth):
+    """VoxelFileError where two inside octants overlap (a duplicate included) or an inside octant holds a
+    boundary voxel: either would count cells twice in the volume."""
+    if inside is None or not len(inside):
+        return
+    start, end = _octant_ranges(inside, depth)
+    order = np.argsort(start, kind="stable")
+    start, end = start[order], end[order]
+    if np.any(end[:-1] > start[1:]):
+        raise VoxelFileError(f"{path}: inside octants overlap (or repeat): a solid's octants are disjoint")
+    if len(coords):
+        codes = morton_codes(coords)
+        row = np.searchsorted(start, codes, side="right") - 1
+        held = (row >= 0) & (codes < end[np.maximum(row, 0)])
+        if held.any():
+            raise VoxelFileError(f"{path}: {int(held.sum())} boundary voxels lie inside inside octants")
 
 
 def _validated_inside(path, inside, depth):
@@ -114,11 +189,23 @@ def _validated_inside(path, inside, depth):
         return None
     if inside.ndim != 2 or inside.shape[1:] != (4,) or inside.dtype.kind not in "iu":
         raise VoxelFileError(f"{path}: inside must be an (N, 4) integer array, got {inside.dtype} {inside.shape}")
-    levels = inside[:, 3].astype(np.int64)
-    if len(inside) and (levels.min() < 1 or levels.max() > depth or inside[:, :3].min() < 0
-                        or np.any(inside[:, :3].astype(np.int64).max(axis=1) >= np.left_shift(1, levels))):
-        raise VoxelFileError(f"{path}: inside octants outside the grid of depth {depth}")
+    if len(inside):  # compared in the array's own type, before any cast could wrap a forged value
+        levels, cells = inside[:, 3], inside[:, :3]
+        if levels.min() < 1 or levels.max() > depth or cells.min() < 0 or cells.max() >= 1 << depth:
+            raise VoxelFileError(f"{path}: inside octants outside the grid of depth {depth}")
+        if np.any(cells.astype(np.int64).max(axis=1) >= np.left_shift(1, levels.astype(np.int64))):
+            raise VoxelFileError(f"{path}: inside octants outside the grid of depth {depth}")
     return inside.astype(np.int32, copy=False)
+
+
+def _usable_bounds(bounds: np.ndarray) -> bool:
+    """Bounds a surface may be compiled over (:func:`implc.surface.check_bounds`: finite, lo < hi, a width
+    and a finest cell that are ordinary doubles)."""
+    try:
+        check_bounds(bounds.tolist())
+    except CompileError:
+        return False
+    return True
 
 
 def _validated(path, coords, normals, depth, bounds):
@@ -126,10 +213,9 @@ def _validated(path, coords, normals, depth, bounds):
     if depth.shape != () or depth.dtype.kind not in "iu" or not 1 <= int(depth) <= MAX_DEPTH:
         raise VoxelFileError(f"{path}: depth must be an integer from 1 to {MAX_DEPTH}, got {depth!r}")
     depth = int(depth)
-    if bounds.shape != (3, 2) or bounds.dtype.kind != "f" or not np.all(np.isfinite(bounds)) \
-            or not np.all(bounds[:, 0] < bounds[:, 1]):
-        raise VoxelFileError(f"{path}: bounds must be three finite (lo, hi) pairs with lo < hi, got "
-                             f"{np.array2string(bounds, threshold=12)}")
+    if bounds.shape != (3, 2) or bounds.dtype.kind != "f" or not _usable_bounds(bounds):
+        raise VoxelFileError(f"{path}: bounds must be three finite (lo, hi) pairs with lo < hi and a finite, "
+                             f"non-zero cell size, got {printable(np.array2string(bounds, threshold=12), 200)}")
     if coords.ndim != 2 or coords.shape[1:] != (3,) or coords.dtype.kind not in "iu":
         raise VoxelFileError(f"{path}: coords must be an (N, 3) integer array, got {coords.dtype} {coords.shape}")
     if normals.shape != coords.shape or normals.dtype.kind != "f":
@@ -161,8 +247,9 @@ def describe(path) -> list[str]:
     if fmt == ".npy":
         try:
             grid = np.load(path, mmap_mode="r", allow_pickle=False)
-        except (OSError, ValueError, EOFError) as exc:
-            raise VoxelFileError(f"cannot read {path}: damaged or truncated ({exc})") from None
+        except Exception as exc:  # numpy's header parser raises several kinds (SyntaxError among them)
+            raise VoxelFileError(f"cannot read {path}: damaged or truncated .npy "
+                                 f"({type(exc).__name__}: {printable(str(exc), 120)})") from None
         if grid.ndim != 3 or grid.dtype != bool:
             raise VoxelFileError(f"{path}: not a dense occupancy grid (a 3-D bool array), got {grid.dtype} "
                                  f"{grid.shape}")
@@ -173,10 +260,26 @@ def describe(path) -> list[str]:
             return describe_vdb(path)
         except (ValueError, OSError) as exc:
             raise VoxelFileError(str(exc)) from None
-    header = _ply_header(path)
-    count = next((int(line.split()[2]) for line in header if line.startswith("element vertex ")), None)
+    header, body = ply_header(path, VoxelFileError)
+    count, row = _ply_vertices(path, header, body)
     comment = next((line[len("comment "):] for line in header if line.startswith("comment implc")), "")
-    return [f"file     {size}, PLY point cloud", f"points   {count}", *([f"comment  {comment}"] if comment else [])]
+    return [f"file     {size}, PLY point cloud", f"points   {count}",
+            *([f"comment  {printable(comment)}"] if comment else [])]
+
+
+def _ply_vertices(path, header: list[str], body: int) -> tuple[int, int]:
+    """(vertices, bytes per vertex) of a binary PLY point cloud, checked against the file's length."""
+    elements = ply_elements(path, header, body, VoxelFileError)
+    if [name for name, _, _ in elements] != ["vertex"]:
+        raise VoxelFileError(f"{path}: not a PLY point cloud (one 'element vertex COUNT' expected)")
+    if not any(line.startswith("format binary") for line in header):
+        raise VoxelFileError(f"{path}: an ASCII PLY; implc describes the binary point clouds it writes")
+    _, count, row = elements[0]
+    size = Path(path).stat().st_size
+    if count * row != size - body:
+        raise VoxelFileError(f"{path}: damaged PLY: {count} vertices of {row} bytes need {count * row} bytes "
+                             f"after the header, the file has {size - body}")
+    return count, row
 
 
 def _solid_lines(voxels) -> list[str]:
@@ -185,19 +288,6 @@ def _solid_lines(voxels) -> list[str]:
     lo, hi = voxels.volume_bounds()
     return [f"inside   {len(voxels.inside)} octants ({voxels.inside_voxels()} voxels)",
             f"volume   [{lo!r}, {hi!r}] (contains the volume where F < 0 within the bounds)"]
-
-
-def _ply_header(path) -> list[str]:
-    lines = []
-    with open(path, "rb") as f:
-        for raw in f:
-            line = raw.decode("ascii", errors="replace").strip()
-            lines.append(line)
-            if line == "end_header" or len(lines) > 64:
-                break
-    if lines[-1:] != ["end_header"]:
-        raise VoxelFileError(f"{path}: damaged PLY header")
-    return lines
 
 
 def save_ply(voxels, path) -> None:

@@ -15,6 +15,7 @@ shard.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,8 +23,11 @@ from pathlib import Path
 import numpy as np
 
 from .atomic_file import replacing_folder
+from .errors import CompileError
 from .morton import morton_codes
 from .subdivide import Subdivider, SubdivisionStats, default_workers
+from .surface import check_bounds
+from .untrusted import printable
 from .voxelization import _check_count, _check_depth, _check_leaf_options, paint_cubes, volume_bounds
 
 CHUNK = 128  # 2 MiB of bool: zarr recommends chunks of 1 MB or more; 64³ made writing twice as slow
@@ -191,6 +195,14 @@ def write_zarr(surface, depth, path, *, solid: bool = True, workers=None, progre
                      writer.shards_written, stats, time.perf_counter() - t0, solid)
 
 
+def _usable_bounds(bounds) -> bool:
+    try:
+        check_bounds(bounds)
+    except CompileError:
+        return False
+    return True
+
+
 def describe_zarr(path) -> list[str]:
     """Lines describing a Zarr store this module wrote (for ``implc info``); ValueError if it is not one."""
     import zarr
@@ -201,9 +213,21 @@ def describe_zarr(path) -> list[str]:
     about = array.attrs.get("implc")
     if not isinstance(about, dict):
         raise ValueError(f"{path} is a Zarr array but not one implc wrote (no 'implc' attribute)")
-    n = array.shape[0]
+    depth, bounds, solid = about.get("depth"), about.get("bounds"), about.get("solid")
+    if type(depth) is not int or not 1 <= depth <= 21:
+        raise ValueError(f"{path}: damaged implc Zarr store (depth {printable(repr(depth), 40)})")
+    n = 1 << depth
+    if tuple(array.shape) != (n, n, n) or str(array.dtype) != "bool":
+        raise ValueError(f"{path}: damaged implc Zarr store (a {printable(str(array.dtype), 20)} array "
+                         f"{'x'.join(map(str, array.shape))}, where depth {depth} means bool {n}³)")
+    if not (isinstance(bounds, list) and len(bounds) == 3 and all(
+            isinstance(b, list) and len(b) == 2 and all(type(v) in (int, float) and math.isfinite(v) for v in b)
+            and b[0] < b[1] for b in bounds)) or not _usable_bounds(bounds):
+        raise ValueError(f"{path}: damaged implc Zarr store (bounds {printable(repr(bounds), 60)})")
+    if type(solid) is not bool:
+        raise ValueError(f"{path}: damaged implc Zarr store (solid {printable(repr(solid), 40)})")
     return [f"file     {path}, Zarr v{array.metadata.zarr_format} {array.dtype} array "
             f"{'x'.join(map(str, array.shape))}, chunks {array.chunks}, shards {array.shards}",
-            f"grid     {n}³ (depth {about['depth']}) over {tuple(tuple(b) for b in about['bounds'])}",
-            f"content  {'the solid (inside and boundary)' if about['solid'] else 'the boundary voxels'}, "
-            f"indexed {about['index']}"]
+            f"grid     {n}³ (depth {depth}) over {tuple(tuple(b) for b in bounds)}",
+            f"content  {'the solid (inside and boundary)' if solid else 'the boundary voxels'}, "
+            f"indexed {printable(str(about.get('index', '?')), 80)}"]

@@ -242,7 +242,7 @@ def test_a_cut_away_shows_the_filled_section_of_a_solid():
 
 @pytest.mark.parametrize("argv, words", [
     (["--cut", "w=0"], "--cut must be AXIS=VALUE"),
-    (["--cut", "z=abc"], "--cut must be one number"),
+    (["--cut", "z=abc"], "--cut must be a number"),
     (["--cut", "z=5"], "must lie within the bounds"),
     (["--cut", "z=0", "--lod", "3"], "cannot be combined with --lod"),
 ])

@@ -6,6 +6,7 @@ export and inlined in a notebook's iframe."""
 
 import http.client
 import json
+import socket
 import os
 import shutil
 import signal
@@ -176,6 +177,47 @@ def test_requests_without_the_token_or_from_a_foreign_host_are_refused(server, c
                   "rebinding": (f"/{t}/meta.json", f"attacker.test:{port}")}[case]
     status, body, _ = _get(server, path, host=host)
     assert status == 403 and b'"depth"' not in body
+
+
+def _raw(server, request: bytes, read=True) -> bytes:
+    with socket.create_connection(("127.0.0.1", server.port), timeout=10) as sock:
+        sock.sendall(request)
+        return sock.recv(65536) if read else b""
+
+
+def test_doubled_hosts_and_absolute_targets_are_refused(server):
+    t, port = server.token, server.port
+    doubled = _raw(server, f"GET /{t}/meta.json HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nHost: evil.example\r\n\r\n"
+                   .encode())
+    assert doubled.startswith(b"HTTP/1.1 403") and b'"depth"' not in doubled
+    for target, status in ((f"http://evil.example/{t}/meta.json", b"400"), (f"http://127.0.0.1:{port}/{t}/meta.json",
+                                                                            b"400"),
+                           (f"//evil.example/{t}/meta.json", b"403")):  # http.server makes it /evil.example/...
+        answer = _raw(server, f"GET {target} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n".encode())
+        assert answer.startswith(b"HTTP/1.1 " + status) and b'"depth"' not in answer, target
+
+
+def test_clients_that_hang_up_or_stall_leave_no_traceback(server, capfd):
+    """Clients that send half a request and leave, or leave before reading a chunk, cost nothing and print
+    nothing; a stalled one holds no connection slot for ever (its socket times out)."""
+    import implc.view_server as view_server
+    t, port = server.token, server.port
+    for _ in range(50):
+        _raw(server, f"GET /{t}/chunks/0-0-0-0.bin HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n".encode(),
+             read=False)
+        _raw(server, b"GET /", read=False)
+    assert _get(server, f"/{t}/meta.json")[0] == 200
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "Exception" not in err
+    assert view_server.READ_TIMEOUT <= 30 and view_server._Handler.timeout == view_server.READ_TIMEOUT
+
+
+def test_connections_are_capped(flower):
+    """More silent connections than the cap: the server still answers once they time out, and never runs
+    more handlers at once than the cap."""
+    import implc.view_server as view_server
+    with ViewServer(flower[1], port=0).start() as s:
+        assert s.httpd._slots._initial_value == view_server.MAX_CONNECTIONS
 
 
 def test_other_methods_are_not_served(server):

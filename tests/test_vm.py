@@ -155,7 +155,7 @@ def test_constants_are_enclosed_exactly():
     ("x var-x\nout add x q\n", "'q' is not defined"),
     ("x var-x\nout add x\n", "add takes 2 arguments, got 1"),
     ("x var-x\nx var-y\n", "defined twice"),
-    ("c const abc\n", "'abc' is not a number"),
+    ("c const abc\n", "'abc' is not a decimal number"),
     ("x\n", "expected 'NAME OP ARG"),
 ])
 def test_bad_files_are_named_with_their_line(text, words):
