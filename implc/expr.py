@@ -46,6 +46,8 @@ def parse(text: str) -> sympy.Expr:
         raise ExprError(f"cannot parse {shorten(text, quoted=True)}: {exc.msg}") from None
     except (RecursionError, MemoryError):
         raise ExprError("the expression is nested too deeply") from None
+    except OverflowError:  # SymPy evaluates as it builds (cosh of cosh of ... asks mpmath whether it is zero)
+        raise ExprError(f"a number in {shorten(text, quoted=True)} is too large for SymPy to build") from None
 
 
 

@@ -86,6 +86,12 @@ PRECISION = 60
 """Decimal digits a numeric constant is evaluated to; it must agree with an evaluation at 80 to 50."""
 
 
+class UnevaluatedNumber(CompileError):
+    """A numeric constant SymPy cannot evaluate to certified digits (too large, or too ill-conditioned):
+    the lowering then builds it from its parts (each evaluated, or built so in turn) as ops that the
+    kernels enclose soundly, with an infinite bound where a part overflows."""
+
+
 EVALUATION_SECONDS = 20.0
 """The time one numeric constant's evaluation may take (enforced in the main thread, where the signal
 that interrupts it can be delivered)."""
@@ -137,9 +143,10 @@ def number_bounds(expr: sympy.Expr) -> tuple[float, float, float]:
         raise CompileError(f"evaluating the number {shorten(expr)} took more than {EVALUATION_SECONDS:g} s: give "
                            "it in a simpler closed form or as a literal") from None
     except sympy.core.evalf.PrecisionExhausted:
-        raise CompileError(f"the number {shorten(expr)} cannot be evaluated to {PRECISION} certified digits") from None
+        raise UnevaluatedNumber(f"the number {shorten(expr)} cannot be evaluated to {PRECISION} certified "
+                                "digits") from None
     except (OverflowError, MemoryError, RecursionError):
-        raise CompileError(f"the number {shorten(expr)} is too large to evaluate") from None
+        raise UnevaluatedNumber(f"the number {shorten(expr)} is too large to evaluate") from None
     if value.has(sympy.zoo, sympy.oo, -sympy.oo, sympy.nan):
         raise CompileError(f"unsupported non-finite number {shorten(expr)}")
     if not value.is_real or value.has(sympy.I):
@@ -149,7 +156,7 @@ def number_bounds(expr: sympy.Expr) -> tuple[float, float, float]:
     approx = _fraction_of_float(value)
     err = abs(approx) * Fraction(1, 10**50) + Fraction(1, 10**300)
     if abs(_fraction_of_float(check) - approx) > err:  # the two evaluations disagree: no digits to trust
-        raise CompileError(f"the number {shorten(expr)} cannot be evaluated to {PRECISION} certified digits")
+        raise UnevaluatedNumber(f"the number {shorten(expr)} cannot be evaluated to {PRECISION} certified digits")
     _, lo, _ = const_attr_from_fraction(approx - err)
     _, _, hi = const_attr_from_fraction(approx + err)
     nearest, _, _ = const_attr_from_fraction(approx)
@@ -264,7 +271,12 @@ class _Lowerer:
                 raise CompileError(f"unknown symbol {e.name} (use x, y, z, r, theta, phi)")
             return self._symbol(e.name)
         if self.numeric[e]:  # marked by lower() before any node is lowered
-            return t.const_bounds(*number_bounds(e))
+            try:
+                return t.const_bounds(*number_bounds(e))
+            except UnevaluatedNumber:
+                if not e.args:
+                    raise
+                self.numeric[e] = False  # built from its parts below, as a function of them
         if e.is_Add:
             terms = [self.lower(a) for a in e.args]
             acc = terms[0]

@@ -55,7 +55,8 @@ def run_cli(argv, timeout=30):
 
 
 # -- numbers -----------------------------------------------------------------------------------------
-@pytest.mark.parametrize("formula", ["y - exp(exp(exp(9)))", "y - exp(-exp(exp(9)))", "y + exp(exp(exp(exp(3))))"])
+@pytest.mark.parametrize("formula", ["y - exp(exp(exp(9)))", "y - exp(-exp(exp(9)))", "y + exp(exp(exp(exp(3))))",
+                                     "y - sinh(sinh(sinh(sinh(9))))", "x - exp(exp(exp(exp(10))))"])
 def test_astronomic_constants_compile_at_once(formula):
     """A constant far beyond the doubles' range is an infinite bound on its side (no exact power of two
     with 10^3500 digits is built): the subprocess ends within its timeout."""
@@ -64,9 +65,20 @@ def test_astronomic_constants_compile_at_once(formula):
     assert "does not exist" in out.stderr
 
 
+def test_a_constant_too_large_to_evaluate_is_built_from_its_parts():
+    """sinh(sinh(sinh(sinh(9)))) is beyond SymPy's certified evaluation: the lowering builds it as sinh of
+    an evaluated constant, whose enclosure is [largest double, inf]; F = y - that is negative everywhere."""
+    from sympy import sinh
+    surface = implc.compile(implc.y - sinh(sinh(sinh(sinh(9)))))
+    lo, hi = surface.interval(np.full((1, 3), -1.0), np.full((1, 3), 1.0))
+    assert hi[0] < 0 or not np.isfinite(hi[0])
+    assert surface.eval(np.zeros((1, 3)))[0] < 0
+
+
 def test_astronomic_constant_bounds():
-    from implc.lower import number_bounds
     from sympy import exp
+
+    from implc.lower import number_bounds
     nearest, lo, hi = number_bounds(exp(exp(exp(9))))
     assert lo == sys.float_info.max and hi == float("inf")
     nearest, lo, hi = number_bounds(exp(-exp(exp(9))))  # within the evaluation's own error of 1e-300
@@ -340,7 +352,8 @@ def test_fuzz_mesh_reader(tmp_path, samples, kind, mutation):
         pass
 
 
-VM = "# --scale 0.8\nx var-x\ny var-y\nz var-z\nc const 0.25\nxx square x\nyy square y\ns add xx yy\nd sub s c\nout max d z\n"
+VM = ("# --scale 0.8\nx var-x\ny var-y\nz var-z\nc const 0.25\nxx square x\nyy square y\ns add xx yy\n"
+      "d sub s c\nout max d z\n")
 
 
 @FUZZ
