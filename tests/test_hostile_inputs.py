@@ -440,3 +440,20 @@ def test_outputs_get_the_umask_or_keep_the_old_mode(tmp_path):
         assert (tmp_path / "m.stl").stat().st_mode & 0o777 == 0o600
     finally:
         os.umask(old)
+
+
+@FUZZ
+@given(mutation=mutations())
+def test_fuzz_zarr_reader(tmp_path_factory, mutation):
+    """The store's metadata (zarr.json: shape, chunks, shards, the implc attributes) mutated: implc info
+    describes a valid store or says in one line what is wrong."""
+    from implc.zarr_store import describe_zarr, write_zarr
+    folder = tmp_path_factory.mktemp("z")
+    write_zarr(implc.compile(shapes.sphere(0.7, (0, 0, 0))), 3, folder / "v.zarr", solid=False)
+    meta = folder / "v.zarr" / "zarr.json"
+    meta.write_bytes(mutated(meta.read_bytes(), mutation))
+    try:
+        lines = describe_zarr(folder / "v.zarr")
+        assert all("\x1b" not in line and "\n" not in line for line in lines)
+    except ValueError:
+        pass
