@@ -61,6 +61,15 @@ def check_bounds(bounds) -> tuple[tuple[float, float], ...]:
     return tuple(out)
 
 
+def usable_bounds(bounds) -> bool:
+    """Whether :func:`check_bounds` accepts ``bounds`` (for readers that say what is wrong themselves)."""
+    try:
+        check_bounds(bounds)
+    except CompileError:
+        return False
+    return True
+
+
 def _rows(name: str, array) -> np.ndarray:
     a = np.ascontiguousarray(array, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != 3:

@@ -17,9 +17,8 @@ import numpy as np
 
 from .abi import MAX_DEPTH
 from .atomic_file import replacing
-from .errors import CompileError
 from .morton import morton_codes
-from .surface import check_bounds
+from .surface import usable_bounds
 from .untrusted import ply_elements, ply_header, printable, regular_file
 from .vdb_file import describe_vdb, save_vdb
 from .voxelization import Voxels, available_memory
@@ -198,22 +197,12 @@ def _validated_inside(path, inside, depth):
     return inside.astype(np.int32, copy=False)
 
 
-def _usable_bounds(bounds: np.ndarray) -> bool:
-    """Bounds a surface may be compiled over (:func:`implc.surface.check_bounds`: finite, lo < hi, a width
-    and a finest cell that are ordinary doubles)."""
-    try:
-        check_bounds(bounds.tolist())
-    except CompileError:
-        return False
-    return True
-
-
 def _validated(path, coords, normals, depth, bounds):
     """(coords, normals, depth, bounds) checked to be what save_npz writes; VoxelFileError otherwise."""
     if depth.shape != () or depth.dtype.kind not in "iu" or not 1 <= int(depth) <= MAX_DEPTH:
         raise VoxelFileError(f"{path}: depth must be an integer from 1 to {MAX_DEPTH}, got {depth!r}")
     depth = int(depth)
-    if bounds.shape != (3, 2) or bounds.dtype.kind != "f" or not _usable_bounds(bounds):
+    if bounds.shape != (3, 2) or bounds.dtype.kind != "f" or not usable_bounds(bounds.tolist()):
         raise VoxelFileError(f"{path}: bounds must be three finite (lo, hi) pairs with lo < hi and a finite, "
                              f"non-zero cell size, got {printable(np.array2string(bounds, threshold=12), 200)}")
     if coords.ndim != 2 or coords.shape[1:] != (3,) or coords.dtype.kind not in "iu":

@@ -23,10 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from .atomic_file import replacing_folder
-from .errors import CompileError
 from .morton import morton_codes
 from .subdivide import Subdivider, SubdivisionStats, default_workers
-from .surface import check_bounds
+from .surface import usable_bounds
 from .untrusted import printable
 from .voxelization import _check_count, _check_depth, _check_leaf_options, paint_cubes, volume_bounds
 
@@ -195,14 +194,6 @@ def write_zarr(surface, depth, path, *, solid: bool = True, workers=None, progre
                      writer.shards_written, stats, time.perf_counter() - t0, solid)
 
 
-def _usable_bounds(bounds) -> bool:
-    try:
-        check_bounds(bounds)
-    except CompileError:
-        return False
-    return True
-
-
 def describe_zarr(path) -> list[str]:
     """Lines describing a Zarr store this module wrote (for ``implc info``); ValueError if it is not one."""
     import zarr
@@ -222,7 +213,7 @@ def describe_zarr(path) -> list[str]:
                          f"{'x'.join(map(str, array.shape))}, where depth {depth} means bool {n}³)")
     if not (isinstance(bounds, list) and len(bounds) == 3 and all(
             isinstance(b, list) and len(b) == 2 and all(type(v) in (int, float) and math.isfinite(v) for v in b)
-            and b[0] < b[1] for b in bounds)) or not _usable_bounds(bounds):
+            and b[0] < b[1] for b in bounds)) or not usable_bounds(bounds):
         raise ValueError(f"{path}: damaged implc Zarr store (bounds {printable(repr(bounds), 60)})")
     if type(solid) is not bool:
         raise ValueError(f"{path}: damaged implc Zarr store (solid {printable(repr(solid), 40)})")
