@@ -53,10 +53,12 @@ elif case.endswith(".vm"):  # a peer model: load_vm where the revision has it, e
                  "sqrt": lambda a: sympy.Pow(a, S.Half, evaluate=False), "exp": lambda a: sympy.exp(a, evaluate=False),
                  "ln": lambda a: sympy.log(a, evaluate=False), "sin": lambda a: sympy.sin(a, evaluate=False),
                  "cos": lambda a: sympy.cos(a, evaluate=False), "abs": lambda a: sympy.Abs(a, evaluate=False)}
-        binary = {"add": lambda a, b: sympy.Add(a, b, evaluate=False), "mul": lambda a, b: sympy.Mul(a, b, evaluate=False),
+        binary = {"add": lambda a, b: sympy.Add(a, b, evaluate=False),
+                  "mul": lambda a, b: sympy.Mul(a, b, evaluate=False),
                   "sub": lambda a, b: sympy.Add(a, sympy.Mul(-1, b, evaluate=False), evaluate=False),
                   "div": lambda a, b: sympy.Mul(a, sympy.Pow(b, -1, evaluate=False), evaluate=False),
-                  "min": lambda a, b: sympy.Min(a, b, evaluate=False), "max": lambda a, b: sympy.Max(a, b, evaluate=False)}
+                  "min": lambda a, b: sympy.Min(a, b, evaluate=False),
+                  "max": lambda a, b: sympy.Max(a, b, evaluate=False)}
         for line in text.splitlines():
             w = line.split("#")[0].split()
             if not w:

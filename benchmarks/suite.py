@@ -26,7 +26,7 @@ from implc import scene
 from implc.subdivide import default_workers
 
 PAPER_SCENES = ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4")
-PAPER_TABLE1 = {  # seconds on the SGI Challenge, 1..7 slaves (Stolte & Caubet, Table 1)
+PAPER_TABLE1 = {  # seconds on the SGI Challenge, 1..7 slaves (Stolte & Kaufman, Table 1)
     "paper_blobs": [88, 45, 34, 26, 21, 20, 14],
     "paper_sin4_sin8": [111, 58, 38, 31, 28, 24, 21],
     "paper_sin3_sin4": [71, 35, 23, 17, 16, 14, 11],
@@ -435,7 +435,10 @@ def sphere_union(count=50, seed=7):
 
     from implc import shapes
     rng = random.Random(seed)
-    centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
+
+    def centre():
+        return tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
+
     return shapes.union(*[shapes.sphere(sympy.Rational(rng.randint(6, 14), 100), centre()) for _ in range(count)])
 
 

@@ -79,8 +79,8 @@ def main(argv=None):
         elif np.nanmin(np.abs(v)) <= 1e-12 * max(span, 1e-300):
             touching += 1
     n = len(picked)
-    print(f"| model | depth | voxels | sign-change cells | extra voxels | sampled | F = 0 at a point | "
-          f"sign change inside | neither |")
+    print("| model | depth | voxels | sign-change cells | extra voxels | sampled | F = 0 at a point | "
+          "sign change inside | neither |")
     print("|---|---|---|---|---|---|---|---|---|")
     print(f"| {args.model} | {1 << args.depth}³ | {len(kept)} | {int(changes.sum())} | {len(extra)} | {n} | "
           f"{touching / n:.1%} | {crossing / n:.1%} | {(n - touching - crossing) / n:.1%} |")

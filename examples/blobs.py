@@ -1,4 +1,7 @@
-"""Blended blobs with the paper's polynomial g(d) = (d² − R²)⁴ / R⁸."""
+"""Blended blobs
+=============
+
+Blended blobs with the paper's polynomial g(d) = (d² − R²)⁴ / R⁸."""
 
 import os
 

@@ -1,4 +1,7 @@
-"""Constructive solid geometry with Min/Max: a box, minus a sphere, plus a torus, then its octree LOD."""
+"""CSG and levels of detail
+========================
+
+Constructive solid geometry with Min/Max: a box, minus a sphere, plus a torus, then its octree LOD."""
 
 import os
 

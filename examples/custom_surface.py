@@ -1,4 +1,7 @@
-"""Define your own surface with SymPy, voxelize it and render it."""
+"""A surface of your own
+=====================
+
+Define your own surface with SymPy, voxelize it and render it."""
 
 import os
 

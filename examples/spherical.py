@@ -1,4 +1,7 @@
-"""A surface given in spherical coordinates: r, theta (polar) and phi (azimuth) are ready-made symbols."""
+"""A surface in spherical coordinates
+==================================
+
+A surface given in spherical coordinates: r, theta (polar) and phi (azimuth) are ready-made symbols."""
 
 import os
 

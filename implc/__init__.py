@@ -15,7 +15,8 @@ _EXPORTS = {
 
 __all__ = ["NATURAL", "TIGHTEST", "CompileError", "Mesh", "Surface", "Voxels", "compile", "load_vm", "mesh", "phi",
            "r", "shapes", "theta", "voxelize", "x", "y", "z"]
-__version__ = "0.1.0"
+__version__ = "0.2.0"
+"""The one place the version is set: the build reads it (pyproject.toml), and so does ``implc --version``."""
 
 
 def __getattr__(name: str):

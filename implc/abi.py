@@ -55,7 +55,7 @@ class Entry:
 
 def _entry(name, params: str, returns=None) -> Entry:
     """``params``: "name:kind name:kind ..." (kinds as in _LLVM_KINDS)."""
-    return Entry(name, tuple(tuple(p.split(":")) for p in params.split()), returns)
+    return Entry(name, tuple((p.split(":")[0], p.split(":")[1]) for p in params.split()), returns)
 
 
 # -- a surface's kernels (implc.codegen.kernels); n is a multiple of the vector width -------------------

@@ -122,7 +122,7 @@ def _surface_from_args(args):
     return sc.name, compile_surface(sc.surface, bounds), sc
 
 
-TIGHTNESS = {"natural": {"mean_value_levels": 0, "refine_leaves": False}, "default": {},
+TIGHTNESS: dict[str, dict] = {"natural": {"mean_value_levels": 0, "refine_leaves": False}, "default": {},
              "tightest": {"mean_value_levels": 1, "refine_leaves": "auto"}}
 """--tightness: implc.NATURAL, the default and implc.TIGHTEST (spelt out: importing them would load NumPy)."""
 
@@ -360,6 +360,8 @@ def cmd_bench(argv) -> int:
     if not suite.is_file():
         raise UsageError(f"'implc bench' runs the benchmark suite of a source checkout; there is none at {suite}")
     spec = importlib.util.spec_from_file_location("implc_benchmark_suite", suite)
+    if spec is None or spec.loader is None:
+        raise UsageError(f"cannot load the benchmark suite at {suite}")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module.main(argv)
@@ -416,11 +418,8 @@ def cmd_demo(args) -> int:
 
 # -- entry point -----------------------------------------------------------------------------------
 def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-    try:
-        return version("implc")
-    except PackageNotFoundError:  # a source tree that was never installed
-        return "unknown (not installed)"
+    from . import __version__  # the package's __init__ imports nothing: still no NumPy at start-up
+    return __version__
 
 
 def _parser():

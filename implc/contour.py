@@ -96,7 +96,7 @@ def _oriented_triangles(points: np.ndarray) -> list[list[list[tuple[int, int]]]]
 
     The orientation does not depend on where on its edge each vertex lies: the plane of every triangle
     separates the tetrahedron's inside vertices from its outside ones, so it is read off the midpoints."""
-    table = []
+    table: list[list[list[tuple[int, int]]]] = []
     for case in range(16):
         inside = [k for k in range(4) if case >> k & 1]
         outside = [k for k in range(4) if not case >> k & 1]
@@ -216,7 +216,7 @@ class _Grid:
         self.runtime = surface.runtime
         self._corners: _KeyIndex | None = None  # the corners sampled so far, and F there
         self._corner_values = np.zeros(0)
-        self._faces = {}  # (axis, side): F at the corners of that face of the bounds
+        self._faces: dict[tuple[int, int], np.ndarray] = {}  # (axis, side): F at the corners of that face of the bounds
         self.n = 1 << depth
         self.k = self.n + 1  # corners per axis
         self.lo = np.array([float(lo) for lo, _ in bounds])
@@ -286,6 +286,7 @@ class _Grid:
         """F at the corners ``keys`` of a face of the bounds, sampled once (and remembered by the face): most
         faces are outside the solid everywhere, and their corners never enter the corner index."""
         if (axis, side) not in self._faces:
+            assert keys is not None, "a face's corners are named the first time it is sampled"
             self._faces[axis, side] = self.values(self.corner_points(keys.reshape(-1))).reshape(keys.shape)
         return self._faces[axis, side]
 
@@ -309,6 +310,8 @@ class _Grid:
         if not len(keys):
             return a, b, fa, fb
         index = self._corners
+        if index is None:
+            raise AssertionError("edge ends looked up before any corner was sampled")
         missing = self.runtime.edge_ends(keys.ctypes.data, len(keys), self.geometry.ctypes.data,
                                          index.table.ctypes.data, index.bits, self._corner_values.ctypes.data,
                                          a.ctypes.data, b.ctypes.data, fa.ctypes.data, fb.ctypes.data)
@@ -320,10 +323,10 @@ class _Grid:
 class _Points:
     """Points added to the tetrahedralization (cell points or face points): sorted ids, positions, F there."""
 
-    def __init__(self, grid: _Grid, ids: np.ndarray, positions: np.ndarray):
+    def __init__(self, grid: _Grid | None, ids: np.ndarray, positions: np.ndarray):
         order = np.argsort(ids)
         self.ids, self.positions = ids[order], positions[order]
-        self.values = grid.values(self.positions) if len(ids) else np.zeros(0)  # grid: None if empty
+        self.values = grid.values(self.positions) if grid is not None and len(ids) else np.zeros(0)  # None: empty
         self.inside = self.values < 0
 
     def find(self, ids: np.ndarray) -> np.ndarray:
@@ -336,7 +339,7 @@ class _Points:
 
 def _both_signs(flags: np.ndarray) -> np.ndarray:
     """Rows of sign flags (one row per cell, face or square) that hold both signs: the surface crosses it."""
-    return flags.any(1) & ~flags.all(1)
+    return np.asarray(flags.any(1) & ~flags.all(1))
 
 
 def _grid_edge_key(corner_keys, code):
@@ -570,10 +573,10 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
     for axis in range(3):
         b, c = _face_axes(axis)
         for side in (0, 1):
-            cells = np.zeros((n, n, 3), np.int64)
-            cells[..., axis] = side * (n - 1)
-            cells[..., b], cells[..., c] = u, v
-            cells = cells.reshape(-1, 3)
+            grid_of_cells = np.zeros((n, n, 3), np.int64)
+            grid_of_cells[..., axis] = side * (n - 1)
+            grid_of_cells[..., b], grid_of_cells[..., c] = u, v
+            cells = grid_of_cells.reshape(-1, 3)
             local, corner_keys = _face_corner_keys(grid, cells, axis, side)
             corners = np.zeros((n + 1, n + 1, 3), np.int64)
             corners[..., axis] = side * n
@@ -597,8 +600,7 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
                     for triple in CAP_POLYGONS[polygon_case]:
                         out.append(np.stack([selves[pick, i] if i == j else edges[pick, i] for i, j in triple], 1))
     triangles = np.concatenate(out) if out else np.zeros((0, 3), np.int64)
-    seeds = np.concatenate(seeds) if seeds else np.zeros((0, 3), np.int64)
-    return triangles, seeds
+    return triangles, (np.concatenate(seeds) if seeds else np.zeros((0, 3), np.int64))
 
 
 # -- features ----------------------------------------------------------------------------------------
@@ -756,7 +758,7 @@ def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: 
     else:
         a, b, fa, fb = a[on_edge], b[on_edge], fa[on_edge], fb[on_edge]
         positions[on_edge] = _edge_roots(grid, keys[on_edge], a, b, fa, fb)
-    if witnesses:
+    if ends is not None:
         ends[on_edge, 0], ends[on_edge, 1] = a, b
     return positions, on_edge, ends
 

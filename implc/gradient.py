@@ -139,7 +139,8 @@ DERIVATIVE_RULES = {
     "neg": _d_neg, "scale": _d_scale, "add": _d_add, "sub": _d_sub, "mul": _d_mul, "div": _d_div, "powi": _d_powi,
     "powf": _d_powf, "sqrt": _d_sqrt, "cbrt": _d_cbrt, "exp": _d_exp, "log": _d_log, "sin": _d_sin,
     "cos": _d_cos, "tan": _d_tan, "asin": _d_asin, "acos": _d_acos, "atan": _d_atan, "atan2": _d_atan2,
-    "atan2_wrapped": _d_atan2_wrapped, "cut_guard": _d_cut_guard, "sinh": _d_sinh, "cosh": _d_cosh, "tanh": _d_tanh, "abs": _d_abs,
+    "atan2_wrapped": _d_atan2_wrapped, "cut_guard": _d_cut_guard, "sinh": _d_sinh, "cosh": _d_cosh, "tanh": _d_tanh,
+    "abs": _d_abs,
     "min": _d_min, "max": _d_max, "select_lt": _d_select("select_lt"), "select_le": _d_select("select_le"),
 }
 """One derivative rule per op: (tape, node, args, attr, derivatives of args) -> derivative node."""
@@ -161,7 +162,7 @@ def with_gradient(tape: Tape) -> Tape:
         if op == "const":
             derivs[i] = (out.const(0),) * 3
         elif op == "var":
-            derivs[i] = tuple(out.const(1 if k == attr else 0) for k in range(3))
+            derivs[i] = (out.const(int(attr == 0)), out.const(int(attr == 1)), out.const(int(attr == 2)))
         else:
             rule = DERIVATIVE_RULES[op]
             derivs[i] = tuple(rule(out, i, new_args, attr, [derivs[a][k] for a in new_args]) for k in range(3))

@@ -13,6 +13,7 @@ import math
 import sys
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -87,7 +88,7 @@ class Tape:
     """A hash-consed SSA tape: build it with the op methods, read it through ``nodes`` and ``outputs``."""
 
     def __init__(self):
-        self.nodes: list[tuple[str, tuple[int, ...], object]] = []
+        self.nodes: list[tuple[str, tuple[int, ...], Any]] = []  # attr: per op (an axis, bounds, an exponent...)
         self.outputs: list[int] = []
         self._index: dict[tuple, int] = {}
         self._nonnegative: list[bool] = []

@@ -102,7 +102,8 @@ class LodChunks:
         shift = np.uint64(3 * (point_level - level))
         code = morton_codes(np.array([cell], dtype=np.int64))[0]
         lo, hi = code << shift, (code + np.uint64(1)) << shift
-        return tuple(int(v) for v in np.searchsorted(keys, np.array([lo, hi], dtype=np.uint64)))
+        first, last = np.searchsorted(keys, np.array([lo, hi], dtype=np.uint64))
+        return int(first), int(last)
 
     def count(self, level: int, cell) -> int:
         if not 0 <= level <= self.max_chunk_level or any(not 0 <= c < (1 << level) for c in cell):

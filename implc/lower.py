@@ -328,14 +328,14 @@ class _Lowerer:
                 denom.append(self._lower_pow(factor.base, -factor.exp))
             else:
                 numer.append(self.lower(factor))
-        acc = numer[0] if numer else None
+        acc = numer[0] if numer else t.const(1)
         for f in numer[1:]:
             acc = t.mul(acc, f)
         if denom:
             d = denom[0]
             for f in denom[1:]:
                 d = t.mul(d, f)
-            acc = t.div(acc if acc is not None else t.const(1), d)
+            acc = t.div(acc, d)
         if coeff == -1:
             return t.neg(acc)
         if coeff != 1:
@@ -405,7 +405,7 @@ class _Lowerer:
             # condition d² <= R² and its value (d² - R²)⁴ then share one d² - R² node)
             g_expr = cond.lhs - cond.rhs
             g = self.lower(g_expr)
-            kind = "continuous" if branches and _meets_on_boundary(*branches, g_expr) else None
+            kind = "continuous" if branches and _meets_on_boundary(branches[0], branches[1], g_expr) else None
             if isinstance(cond, sympy.StrictLessThan):
                 return t.node("select_lt", (g, then, otherwise), kind)
             if isinstance(cond, sympy.LessThan):

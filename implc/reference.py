@@ -15,6 +15,8 @@ compiled kernels against, op by op (the LLVM emitters in :mod:`implc.codegen` mi
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from . import rounding as R
@@ -28,7 +30,7 @@ def _point_select(g, cond, a, b):
     return np.where(np.isnan(g), np.nan, np.where(cond, a, b))
 
 
-POINT_RULES = {
+POINT_RULES: dict[str, Any] = {
     "neg": np.negative, "add": np.add, "sub": np.subtract, "mul": np.multiply, "div": np.divide,
     "sqrt": np.sqrt, "cbrt": lambda a: np.where(a < 0, np.nan, np.cbrt(a)), "exp": np.exp, "log": np.log,
     "sin": np.sin, "cos": np.cos, "tan": np.tan, "asin": np.arcsin, "acos": np.arccos, "atan": np.arctan,
@@ -337,7 +339,8 @@ def i_atan2_wrapped(args, attr):
 
 INTERVAL_RULES = {
     "neg": i_neg, "scale": i_scale, "powi": i_powi, "powf": i_powf, "add": i_add, "sub": i_sub, "mul": i_mul,
-    "div": i_div, "sqrt": i_sqrt, "cbrt": i_cbrt, "exp": i_exp, "log": i_log, "sin": i_sin, "cos": i_cos, "tan": i_tan, "asin": i_asin, "acos": i_acos,
+    "div": i_div, "sqrt": i_sqrt, "cbrt": i_cbrt, "exp": i_exp, "log": i_log, "sin": i_sin, "cos": i_cos, "tan": i_tan,
+    "asin": i_asin, "acos": i_acos,
     "atan": i_atan, "atan2": i_atan2, "atan2_wrapped": i_atan2_wrapped, "sinh": i_sinh, "cosh": i_cosh,
     "tanh": i_tanh, "abs": i_abs, "min": i_min, "max": i_max, "select_lt": i_select_lt,
     "select_le": i_select_le, "cut_guard": i_cut_guard,

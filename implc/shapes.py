@@ -24,12 +24,12 @@ def _squared_distance(center):
 
 
 def sphere(radius=1, center=(0, 0, 0)):
-    """Signed-distance sphere: |p − c| − radius."""
+    """Signed-distance sphere: ‖p − c‖ − radius."""
     return sympy.sqrt(_squared_distance(center)) - radius
 
 
 def box(half_sizes=(1, 1, 1), center=(0, 0, 0)):
-    """Axis-aligned box as max(|p − c| − h) over the axes (exact inside, a lower bound outside)."""
+    """Axis-aligned box as max(abs(pᵢ − cᵢ) − hᵢ) over the axes (exact inside, a lower bound outside)."""
     hx, hy, hz = _vec(half_sizes, "half_sizes")
     cx, cy, cz = _vec(center, "center")
     return sympy.Max(sympy.Abs(x - cx) - hx, sympy.Abs(y - cy) - hy, sympy.Abs(z - cz) - hz)
@@ -43,7 +43,7 @@ def torus(major=1, minor=sympy.Rational(1, 4), center=(0, 0, 0)):
 
 
 def cylinder(radius=1, height=2, center=(0, 0, 0)):
-    """Capped cylinder along z: max(radial distance − radius, |z − cz| − height / 2)."""
+    """Capped cylinder along z: max(radial distance − radius, abs(z − cz) − height / 2)."""
     cx, cy, cz = _vec(center, "center")
     return sympy.Max(sympy.sqrt((x - cx) ** 2 + (y - cy) ** 2) - radius, sympy.Abs(z - cz) - height / sympy.S(2))
 
@@ -55,7 +55,7 @@ def blend(squared_distance, radius):
 
 
 def blobs(centers, radius, threshold, weights=None):
-    """Blended blobs: threshold − Σ wᵢ g(|p − cᵢ|), negative inside (where the field exceeds threshold)."""
+    """Blended blobs: threshold − Σ wᵢ g(‖p − cᵢ‖), negative inside (where the field exceeds threshold)."""
     centers = list(centers)
     if not centers:
         raise ValueError("blobs needs at least one center")

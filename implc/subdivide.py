@@ -397,7 +397,7 @@ class Subdivider:
 
     def _parallel(self, cells, level, emit, progress, placement):
         n_tasks = len(cells)
-        results: dict[int, tuple] = {}
+        results: dict[int, _TaskResult] = {}
         errors: list[BaseException] = []
         lock = threading.Lock()
         finished = threading.Event()  # all tasks stored, or an error: the only thing the caller waits for

@@ -173,7 +173,8 @@ class Surface:
     def from_cache(self) -> bool:
         """Whether this surface's native code was loaded from the disk cache (no code generation, no LLVM):
         its compiled kernels, or for the tape engine the shared engine (nothing of the surface's own)."""
-        return self._engine.native.from_cache if self.engine == "tape" else self._native.from_cache
+        native = self._engine.native if self._engine is not None else self._native
+        return native is not None and native.from_cache
 
     @property
     def runtime(self) -> Runtime:
@@ -307,10 +308,12 @@ class Surface:
             raise ValueError("choose one of mean_value and monotone")
         if mean_value or monotone:
             kernel = self.kernel(abi.INTERVAL_MONOTONE if monotone else abi.INTERVAL_MVF)
-            return tuple(self._run(kernel, [lo, hi], [(), ()], extra=(None, None)))
-        if self.engine == "tape":
-            return tuple(self._run(self._tape_kernel(self.tape_engine.interval, choices=True), [lo, hi], [(), ()]))
-        return tuple(self._run(self.kernel(abi.INTERVAL), [lo, hi], [(), ()], extra=(None, None)))
+            f_lo, f_hi = self._run(kernel, [lo, hi], [(), ()], extra=(None, None))
+        elif self.engine == "tape":
+            f_lo, f_hi = self._run(self._tape_kernel(self.tape_engine.interval, choices=True), [lo, hi], [(), ()])
+        else:
+            f_lo, f_hi = self._run(self.kernel(abi.INTERVAL), [lo, hi], [(), ()], extra=(None, None))
+        return f_lo, f_hi
 
 
 def compile(expr, bounds=None, *, vector_width: int = WIDTH, rounding: str = "auto", engine: str = "auto") -> Surface:

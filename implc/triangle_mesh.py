@@ -156,7 +156,7 @@ def load(path) -> Mesh:
         loaded = trimesh.load(str(path), force="mesh", process=False)
     except Exception as error:  # trimesh raises many kinds for a bad file
         raise MeshFileError(f"cannot read {path} as a mesh: {printable(str(error), 160)}") from None
-    vertices, faces = np.asarray(loaded.vertices), np.asarray(loaded.faces)
+    vertices, faces = np.asarray(getattr(loaded, "vertices", ())), np.asarray(getattr(loaded, "faces", ()))
     if vertices.ndim != 2 or len(faces) == 0:
         raise MeshFileError(f"{path} holds no triangles")
     return Mesh(vertices, faces)

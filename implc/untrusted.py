@@ -111,7 +111,8 @@ PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort":
 def ply_header(path, error=ValueError) -> tuple[list[str], int]:
     """A PLY file's header lines (at most 64, each read with a bound) and the offset where its body
     starts; ``error`` if there is no ``end_header`` within them."""
-    lines, offset = [], 0
+    lines: list[str] = []
+    offset = 0
     with open(path, "rb") as f:
         while len(lines) <= 64:
             raw = f.readline(1 << 12)  # bounded: a body without line breaks is not read whole

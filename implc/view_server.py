@@ -55,7 +55,7 @@ class ViewServer:
         self.httpd.daemon_threads = True
         self.port = self.httpd.server_address[1]
         self.hosts = {f"127.0.0.1:{self.port}", f"localhost:{self.port}"}
-        self._thread = None
+        self._thread: threading.Thread | None = None
 
     @property
     def url(self) -> str:

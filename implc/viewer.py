@@ -55,7 +55,7 @@ def embed_html(chunks: LodChunks, *, max_bytes: int = EMBED_BYTES, budget: int =
     """One HTML document holding the viewer and the coarsest chunks up to ``max_bytes`` (the finest
     levels that fit are shown; nothing is fetched)."""
     data = {"meta": chunks.meta(budget),
-            "chunks": {f"{c[0]}-{c[1]}-{c[2]}-{c[3]}": base64.b64encode(chunks.chunk(*c)).decode("ascii")
+            "chunks": {f"{c[0]}-{c[1]}-{c[2]}-{c[3]}": base64.b64encode(chunks.chunk(*c) or b"").decode("ascii")
                        for c in chunks.chunk_ids(max_bytes)}}
     page = asset("index.html").decode()
     style = f"<style>{asset('viewer.css').decode()}</style>"

@@ -139,7 +139,7 @@ def _instruction(tape: Tape, names, op, args, where, number) -> int:
     if op == "square":
         return tape.powi(operands[0], 2)
     if op in _UNARY:
-        return tape.unary(_UNARY[op], operands[0])
+        return tape.unary(_UNARY[op] or op, operands[0])
     a, b = operands
     if op in ("add", "sub", "mul", "div"):
         return getattr(tape, op)(a, b)

@@ -43,7 +43,7 @@ class Voxels:
     (``voxelize(..., solid=True)``) also ``inside``: the octants whose whole box lies where F < 0, as
     (n, 4) int32 rows (i, j, k, level), each a cube of 2^(depth − level) voxels per axis, never expanded."""
 
-    def __init__(self, coords, normals, depth, bounds, stats: SubdivisionStats, storage=None, inside=None,
+    def __init__(self, coords, normals, depth, bounds, stats: SubdivisionStats | None, storage=None, inside=None,
                  surface=None):
         """``coords`` may be None when ``storage`` is an :class:`Octree`: they are read from the tree on
         first use (the octree holds them; the default voxelization stores no other copy). ``surface``: the
@@ -64,6 +64,7 @@ class Voxels:
     def coords(self) -> np.ndarray:
         """(N, 3) uint32 cell indices in Morton order (from the octree on first use where not stored)."""
         if self._coords is None:
+            assert self._octree is not None  # checked in __init__
             coords, payload = self._octree.traverse(self.depth)
             if len(payload) != len(self.normals) or np.any(payload != np.arange(len(payload))):
                 raise AssertionError("the octree's voxels are not its payload in order")
@@ -332,7 +333,7 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     inside = subdivider.inside if solid else None
     if isinstance(result, Octree):
         result.normals = normals  # the octree's payload is the voxels' normals array itself
-        if solid:
+        if inside is not None:
             result.add_inside(inside)
     stats.seconds["finish"] = time.perf_counter() - t1
     stats.seconds["setup"] = t0 - t_start - stats.seconds["plan"]

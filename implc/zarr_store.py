@@ -19,6 +19,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +38,7 @@ def _create(path: Path, depth: int, bounds, solid: bool):
     import zarr
     n = 1 << depth
     shard = min(SHARD, n)
-    about = {"depth": depth, "bounds": [list(b) for b in bounds], "solid": solid,
+    about: dict[str, Any] = {"depth": depth, "bounds": [list(b) for b in bounds], "solid": solid,
              "index": "[i, j, k]: cell (i, j, k) of the grid"}
     return zarr.create_array(store=str(path), shape=(n, n, n), chunks=(min(CHUNK, shard),) * 3, shards=(shard,) * 3,
                              dtype="bool", fill_value=False, zarr_format=3, overwrite=True, attributes={"implc": about})

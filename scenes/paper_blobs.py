@@ -1,10 +1,11 @@
-"""Scene 1 of Stolte & Caubet: ten spheres blended with the polynomial g(d) = (d² − R²)⁴ / R⁸.
+"""Scene 1 of Stolte & Kaufman: ten spheres blended with the polynomial g(d) = (d² − R²)⁴ / R⁸.
 
 F(x, y, z) = C − Σᵢ g(|p − cᵢ|), negative inside. The paper does not list its centres or constants; these
 are ours: ten centres on a ring of radius 0.6 in the xy plane, undulating ±0.25 in z, blob radius
 R = 2/5 and threshold C = 1/4 (a lone blob then has radius R·sqrt(1 − C^¼) ≈ 0.22, and neighbours,
 0.37 apart, blend into a necklace).
-Source: Stolte & Caubet, "Parallel voxelization of implicit surfaces" (Fig. 4).
+Source: Stolte & Kaufman, "Parallel spatial enumeration of implicit surfaces using interval arithmetic
+for octree generation and its direct visualization" (Fig. 4).
 """
 
 import math

@@ -1,6 +1,6 @@
-"""Scene 3 of Stolte & Caubet: sin(3θ)·sin(4φ) − r = 0, a surface given in spherical coordinates.
+"""Scene 3 of Stolte & Kaufman: sin(3θ)·sin(4φ) − r = 0, a surface given in spherical coordinates.
 
-Source: Stolte & Caubet, Fig. 5(b).
+Source: Stolte & Kaufman, Fig. 5(b).
 """
 
 import sympy

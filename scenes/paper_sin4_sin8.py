@@ -1,6 +1,6 @@
-"""Scene 2 of Stolte & Caubet: sin(4θ)·sin(8φ) − r = 0, a surface given in spherical coordinates.
+"""Scene 2 of Stolte & Kaufman: sin(4θ)·sin(8φ) − r = 0, a surface given in spherical coordinates.
 
-r ≤ |sin 4θ · sin 8φ| ≤ 1, so the unit cube holds it. Source: Stolte & Caubet, Fig. 5(a).
+r ≤ |sin 4θ · sin 8φ| ≤ 1, so the unit cube holds it. Source: Stolte & Kaufman, Fig. 5(a).
 """
 
 import sympy

@@ -174,7 +174,8 @@ def test_log_relative_error_is_within_the_proven_bound(width):
     x = x[: len(x) - len(x) % 8]
     got = _run("log", width, x)
     mpmath.mp.prec = 200
-    worst = max(abs(mpmath.mpf(g) - mpmath.log(mpmath.mpf(a))) / max(abs(mpmath.log(mpmath.mpf(a))), mpmath.mpf(2)**-1074)
+    worst = max(abs(mpmath.mpf(g) - mpmath.log(mpmath.mpf(a)))
+                / max(abs(mpmath.log(mpmath.mpf(a))), mpmath.mpf(2)**-1074)
                 for a, g in zip(x, got) if a != 1.0)
     assert worst <= PROVEN_LOG
     assert got[np.flatnonzero(x == 1.0)][0] == 0.0

@@ -33,7 +33,8 @@ def test_exact_folding_only():
     assert t.add(a, t.const(0)) == a
     assert t.mul(a, t.const(1)) == a
     assert t.exact_value(t.add(t.const(1), t.const(2))) == 3
-    third = t.const_bounds(1 / 3, 0.333333333333333314829616256247, 0.33333333333333337034076748750521801412105560302734375)
+    third = t.const_bounds(1 / 3, 0.333333333333333314829616256247,
+                           0.33333333333333337034076748750521801412105560302734375)
     assert t.exact_value(third) is None  # an inexact constant is never folded
     square = t.mul(a, a)
     assert t.nodes[square][0] == "powi"  # x * x is a (tight) square

@@ -128,11 +128,11 @@ def test_slices_are_the_dense_solid_layer_by_layer(tmp_path, fmt):
     folder = save_slices(v, tmp_path / "layers", fmt)
     files = sorted(folder.iterdir())
     assert len(files) == 32 and all(f.suffix == (".png" if fmt == "png" else ".tif") for f in files)
-    for z, path in enumerate(files):
+    for layer, path in enumerate(files):
         with Image.open(path) as image:
             assert image.mode == "1" and image.size == (32, 32)
             pixels = np.array(image, dtype=bool)
-        np.testing.assert_array_equal(pixels, np.flipud(dense[:, :, z].T), err_msg=str(path))
+        np.testing.assert_array_equal(pixels, np.flipud(dense[:, :, layer].T), err_msg=str(path))
     save_slices(implc.voxelize(implc.compile(SPHERE), 5, solid=True), folder, fmt)  # replaces it whole
     assert len(list(folder.iterdir())) == 32
     assert sorted(p.name for p in tmp_path.iterdir()) == ["layers"], "a temporary folder was left"

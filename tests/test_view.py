@@ -6,10 +6,10 @@ export and inlined in a notebook's iframe."""
 
 import http.client
 import json
-import socket
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import threading

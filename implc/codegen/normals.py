@@ -42,7 +42,8 @@ def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at,
     module = b.module
     origin = [load_at(b, geom, a) for a in range(3)]
     h = [load_at(b, geom, 3 + a) for a in range(3)]
-    hmax = b.call(intrinsic(module, "llvm.maxnum.f64", 2), [b.call(intrinsic(module, "llvm.maxnum.f64", 2), h[:2]), h[2]])
+    maxnum = intrinsic(module, "llvm.maxnum.f64", 2)
+    hmax = b.call(maxnum, [b.call(maxnum, h[:2]), h[2]])
     near_origin = b.fmul(b.fmul(hmax, hmax), const(DOUBLE, 4.0))  # r < 2 voxels: the 1/r blow-up zone
     sqrt = intrinsic(module, "llvm.sqrt.f64", 1)
     pts = local_array(b, DOUBLE, 24, "pts")

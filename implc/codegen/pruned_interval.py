@@ -16,13 +16,14 @@ from .vector import VectorBuilder, broadcast
 
 
 def emit_interval_regions(vb: VectorBuilder, tape, plan, lo_coords, hi_coords, live_mask):
-    """Like :func:`implc.codegen.interval_rules.emit_interval`, skipping the terms dead in the parent (``live_mask``, an i64 shared by
-    the W boxes) and returning, besides (lo, hi), each box's own live mask (a <W x i64> vector).
+    """Like :func:`implc.codegen.interval_rules.emit_interval`, skipping the terms dead in the parent
+    (``live_mask``, an i64 shared by the W boxes) and returning, besides (lo, hi), each box's own live mask
+    (a <W x i64> vector).
 
     Where the chain is a fold over the terms (:class:`implc.regions.Fold`), a loop visits the live bits
     only, so a dead term costs nothing at all; otherwise every term's bit is tested in turn. With every
-    term live both compute exactly what :func:`implc.codegen.interval_rules.emit_interval` does; with dead terms the fold skips their
-    exact zeros (or infinities) instead of adding them, so its sums are equal or tighter.
+    term live both compute exactly what :func:`implc.codegen.interval_rules.emit_interval` does; with dead
+    terms the fold skips their exact zeros (or infinities) instead of adding them, so its sums are equal or tighter.
     """
     b = vb.b
     em = IntervalEmitter(vb)

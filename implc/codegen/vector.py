@@ -186,8 +186,8 @@ class VectorBuilder:
         i32 = ir.IntType(32)
         if self.width == 1:  # the scalar (sd) forms, on lane 0 of an xmm register
             v2 = ir.VectorType(DOUBLE, 2)
-            wide = [self.b.shuffle_vector(a, ir.Constant(a.type, ir.Undefined), ir.Constant(ir.VectorType(i32, 2), [0, 1]))
-                    for a in args]
+            pair = ir.Constant(ir.VectorType(i32, 2), [0, 1])
+            wide = [self.b.shuffle_vector(a, ir.Constant(a.type, ir.Undefined), pair) for a in args]
             name = "llvm.x86.avx512.mask.sqrt.sd" if op == "sqrt" else f"llvm.x86.avx512.mask.{op}.sd.round"
             fn = self._function(name, v2, [v2, v2, v2, ir.IntType(8), i32])
             operands = [wide[0], wide[0]] if op == "sqrt" else wide

@@ -86,7 +86,8 @@ class Octree:
         else:
             voxels, index = self.traverse(self.depth)
             prefix = voxels >> np.uint32(self.depth - k)
-            starts = np.flatnonzero(np.r_[True, np.any(prefix[1:] != prefix[:-1], axis=1)]) if len(voxels) else []
+            starts = (np.flatnonzero(np.r_[True, np.any(prefix[1:] != prefix[:-1], axis=1)]) if len(voxels)
+                      else np.zeros(0, np.int64))
             sums = np.zeros((len(coords), 3))
             if len(voxels):  # a node with no voxel below (never on a sound voxelization) keeps the default
                 at = np.searchsorted(morton_codes(coords), morton_codes(prefix[starts]))
