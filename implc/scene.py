@@ -37,6 +37,8 @@ SCENES_DIR = _scenes_dir()
 
 @dataclass(frozen=True)
 class Scene:
+    """A scene: its name, surface (a SymPy expression), bounds, default depth and view, and docstring."""
+
     name: str
     surface: object
     bounds: tuple
@@ -46,6 +48,7 @@ class Scene:
 
     @property
     def title(self) -> str:
+        """The first line of the scene's docstring (its name where it has none)."""
         return self.doc.strip().splitlines()[0] if self.doc.strip() else self.name
 
 
@@ -54,10 +57,13 @@ class SceneError(ValueError):
 
 
 def available() -> list[str]:
+    """The built-in scenes' names."""
     return sorted(p.stem for p in SCENES_DIR.glob("*.py") if not p.stem.startswith("_"))
 
 
 def load(name_or_path: str) -> Scene:
+    """A built-in scene by name (see :func:`available`) or a scene file by its path; :class:`SceneError`
+    naming the problem for a missing, broken or incomplete one."""
     path = Path(name_or_path)
     if path.suffix != ".py":
         path = SCENES_DIR / f"{name_or_path}.py"

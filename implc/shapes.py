@@ -67,10 +67,12 @@ def blobs(centers, radius, threshold, weights=None):
 
 
 def union(*shapes):
+    """The union of solids (F < 0 inside each): their Min."""
     return sympy.Min(*shapes)
 
 
 def intersection(*shapes):
+    """The intersection of solids: their Max."""
     return sympy.Max(*shapes)
 
 
@@ -80,6 +82,7 @@ def difference(a, *cut):
 
 
 def translate(expr, offset):
+    """``expr`` moved by ``offset`` (dx, dy, dz)."""
     dx, dy, dz = _vec(offset, "offset")
     return cartesian_form(expr).xreplace({x: x - dx, y: y - dy, z: z - dz})
 

@@ -275,18 +275,31 @@ class Surface:
         return self._run(kernel, [_rows("points", points)], [(), (3,)])
 
     def eval(self, points) -> np.ndarray:
-        """F at each row of an (N, 3) array of points."""
+        """F at each row of an (N, 3) array of points.
+
+        >>> import implc
+        >>> ball = implc.compile(implc.x**2 + implc.y**2 + implc.z**2 - 1)
+        >>> ball.eval([[0, 0, 0], [1, 1, 1]])
+        array([-1.,  2.])
+        """
         if self.engine == "tape":
             return self._value_and_gradient(points)[0]
         (values,) = self._run(self.kernel(abi.POINT), [_rows("points", points)], [()])
         return values
 
     def gradient(self, points) -> np.ndarray:
-        """The analytic gradient of F at each point: (N, 3)."""
+        """The analytic gradient of F at each point: (N, 3).
+
+        >>> import implc
+        >>> implc.compile(implc.x**2 + implc.y**2 + implc.z**2 - 1).gradient([[1, 2, 3]])
+        array([[2., 4., 6.]])
+        """
         return self._value_and_gradient(points)[1]
 
     def value_and_gradient(self, points) -> tuple[np.ndarray, np.ndarray]:
-        return tuple(self._value_and_gradient(points))
+        """(F, its gradient) at each point: (N,) and (N, 3), in one pass."""
+        values, gradients = self._value_and_gradient(points)
+        return values, gradients
 
     def interval(self, lo, hi, mean_value: bool = False, monotone: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """(f_lo, f_hi): an enclosure of F over each box [lo[i], hi[i]] ((N, 3) corners each).
@@ -297,6 +310,12 @@ class Surface:
         instead (each bound taken at the corner where F is least or greatest along the axes where the
         gradient's sign is known over the box): at least as tight as the mean-value form up to rounding,
         exact where every partial keeps its sign; the voxelizer's second look at leaves uses it.
+
+        >>> import implc
+        >>> ball = implc.compile(implc.x**2 + implc.y**2 + implc.z**2 - 1)
+        >>> lo, hi = ball.interval([[0, 0, 0]], [[1, 1, 1]])   # F over [0, 1]³ is [-1, 2], rounded outward
+        >>> bool(lo[0] <= -1 and hi[0] >= 2 and hi[0] - lo[0] < 3 + 1e-12)
+        True
         """
         lo, hi = _rows("lo", lo), _rows("hi", hi)
         if lo.shape != hi.shape:
@@ -329,6 +348,14 @@ def compile(expr, bounds=None, *, vector_width: int = WIDTH, rounding: str = "au
     "jit" (LLVM compiles this surface's kernels), "tape" (the shared tape engine interprets it, pruning
     every Min/Max an octant decides; nothing to compile) or "auto" (the tape engine for tapes with Min/Max
     below the top level or more than :data:`TAPE_ABOVE` nodes, where it can run every op).
+
+    >>> import implc
+    >>> ball = implc.compile(implc.x**2 + implc.y**2 + implc.z**2 - 1)
+    >>> ball.bounds
+    ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
+    >>> flower = implc.compile(implc.r - 0.5)   # spherical coordinates: the sphere of radius 1/2
+    >>> float(flower.eval([[0.5, 0, 0]])[0])
+    0.0
     """
     if isinstance(expr, VmModel):
         checked, directed = _check_options(expr.bounds if bounds is None else bounds, vector_width, rounding, engine)

@@ -47,6 +47,7 @@ class Mesh:
 
     @property
     def area(self) -> float:
+        """The surface area: the sum of the triangles' areas."""
         a, b, c = self._corners()
         return float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum() / 2)
 

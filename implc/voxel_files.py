@@ -58,6 +58,8 @@ def save(voxels, path, *, compress: bool = False) -> Path:
 
 
 def save_npz(voxels, path, *, compress: bool = False) -> None:
+    """``voxels`` as an ``.npz`` that :func:`load_npz` reads back exactly (coords, normals, depth, bounds,
+    and a solid's inside octants); ``compress``: deflated."""
     arrays = dict(implc_voxels=FORMAT_VERSION, coords=voxels.coords, normals=voxels.normals, depth=voxels.depth,
                   bounds=np.asarray(voxels.bounds, dtype=np.float64))
     if getattr(voxels, "inside", None) is not None:  # a solid: its inside octants (i, j, k, level)
