@@ -65,3 +65,28 @@ def test_every_page_is_in_the_table_of_contents():
     pages = sorted(p.relative_to(docs).with_suffix("").as_posix() for p in docs.rglob("*.md")
                    if "_build" not in p.parts and "gallery" not in p.parts and p.name != "index.md")
     assert [p for p in pages if p not in index] == []
+
+
+NOTEBOOKS = sorted((ROOT / "examples").glob("*.ipynb"))
+
+
+def test_notebooks_are_stored_without_outputs():
+    import nbformat
+    assert len(NOTEBOOKS) >= 2
+    for path in NOTEBOOKS:
+        nb = nbformat.read(path, as_version=4)
+        assert all(not cell.get("outputs") and cell.get("execution_count") is None
+                   for cell in nb.cells if cell.cell_type == "code"), f"{path.name} has outputs stored"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_notebooks_run(path, tmp_path):
+    """Each notebook runs top to bottom in a fresh kernel, in a temporary folder (its own checks included:
+    the part's volume bracketed, its mesh closed)."""
+    import nbformat
+    from nbclient import NotebookClient
+    nb = nbformat.read(path, as_version=4)
+    NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
+    errors = [o for cell in nb.cells for o in cell.get("outputs", []) if o.get("output_type") == "error"]
+    assert errors == []
