@@ -8,7 +8,9 @@ octree level (LOD) renders its nodes as larger splats with the mean normal of th
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -23,7 +25,7 @@ class View:
     perspective: bool = False
     fov: float = 35.0  # vertical field of view for the perspective camera, degrees
 
-    def basis(self):
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(forward, right, up) unit vectors; forward points from the eye into the scene."""
         az, el = np.radians(self.azimuth), np.radians(self.elevation)
         eye_dir = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
@@ -66,7 +68,8 @@ BYTES_PER_PIXEL = 100
 """A render's working memory per pixel (z-buffer, winners, shading, the image), measured: 1.6 GB at 4096²."""
 
 
-def render_points(centers, normals, cell_size, bounds, *, size=1024, view: View = View(), style: Style = Style()):
+def render_points(centers: np.ndarray, normals: np.ndarray, cell_size: np.ndarray, bounds: Any, *, size: int = 1024,
+                  view: View = View(), style: Style = Style()) -> np.ndarray:
     """An (size, size, 3) uint8 image of points with normals, each drawn as a square of its cell's size.
 
     Only the points that win a pixel are shaded; the z-buffer runs natively (``implc_splat``).
@@ -115,7 +118,7 @@ def render_points(centers, normals, cell_size, bounds, *, size=1024, view: View 
 AXES = "xyz"
 
 
-def cross_section(voxels, axis: int, index: int) -> np.ndarray:
+def cross_section(voxels: Any, axis: int, index: int) -> np.ndarray:
     """The cells of layer ``index`` along ``axis`` that the voxels' solid covers: the boundary voxels there
     and every cell of the inside octants that cross it ((m, 3) uint32; a shell has only its voxels)."""
     parts = [voxels.coords[voxels.coords[:, axis] == index].astype(np.int64)]
@@ -135,8 +138,8 @@ def cross_section(voxels, axis: int, index: int) -> np.ndarray:
     return np.concatenate(parts).astype(np.uint32)
 
 
-def render_voxels(voxels, *, size=1024, view: View = View(), style: Style = Style(), lod: int | None = None,
-                  cut: tuple[int, float] | None = None):
+def render_voxels(voxels: Any, *, size: int = 1024, view: View = View(), style: Style = Style(),
+                  lod: int | None = None, cut: tuple[int, float] | None = None) -> np.ndarray:
     """Render a :class:`~implc.voxelization.Voxels` (or anything with coords, normals, depth, bounds).
 
     ``cut = (axis, value)``: a cut-away. Everything beyond the plane (coordinate ``axis`` above ``value``,
@@ -169,7 +172,7 @@ def render_voxels(voxels, *, size=1024, view: View = View(), style: Style = Styl
     return render_points(centers, normals, cell, voxels.bounds, size=size, view=view, style=style)
 
 
-def save_png(image, path) -> None:
+def save_png(image: np.ndarray, path: str | os.PathLike[str]) -> None:
     """Write an RGB uint8 image with Pillow, under a temporary name renamed into place."""
     from PIL import Image
     with replacing(path) as tmp:

@@ -9,21 +9,27 @@ column) is cell (i = column, j = n − 1 − row) of the layer: x to the right, 
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .voxelization import Voxels
 
 FORMATS = {"png": ".png", "tiff": ".tif"}
 
 
-def layers(voxels):
+def layers(voxels: Voxels) -> Iterator[tuple[int, np.ndarray]]:
     """Yield (z, image) for every z layer: ``image`` an (n, n) bool array as described above."""
     n = 1 << voxels.depth
     order = np.argsort(voxels.coords[:, 2], kind="stable")
     by_z = voxels.coords[order]
     starts = np.searchsorted(by_z[:, 2], np.arange(n + 1))
     inside = voxels.inside if voxels.inside is not None else np.empty((0, 4), dtype=np.int32)
-    levels = {}
+    levels: dict[int, tuple[np.ndarray, np.ndarray, Any, int]] = {}  # rows, bounds, the cached layer, its k
     for level in np.unique(inside[:, 3]):
         rows = inside[inside[:, 3] == level]
         rows = rows[np.argsort(rows[:, 2], kind="stable")]
@@ -46,7 +52,7 @@ def layers(voxels):
         yield z, np.flipud(image.T)
 
 
-def save_slices(voxels, folder, fmt: str = "png") -> Path:
+def save_slices(voxels: Voxels, folder: str | os.PathLike[str], fmt: str = "png") -> Path:
     """Write ``folder/layer_00000.png`` ... (or ``.tif``), one 1-bit image per z layer, bottom first. The
     folder is written under a temporary name beside it and renamed into place: an interrupted save leaves
     no partial stack, and an existing folder is replaced only once the new one is complete."""

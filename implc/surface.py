@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import math
 import sys
+from typing import Any
 
 import numpy as np
 import sympy
+from numpy.typing import ArrayLike
 
 from . import abi
 from .abi import MAX_DEPTH
@@ -32,7 +34,7 @@ CHUNK = 1 << 16
 """Rows per native call of the batched entry points (a multiple of every vector width)."""
 
 
-def check_bounds(bounds) -> tuple[tuple[float, float], ...]:
+def check_bounds(bounds: Any) -> tuple[tuple[float, float], ...]:
     """Three finite (lo, hi) pairs with lo < hi, as floats; CompileError naming the bad part otherwise."""
     try:
         pairs = [tuple(pair) for pair in bounds]
@@ -61,7 +63,7 @@ def check_bounds(bounds) -> tuple[tuple[float, float], ...]:
     return tuple(out)
 
 
-def usable_bounds(bounds) -> bool:
+def usable_bounds(bounds: Any) -> bool:
     """Whether :func:`check_bounds` accepts ``bounds`` (for readers that say what is wrong themselves)."""
     try:
         check_bounds(bounds)
@@ -134,7 +136,7 @@ class Surface:
     form).
     """
 
-    def __init__(self, expr: sympy.Expr, bounds, tape: Tape, vector_width: int = WIDTH, directed: bool = False,
+    def __init__(self, expr: Any, bounds: Any, tape: Tape, vector_width: int = WIDTH, directed: bool = False,
                  engine: str = "jit"):
         self.expr = expr
         self.bounds = bounds
@@ -202,7 +204,7 @@ class Surface:
                 source_key="mvf" + self._key)
         return self._mean_value_native
 
-    def kernel(self, entry: abi.Entry):
+    def kernel(self, entry: abi.Entry) -> Any:
         """The compiled kernel ``entry`` (one of :data:`implc.abi.SURFACE_ENTRIES`, ``MEAN_VALUE_ENTRIES`` or
         ``BOUND_ENTRIES``) as a ctypes function with the ABI's prototype, valid while this Surface
         lives. The low-level seam under :meth:`eval`, :meth:`interval` and the voxelizer: arrays go in as
@@ -274,7 +276,7 @@ class Surface:
             kernel = self.kernel(abi.GRADIENT)
         return self._run(kernel, [_rows("points", points)], [(), (3,)])
 
-    def eval(self, points) -> np.ndarray:
+    def eval(self, points: ArrayLike) -> np.ndarray:
         """F at each row of an (N, 3) array of points.
 
         >>> import implc
@@ -287,7 +289,7 @@ class Surface:
         (values,) = self._run(self.kernel(abi.POINT), [_rows("points", points)], [()])
         return values
 
-    def gradient(self, points) -> np.ndarray:
+    def gradient(self, points: ArrayLike) -> np.ndarray:
         """The analytic gradient of F at each point: (N, 3).
 
         >>> import implc
@@ -296,12 +298,13 @@ class Surface:
         """
         return self._value_and_gradient(points)[1]
 
-    def value_and_gradient(self, points) -> tuple[np.ndarray, np.ndarray]:
+    def value_and_gradient(self, points: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(F, its gradient) at each point: (N,) and (N, 3), in one pass."""
         values, gradients = self._value_and_gradient(points)
         return values, gradients
 
-    def interval(self, lo, hi, mean_value: bool = False, monotone: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def interval(self, lo: ArrayLike, hi: ArrayLike, mean_value: bool = False,
+                 monotone: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """(f_lo, f_hi): an enclosure of F over each box [lo[i], hi[i]] ((N, 3) corners each).
 
         Boxes where F may be undefined (NaN) get the whole line (-inf, inf): they never prune.
@@ -335,7 +338,8 @@ class Surface:
         return f_lo, f_hi
 
 
-def compile(expr, bounds=None, *, vector_width: int = WIDTH, rounding: str = "auto", engine: str = "auto") -> Surface:
+def compile(expr: Any, bounds: Any = None, *, vector_width: int = WIDTH, rounding: str = "auto",
+            engine: str = "auto") -> Surface:
     """Compile the surface ``expr = 0`` over ``bounds`` (default: a model's own, else [-1, 1]³).
 
     ``expr``: a SymPy expression in x, y, z, r, theta, phi, or a model read by :func:`implc.load_vm`.

@@ -7,7 +7,9 @@ place.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +28,8 @@ class Mesh:
     indices, counter-clockwise seen from outside, ``normals`` (V, 3) float64 unit normals at the vertices
     (F's analytic gradient where the vertex lies on F = 0), ``stats`` (how it was made) and ``bounds``."""
 
-    def __init__(self, vertices, faces, normals=None, *, stats=None, bounds=None):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None = None, *,
+                 stats: Any = None, bounds: tuple | None = None):
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
         self.faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
         self.normals = None if normals is None else np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -80,13 +83,13 @@ class Mesh:
                 "split_vertices": _split_vertices(f, len(self.vertices)), "volume": self.volume}
 
     # -- files ------------------------------------------------------------------------------------
-    def to_trimesh(self):
+    def to_trimesh(self) -> Any:
         """A ``trimesh.Trimesh`` of this mesh (vertices not merged, faces not reordered)."""
         import trimesh
         return trimesh.Trimesh(vertices=self.vertices, faces=self.faces, vertex_normals=self.normals,
                                process=False, validate=False)
 
-    def save(self, path) -> Path:
+    def save(self, path: str | os.PathLike[str]) -> Path:
         """Write ``path`` (.stl, .obj, .ply, .glb or .3mf, by its suffix) through trimesh, under a temporary
         name renamed into place."""
         path = Path(path)
@@ -130,7 +133,7 @@ def _split_vertices(faces: np.ndarray, count: int) -> int | None:
     return int(np.sum(fans > 1))
 
 
-def is_mesh_file(path) -> bool:
+def is_mesh_file(path: str | os.PathLike[str]) -> bool:
     """Whether ``path`` is to be read as a mesh: a mesh suffix, and for .ply (also implc's voxel point
     clouds) a header that declares faces."""
     path = Path(path)
@@ -146,7 +149,7 @@ def is_mesh_file(path) -> bool:
     return b"element face" in header.split(b"end_header")[0]
 
 
-def load(path) -> Mesh:
+def load(path: str | os.PathLike[str]) -> Mesh:
     """Read a mesh file (any format trimesh reads) as a :class:`Mesh`; one clear error if it is not one."""
     path = Path(path)
     regular_file(path, MeshFileError, "mesh file")
@@ -163,7 +166,7 @@ def load(path) -> Mesh:
     return Mesh(vertices, faces)
 
 
-def describe(path) -> list[str]:
+def describe(path: str | os.PathLike[str]) -> list[str]:
     """``implc info`` for a mesh file: size, extent, and the counted checks (after merging the vertices
     that formats such as STL repeat per triangle)."""
     path = Path(path)

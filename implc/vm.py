@@ -60,7 +60,7 @@ class VmModel:
         return function(x, y, z)
 
 
-def load_vm(path) -> VmModel:
+def load_vm(path: str | os.PathLike[str]) -> VmModel:
     """Read a ``.vm`` file; :class:`VmError` for an unknown op, an undefined or redefined name, a bad
     argument count or constant, an empty file.
 

@@ -9,9 +9,11 @@ foreign, truncated or damaged file is a :class:`VoxelFileError` naming the probl
 
 from __future__ import annotations
 
+import os
 import zipfile
 import zlib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -33,12 +35,12 @@ class VoxelFileError(ValueError):
     """A voxel file is missing, unreadable, damaged or not one of ours."""
 
 
-def suffix_of(path) -> str:
+def suffix_of(path: str | os.PathLike[str]) -> str:
     """The format a path names by its extension, in lower case (``A.NPZ`` is an .npz)."""
     return Path(path).suffix.lower()
 
 
-def save(voxels, path, *, compress: bool = False) -> Path:
+def save(voxels: Voxels, path: str | os.PathLike[str], *, compress: bool = False) -> Path:
     """Write ``voxels`` in the format named by the extension: .npz, .ply, .npy (dense occupancy), .vdb
     (OpenVDB occupancy and normals grids: :mod:`implc.vdb_file`) or .zarr (a Zarr v3 array of the
     occupancy, written shard by shard: :mod:`implc.zarr_store`).
@@ -57,18 +59,18 @@ def save(voxels, path, *, compress: bool = False) -> Path:
     return path
 
 
-def save_npz(voxels, path, *, compress: bool = False) -> None:
+def save_npz(voxels: Voxels, path: str | os.PathLike[str], *, compress: bool = False) -> None:
     """``voxels`` as an ``.npz`` that :func:`load_npz` reads back exactly (coords, normals, depth, bounds,
     and a solid's inside octants); ``compress``: deflated."""
-    arrays = dict(implc_voxels=FORMAT_VERSION, coords=voxels.coords, normals=voxels.normals, depth=voxels.depth,
-                  bounds=np.asarray(voxels.bounds, dtype=np.float64))
+    arrays: dict[str, Any] = dict(implc_voxels=FORMAT_VERSION, coords=voxels.coords, normals=voxels.normals,
+                                  depth=voxels.depth, bounds=np.asarray(voxels.bounds, dtype=np.float64))
     if getattr(voxels, "inside", None) is not None:  # a solid: its inside octants (i, j, k, level)
         arrays["inside"] = voxels.inside
     with replacing(path) as tmp:
         (np.savez_compressed if compress else np.savez)(tmp, **arrays)
 
 
-def sniff(path) -> str:
+def sniff(path: str | os.PathLike[str]) -> str:
     """The format of an existing file by its first bytes: ".npz", ".npy", ".ply", ".vdb" or "" (unknown)."""
     with open(path, "rb") as f:
         head = f.read(8)
@@ -93,7 +95,7 @@ def _check_readable(path: Path) -> str:
     return fmt
 
 
-def load_npz(path) -> Voxels:
+def load_npz(path: str | os.PathLike[str]) -> Voxels:
     """The :class:`~implc.voxelization.Voxels` stored in an ``.npz`` written by :func:`save_npz`, validated."""
     path = Path(path)
     fmt = _check_readable(path)
@@ -220,7 +222,7 @@ def _validated(path, coords, normals, depth, bounds):
             tuple(tuple(b) for b in bounds.tolist()))
 
 
-def describe(path) -> list[str]:
+def describe(path: str | os.PathLike[str]) -> list[str]:
     """Lines describing any voxel file implc writes (for ``implc info``)."""
     path = Path(path)
     fmt = _check_readable(path)
@@ -281,7 +283,7 @@ def _solid_lines(voxels) -> list[str]:
             f"volume   [{lo!r}, {hi!r}] (contains the volume where F < 0 within the bounds)"]
 
 
-def save_ply(voxels, path) -> None:
+def save_ply(voxels: Voxels, path: str | os.PathLike[str]) -> None:
     """Binary little-endian PLY: one vertex per voxel centre with float x y z nx ny nz."""
     centers = voxels.centers().astype(np.float32)
     vertex = np.empty(len(centers), dtype=[(n, "<f4") for n in ("x", "y", "z", "nx", "ny", "nz")])
@@ -300,7 +302,7 @@ def save_ply(voxels, path) -> None:
         f.write(vertex.tobytes())
 
 
-def save_dense(voxels, path) -> None:
+def save_dense(voxels: Voxels, path: str | os.PathLike[str]) -> None:
     """Dense occupancy as a bool ``.npy`` indexed [i, j, k]."""
     with replacing(path) as tmp:
         np.save(tmp, voxels.to_dense())

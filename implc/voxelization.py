@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 import time
+from typing import Any
 
 import numpy as np
 
@@ -60,8 +61,9 @@ class Voxels:
     0
     """
 
-    def __init__(self, coords, normals, depth, bounds, stats: SubdivisionStats | None, storage=None, inside=None,
-                 surface=None):
+    def __init__(self, coords: np.ndarray | None, normals: np.ndarray, depth: int, bounds: tuple,
+                 stats: SubdivisionStats | None, storage: Any = None, inside: np.ndarray | None = None,
+                 surface: Surface | None = None):
         """``coords`` may be None when ``storage`` is an :class:`Octree`: they are read from the tree on
         first use (the octree holds them; the default voxelization stores no other copy). ``surface``: the
         :class:`Surface` voxelized (None for voxels read from a file), which :meth:`mesh` samples."""
@@ -134,7 +136,7 @@ class Voxels:
             paint_cubes(grid, inside[:, :3].astype(np.int64) * sizes[:, None], sizes)
         return grid
 
-    def show(self, *, height: int = 480, budget: int = 1_000_000, max_bytes: int | None = None):
+    def show(self, *, height: int = 480, budget: int = 1_000_000, max_bytes: int | None = None) -> Any:
         """The interactive viewer for a notebook (Jupyter displays what this returns): the page and the
         coarsest levels of detail up to ``max_bytes`` (default 24 MiB) inlined in one document, so no
         server or second process is involved. ``.save("x.html")`` writes it as a file."""
@@ -173,7 +175,7 @@ class Voxels:
         return volume_bounds(self.bounds, self.depth, self.inside_voxels(), len(self))
 
 
-def volume_bounds(bounds, depth: int, inside_voxels: int, boundary_voxels: int) -> tuple[float, float]:
+def volume_bounds(bounds: Any, depth: int, inside_voxels: int, boundary_voxels: int) -> tuple[float, float]:
     """(lo, hi): the volume of ``inside_voxels`` cells, and of those and ``boundary_voxels`` more, of the
     2^depth grid over ``bounds``, computed exactly in rationals and rounded outward."""
     from fractions import Fraction
@@ -292,8 +294,9 @@ def _check_memory(depth, storage, estimate_voxels, available):
                           f"but {available / 2**30:.1f} GiB are available; lower the depth")
 
 
-def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False, max_voxels=None,
-             mean_value_levels=0, prune=True, refine_leaves="auto", solid=False) -> Voxels:
+def voxelize(surface: Surface, depth: int = 9, *, workers: int | None = None, storage: Any = "octree",
+             progress: bool = False, max_voxels: int | None = None, mean_value_levels: int = 0, prune: bool = True,
+             refine_leaves: bool | str = "auto", solid: bool = False) -> Voxels:
     """Voxelize a compiled surface on a 2^depth grid over its bounds.
 
     ``mean_value_levels``: how many of the deepest levels also use the mean-value form (tighter on small
@@ -372,7 +375,8 @@ def voxelize(surface, depth=9, *, workers=None, storage="octree", progress=False
     return Voxels(coords, normals, depth, surface.bounds, stats, storage=result, inside=inside, surface=surface)
 
 
-def mesh(surface, depth=8, *, workers=None, progress=False, features=True, witnesses=False, **options) -> Mesh:
+def mesh(surface: Surface, depth: int = 8, *, workers: int | None = None, progress: bool = False,
+         features: bool = True, witnesses: bool = False, **options: Any) -> Mesh:
     """The boundary of the solid {F < 0} within ``surface``'s bounds as a closed, oriented,
     intersection-free triangle mesh on the 2^depth grid: :func:`voxelize` (``options`` are its tightness
     options) finds the cells the surface may meet, then :meth:`Voxels.mesh` contours them (``features``,

@@ -16,10 +16,11 @@ shard.
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,6 +30,10 @@ from .subdivide import Subdivider, SubdivisionStats, default_workers
 from .surface import usable_bounds
 from .untrusted import printable
 from .voxelization import _check_count, _check_depth, _check_leaf_options, paint_cubes, volume_bounds
+
+if TYPE_CHECKING:
+    from .surface import Surface
+    from .voxelization import Voxels
 
 CHUNK = 128  # 2 MiB of bool: zarr recommends chunks of 1 MB or more; 64³ made writing twice as slow
 SHARD = 256
@@ -57,7 +62,7 @@ class ShardWriter:
         self.cubes: list[tuple[np.ndarray, np.ndarray]] = []  # (first cells, edges) of octants within a shard
         self.shards_written = 0
 
-    def add(self, coords: np.ndarray, inside: np.ndarray | None = None):
+    def add(self, coords: np.ndarray, inside: np.ndarray | None = None) -> None:
         """Voxels (n, 3) and inside octants (m, 4) rows (i, j, k, level); both are copied."""
         if len(coords):
             self.coords.append(np.array(coords, dtype=np.uint32))
@@ -80,7 +85,7 @@ class ShardWriter:
         self.array[i:i + s, j:j + s, k:k + s] = block
         self.shards_written += 1
 
-    def flush(self, before: int | None = None):
+    def flush(self, before: int | None = None) -> None:
         """Write every pending shard whose Morton code (in shards) is below ``before`` (None: all)."""
         coords = np.concatenate(self.coords) if self.coords else np.empty((0, 3), np.uint32)
         firsts = np.concatenate([f for f, _ in self.cubes]) if self.cubes else np.empty((0, 3), np.int64)
@@ -106,7 +111,7 @@ class ShardWriter:
             self._write(origin, block)
 
 
-def save_zarr(voxels, path) -> Path:
+def save_zarr(voxels: Voxels, path: str | os.PathLike[str]) -> Path:
     """Write the occupancy of ``voxels`` (with the inside octants, for a solid) as a Zarr v3 array at
     ``path`` (a folder, conventionally ending in .zarr), readable by ``zarr.open``."""
     path = Path(path)
@@ -138,8 +143,9 @@ class ZarrWrite:
         return volume_bounds(self.bounds, self.depth, self.inside_voxels, self.voxels)
 
 
-def write_zarr(surface, depth, path, *, solid: bool = True, workers=None, progress: bool = False,
-               mean_value_levels: int = 0, refine_leaves="auto") -> ZarrWrite:
+def write_zarr(surface: Surface, depth: int, path: str | os.PathLike[str], *, solid: bool = True,
+               workers: int | None = None, progress: bool = False, mean_value_levels: int = 0,
+               refine_leaves: bool | str = "auto") -> ZarrWrite:
     """Voxelize ``surface`` at ``depth`` straight into a Zarr v3 array at ``path`` (the occupancy of
     :func:`save_zarr`), in memory bounded by the tasks in flight rather than the voxel count
     (``mean_value_levels``, ``refine_leaves``: as :func:`implc.voxelize`'s)."""
@@ -195,7 +201,7 @@ def write_zarr(surface, depth, path, *, solid: bool = True, workers=None, progre
                      writer.shards_written, stats, time.perf_counter() - t0, solid)
 
 
-def describe_zarr(path) -> list[str]:
+def describe_zarr(path: str | os.PathLike[str]) -> list[str]:
     """Lines describing a Zarr store this module wrote (for ``implc info``); ValueError if it is not one."""
     import zarr
     try:

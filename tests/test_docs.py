@@ -90,3 +90,25 @@ def test_notebooks_run(path, tmp_path):
     NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
     errors = [o for cell in nb.cells for o in cell.get("outputs", []) if o.get("output_type") == "error"]
     assert errors == []
+
+
+ANNOTATED = ["implc.surface", "implc.voxelization", "implc.vm", "implc.triangle_mesh", "implc.shapes",
+             "implc.voxel_files", "implc.zarr_store", "implc.slices", "implc.render", "implc.scene"]
+
+
+@pytest.mark.parametrize("name", ANNOTATED)
+def test_the_public_api_is_annotated(name):
+    """Every public function and method of the public modules has annotated parameters and a return type
+    (py.typed promises them to an editor; mypy checks them in CI)."""
+    module = importlib.import_module(name)
+    bare = []
+    for qualified, value in _public(module):
+        if not inspect.isfunction(value):
+            continue
+        signature = inspect.signature(value)
+        params = [p.name for p in signature.parameters.values()
+                  if p.name not in ("self", "cls") and p.annotation is inspect.Parameter.empty]
+        if params or signature.return_annotation is inspect.Signature.empty:
+            bare.append(f"{qualified}({', '.join(params)})")
+    assert bare == []
+    assert (ROOT / "implc" / "py.typed").is_file()
