@@ -84,6 +84,8 @@ NORMALS = _entry("implc_normals", "gradient_live:fn* point:fn* leaf_geom:f64* co
                                   "flags:i8*")
 TIGHTEN = _entry("implc_tighten", "bound:fn* point:fn* geom:f64* depth:i64 coords:i32* masks:i64* normals:f32* "
                                   "flags:i8* n:i64 inside:i32* inside_count:i64* stats:i64*", "i64")
+DROP_MARKED = _entry("implc_drop_marked", "depth:i64 coords:i32* masks:i64* normals:f32* flags:i8* n:i64 inside:i32* "
+                                          "inside_count:i64* stats:i64*", "i64")
 OCTREE_INSERT = _entry("implc_octree_insert", "nodes:i32* node_capacity:i64 state:i64* coords:i32* n:i64 "
                                               "first_index:i64", "i64")
 OCTREE_TRAVERSE = _entry("implc_octree_traverse", "nodes:i32* depth:i64 level:i64 out:i32* payload:i64*", "i64")
@@ -103,9 +105,12 @@ EDGE_ENDS = _entry("implc_edge_ends", "keys:i64* n:i64 geometry:f64* table:i64* 
 EDGE_ROOTS = _entry("implc_edge_roots", "phase:i64 n:i64 keys:i64* a:f64* b:f64* fa:f64* fb:f64* state:f64* f:f64* "
                                         "points:f64* margin:f64 nudge:f64", "i64")
 CORNER_POINTS = _entry("implc_corner_points", "keys:i64* n:i64 geometry:f64* points:f64*")
-RUNTIME_ENTRIES = (SUBDIVIDE, NORMALS, TIGHTEN, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS,
-                   SPLAT, HASH_INDEX, KUHN_TRIANGLES, BENT_CELLS, EDGE_ENDS, EDGE_ROOTS,
-                   CORNER_POINTS)
+RUNTIME_ENTRIES = (DROP_MARKED, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS, SPLAT,
+                   HASH_INDEX, KUHN_TRIANGLES, BENT_CELLS, EDGE_ENDS, EDGE_ROOTS, CORNER_POINTS)
+KERNEL_WALK_ENTRIES = (SUBDIVIDE, NORMALS, TIGHTEN)
+"""... and the compiled kernels' walk (subdivision, normals, second look), a module of its own
+(:func:`implc.codegen.runtime_module.build_kernel_walk`), built on first use by a surface with compiled
+kernels: a process that only runs the tape engine never compiles it."""
 
 # -- the tape engine (implc.codegen.tape_engine_module): one interpreter for every program -----------------
 # (``program``: a program header, implc.tape_program; ``slots``: TAPE_SLOT_DOUBLES per slot of the full

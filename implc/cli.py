@@ -532,6 +532,16 @@ def _on_sigterm(signum, frame):
     raise _Terminated
 
 
+_signalled: list[int] = []
+"""The signals main() saw: an import that an interrupt broke (numpy wraps it in an ImportError) is then
+reported as the interrupt, not as a broken installation."""
+
+
+def _on_sigint(signum, frame):
+    _signalled.append(signum)
+    raise KeyboardInterrupt
+
+
 def _run(argv) -> int:
     if argv[:1] == ["bench"]:  # the suite parses its own options
         return cmd_bench(argv[1:])
@@ -572,6 +582,8 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main_thread else None
+    previous_int = signal.signal(signal.SIGINT, _on_sigint) if in_main_thread else None
+    _signalled.clear()
     atomic_file = sys.modules.get("implc.atomic_file")
     done_before = len(atomic_file.COMPLETED) if atomic_file else 0
     try:
@@ -587,6 +599,11 @@ def main(argv=None) -> int:
             message = message[: MESSAGE_LIMIT - 3] + "..."
         print(f"implc: error: {message}", file=sys.stderr)
         return 2
+    except ImportError:
+        if not _signalled:
+            raise
+        print("implc: interrupted", file=sys.stderr)  # Ctrl-C during an import, wrapped by the importer
+        return 130
     except (KeyboardInterrupt, _Terminated) as exc:
         complete = _output_complete(done_before)
         if complete is not None:  # the save finished first: the output is whole, the command succeeded
@@ -597,6 +614,7 @@ def main(argv=None) -> int:
     finally:
         if in_main_thread:
             signal.signal(signal.SIGTERM, previous)
+            signal.signal(signal.SIGINT, previous_int)
 
 
 if __name__ == "__main__":

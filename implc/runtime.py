@@ -9,10 +9,11 @@ the same one to every caller, which keeps its code alive for the life of the pro
 
 from __future__ import annotations
 
+import functools
 import threading
 
 from . import abi
-from .codegen.runtime_module import build_runtime
+from .codegen.runtime_module import build_kernel_walk, build_runtime
 from .codegen.tape_engine_module import build_tape_engine
 from .jit import NativeModule
 
@@ -32,19 +33,19 @@ class TapeEngine:
 
 
 class Runtime:
-    """The runtime module's entry points: ``subdivide``, ``normals``, ``tighten``, ``octree_insert``,
-    ``octree_traverse``, ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``,
-    ``kuhn_triangles``, ``bent_cells``, ``edge_ends``, ``edge_roots`` and ``corner_points`` (signatures in
-    :mod:`implc.abi`)."""
+    """The runtime module's entry points: ``drop_marked``, ``octree_insert``, ``octree_traverse``,
+    ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``, ``kuhn_triangles``,
+    ``bent_cells``, ``edge_ends``, ``edge_roots`` and ``corner_points``; and the compiled kernels' walk,
+    ``subdivide``, ``normals`` and ``tighten``, from a module of its own compiled on first use (signatures
+    in :mod:`implc.abi`)."""
 
     _shared: Runtime | None = None
     _lock = threading.Lock()
 
     def __init__(self):
         self.native = NativeModule(build_runtime, source_key="implc-runtime")
-        self.subdivide = self.native.bind(abi.SUBDIVIDE)
-        self.normals = self.native.bind(abi.NORMALS)
-        self.tighten = self.native.bind(abi.TIGHTEN)
+        self._walk: NativeModule | None = None  # the compiled kernels' walk, built on first use
+        self.drop_marked = self.native.bind(abi.DROP_MARKED)
         self.octree_insert = self.native.bind(abi.OCTREE_INSERT)
         self.octree_traverse = self.native.bind(abi.OCTREE_TRAVERSE)
         self.octree_mark_inside = self.native.bind(abi.OCTREE_MARK_INSIDE)
@@ -57,6 +58,24 @@ class Runtime:
         self.edge_roots = self.native.bind(abi.EDGE_ROOTS)
         self.corner_points = self.native.bind(abi.CORNER_POINTS)
         self._tape_engines: dict[bool, TapeEngine] = {}
+
+    def _walk_entry(self, entry: abi.Entry):
+        with self._lock:
+            if self._walk is None:
+                self._walk = NativeModule(build_kernel_walk, source_key="implc-kernel-walk")
+        return self._walk.bind(entry)
+
+    @functools.cached_property
+    def subdivide(self):
+        return self._walk_entry(abi.SUBDIVIDE)
+
+    @functools.cached_property
+    def normals(self):
+        return self._walk_entry(abi.NORMALS)
+
+    @functools.cached_property
+    def tighten(self):
+        return self._walk_entry(abi.TIGHTEN)
 
     def tape_engine(self, directed: bool) -> TapeEngine:
         """The tape engine for one rounding mode, compiled on first use (from the disk cache after the

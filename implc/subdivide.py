@@ -310,10 +310,12 @@ class Subdivider:
             result.make_inside_room(n)
             inside = result.inside.ctypes.data
             w.inside_count[0] = result.inside_count
-        point = self.point if self.bound else None  # the compiled F, to spare leaves the surface crosses a split
-        result.count = self.runtime.tighten(self.bound, point, self.geom_ptr, self.depth, result.coords_ptr,
-                                            result.masks_ptr, result.normals_ptr, result.flags_ptr, n, inside,
-                                            w.inside_count.ctypes.data, w.tighten_stats.ctypes.data)
+        marked = (self.depth, result.coords_ptr, result.masks_ptr, result.normals_ptr, result.flags_ptr, n, inside,
+                  w.inside_count.ctypes.data, w.tighten_stats.ctypes.data)
+        if self.bound:  # compiled kernels: the monotonicity bound's test, then the drop (F spares crossed leaves)
+            result.count = self.runtime.tighten(self.bound, self.point, self.geom_ptr, *marked)
+        else:  # the tape engine's look marked the leaves already
+            result.count = self.runtime.drop_marked(*marked)
         if self.solid:
             result.inside_count = int(w.inside_count[0])
 

@@ -1,8 +1,11 @@
-"""The generic runtime module: the native routines shared by every surface, in one LLVM module.
+"""The generic runtime modules: the native routines shared by every surface.
 
-Subdivision (:mod:`.subdivision`), normals (:mod:`.normals`), tightening (:mod:`.tighten`), the octree
-(:mod:`.octree_index`), splatting (:mod:`.splat`) and the contouring's cells (:mod:`.contour_cells`);
-:class:`implc.runtime.Runtime` compiles it once per process.
+The runtime module: the tape engine's end of the second look (dropping the leaves it marked,
+:func:`.tighten.emit_drop_marked`), the octree (:mod:`.octree_index`), splatting (:mod:`.splat`) and the
+contouring's cells (:mod:`.contour_cells`). The kernel-walk module: the compiled kernels' subdivision
+(:mod:`.subdivision`), normals (:mod:`.normals`) and second look (:mod:`.tighten`), which the tape
+engine does not use (it has its own). :class:`implc.runtime.Runtime` compiles each once per process, the
+walk on first use: a cold start on a tape-engine model compiles a fifth of the IR it used to.
 """
 
 from __future__ import annotations
@@ -26,15 +29,22 @@ from .octree_index import (
 )
 from .splat import emit_splat
 from .subdivision import emit_subdivide
-from .tighten import emit_tighten
+from .tighten import emit_drop_marked, emit_tighten
+
+
+def build_kernel_walk() -> str:
+    """The LLVM IR text of the kernel-walk module."""
+    module = ir.Module(name="implc_kernel_walk")
+    emit_subdivide(module)
+    emit_normals(module)
+    emit_tighten(module)
+    return str(module)
 
 
 def build_runtime() -> str:
     """The LLVM IR text of the runtime module."""
     module = ir.Module(name="implc_runtime")
-    emit_subdivide(module)
-    emit_normals(module)
-    emit_tighten(module)
+    emit_drop_marked(module)
     emit_octree_insert(module)
     emit_octree_traverse(module)
     emit_octree_mark_inside(module)

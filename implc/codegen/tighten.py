@@ -11,7 +11,8 @@ live terms) and dropped when every box at the last level is proven, unless F at 
 (``point``, in floating point) already lies across 0: the surface crosses it (most leaves the bound
 leaves open on smooth surfaces), and splitting it would only spend time. With ``bound`` NULL the leaves
 come tested (the tape engine's second look, :mod:`implc.codegen.tape_tighten`, marked the proven ones with
-:data:`OUTSIDE` or :data:`INSIDE`): this pass counts them and drops those marked. Where ``inside`` is not
+:data:`OUTSIDE` or :data:`INSIDE`): this pass counts them and drops those marked, which
+``implc_drop_marked`` (:func:`emit_drop_marked`) does alone. Where ``inside`` is not
 NULL (a solid) the leaves proven below 0 are appended to it (:data:`implc.abi.INSIDE_WORDS` each,
 ``*inside_count`` rows already there, and updated). The survivors (coordinates, masks, normals) are
 moved down in order; the new count is returned.
@@ -119,16 +120,37 @@ def emit_tighten(module: ir.Module):
         with testing:
             for_flagged_batches(b, flags, n, slots, test_pending,
                                 lambda i: union.set(b.or_(union.get(), load_at(b, masks, i))))
-        with tested:  # the tape engine's look marked them: count the flagged leaves and the proven ones
-            with for_range(b, n) as i:
-                flag = load_at(b, flags, i)
-                with if_(b, b.and_(b.icmp_unsigned(">=", flag, const(I8, abi.TIGHTEN_ABOVE)),
-                                   b.icmp_unsigned("<=", flag, const(I8, abi.TIGHTEN_BELOW)))):
-                    bump(b, stats, 0)
-                with if_(b, b.or_(b.icmp_unsigned("==", flag, const(I8, OUTSIDE)),
-                                  b.icmp_unsigned("==", flag, const(I8, INSIDE)))):
-                    bump(b, stats, 1)
+        with tested:
+            _count_marked(b, flags, n, stats)
+    b.ret(_drop_marked(b, depth, coords, masks, normals, flags, n, inside, inside_count))
 
+
+def emit_drop_marked(module: ir.Module):
+    """``implc_drop_marked``: the end of :func:`emit_tighten` alone, for leaves the tape engine's second
+    look already marked (:mod:`implc.codegen.tape_tighten`): count them and drop the proven ones. A
+    module of its own from ``implc_tighten``'s tests, so that the tape engine's voxelizations never
+    compile those."""
+    fn, b = define(module, abi.DROP_MARKED)
+    depth, coords, masks, normals, flags, n, inside, inside_count, stats = fn.args
+    _count_marked(b, flags, n, stats)
+    b.ret(_drop_marked(b, depth, coords, masks, normals, flags, n, inside, inside_count))
+
+
+def _count_marked(b: ir.IRBuilder, flags, n, stats):
+    """stats[0] += the flagged leaves, stats[1] += those marked proven (the tape engine's look)."""
+    with for_range(b, n) as i:
+        flag = load_at(b, flags, i)
+        with if_(b, b.and_(b.icmp_unsigned(">=", flag, const(I8, abi.TIGHTEN_ABOVE)),
+                           b.icmp_unsigned("<=", flag, const(I8, abi.TIGHTEN_BELOW)))):
+            bump(b, stats, 0)
+        with if_(b, b.or_(b.icmp_unsigned("==", flag, const(I8, OUTSIDE)),
+                          b.icmp_unsigned("==", flag, const(I8, INSIDE)))):
+            bump(b, stats, 1)
+
+
+def _drop_marked(b: ir.IRBuilder, depth, coords, masks, normals, flags, n, inside, inside_count):
+    """The leaves marked proven dropped in place (a solid's proven-inside ones appended to ``inside``), the
+    survivors moved down in order; returns their count."""
     solid = b.icmp_unsigned("!=", inside, ir.Constant(inside.type, None))
     kept = Local(b, I64, 0, "kept")
     with for_range(b, n) as i:
@@ -151,4 +173,4 @@ def emit_tighten(module: ir.Module):
                              b.add(b.mul(k, const(I64, 3)), const(I64, a)))
                 store_at(b, load_at(b, masks, i), masks, k)
             kept.set(b.add(k, const(I64, 1)))
-    b.ret(kept.get())
+    return kept.get()
