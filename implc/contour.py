@@ -282,11 +282,10 @@ class _Grid:
             self._corner_values = np.concatenate([self._corner_values, fresh])
         return self._corner_values[numbers]
 
-    def face_values(self, axis: int, side: int, keys: np.ndarray | None) -> np.ndarray:
+    def face_values(self, axis: int, side: int, keys: np.ndarray) -> np.ndarray:
         """F at the corners ``keys`` of a face of the bounds, sampled once (and remembered by the face): most
         faces are outside the solid everywhere, and their corners never enter the corner index."""
         if (axis, side) not in self._faces:
-            assert keys is not None, "a face's corners are named the first time it is sampled"
             self._faces[axis, side] = self.values(self.corner_points(keys.reshape(-1))).reshape(keys.shape)
         return self._faces[axis, side]
 
@@ -581,10 +580,12 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
             corners = np.zeros((n + 1, n + 1, 3), np.int64)
             corners[..., axis] = side * n
             corners[..., b], corners[..., c] = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-            signs = grid.face_values(axis, side, grid.key(corners)) < 0
+            keys = grid.key(corners)
+            values = grid.face_values(axis, side, keys)
+            signs = values < 0
             if not signs.any():
                 continue
-            grid.remember(grid.key(corners).reshape(-1), grid.face_values(axis, side, None).reshape(-1))
+            grid.remember(keys.reshape(-1), values.reshape(-1))
             inside = np.zeros((len(cells), 8), bool)
             for k, (du, dv) in enumerate(SQUARE):
                 inside[:, local[k]] = signs[cells[:, b] + du, cells[:, c] + dv]

@@ -213,8 +213,8 @@ def test_clients_that_hang_up_or_stall_leave_no_traceback(server, capfd):
 
 
 def test_connections_are_capped(flower):
-    """More silent connections than the cap: the server still answers once they time out, and never runs
-    more handlers at once than the cap."""
+    """The server's connection slots are the cap (what bounds the handlers running at once; the stalled
+    clients' release is the read timeout, checked above)."""
     import implc.view_server as view_server
     with ViewServer(flower[1], port=0).start() as s:
         assert s.httpd._slots._initial_value == view_server.MAX_CONNECTIONS
