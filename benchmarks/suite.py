@@ -811,9 +811,89 @@ def mesh(args, out):
     return md
 
 
+def _noop(i):
+    return i
+
+
+def cluster(args, out):
+    """Dask cluster runs against the single-process run at the same total cores: Scene 1 as a solid into
+    Zarr at --cluster-depth (the cluster already started: its start-up is measured apart), interleaved,
+    medians of --repeats; one run at --cluster-big-depth through two worker processes with each worker's
+    peak memory; the tasks per second the scheduler sustains (no-op tasks); how the task count grows with
+    the depth (the plan at the task level)."""
+    import distributed
+
+    from implc import zarr_store
+    from implc.cluster import plan_tasks, task_level
+    sc = scene.load(args.cluster_scene)
+    s = implc.compile(sc.surface, sc.bounds)
+    workers = args.cluster_workers
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        local = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                         dashboard_address=":0")
+        client = distributed.Client(local)
+        startup = time.perf_counter() - t0
+        try:
+            depth = args.cluster_depth
+            zarr_store.write_zarr(s, depth, Path(tmp) / "warm.zarr", solid=True, cluster=client)  # workers compile
+            times = {"here": [], "cluster": []}
+            for _ in range(args.repeats):
+                for where in ("here", "cluster"):
+                    t0 = time.perf_counter()
+                    result = zarr_store.write_zarr(s, depth, Path(tmp) / f"{where}.zarr", solid=True, workers=workers,
+                                                   cluster=client if where == "cluster" else None)
+                    times[where].append(time.perf_counter() - t0)
+            rows["overhead"] = {"depth": depth, "workers": workers, "here_s": statistics.median(times["here"]),
+                                "cluster_s": statistics.median(times["cluster"]), "startup_s": startup,
+                                "voxels": result.voxels, "tasks": result.tasks,
+                                "store_mib": _folder_bytes(result.path) / 2**20}
+            t0 = time.perf_counter()
+            futures = client.map(_noop, range(args.cluster_noop_tasks), pure=False)
+            client.gather(futures)
+            rows["tasks_per_s"] = args.cluster_noop_tasks / (time.perf_counter() - t0)
+            if args.cluster_big_depth:
+                big = args.cluster_big_depth
+                t0 = time.perf_counter()
+                result = zarr_store.write_zarr(s, big, Path(tmp) / "big.zarr", solid=True, cluster=client)
+                seconds = time.perf_counter() - t0
+                peaks = client.run(lambda: __import__("resource").getrusage(
+                    __import__("resource").RUSAGE_SELF).ru_maxrss * 1024)
+                rows["big"] = {"depth": big, "seconds": seconds, "voxels": result.voxels, "tasks": result.tasks,
+                               "inside_voxels": result.inside_voxels, "store_mib": _folder_bytes(result.path) / 2**20,
+                               "worker_peak_mib": [v / 2**20 for v in peaks.values()]}
+        finally:
+            client.close()
+            local.close()
+    growth = []
+    for depth in args.cluster_plan_depths:
+        level = task_level(depth, depth - 8)
+        cells, inside = plan_tasks(s, depth, level, solid=True, options={})
+        growth.append({"depth": depth, "task_level": level, "tasks": len(cells), "inside_above": len(inside)})
+    rows["plan"] = growth
+    out["cluster"] = rows
+    o = rows["overhead"]
+    md = [f"### Cluster: {args.cluster_scene} as a solid into Zarr, {workers} worker processes against one process "
+          f"with {workers} threads", "",
+          "| grid | one process s | cluster s | overhead | voxels | tasks | store MiB | cluster start-up s |",
+          "|---|---|---|---|---|---|---|---|",
+          f"| {1 << o['depth']}³ | {o['here_s']:.2f} | {o['cluster_s']:.2f} | {o['cluster_s'] / o['here_s'] - 1:+.0%} "
+          f"| {o['voxels']} | {o['tasks']} | {o['store_mib']:.0f} | {o['startup_s']:.1f} |", ""]
+    if "big" in rows:
+        b = rows["big"]
+        md += [f"At {1 << b['depth']}³: {b['seconds']:.1f} s, {b['voxels']} boundary voxels, {b['tasks']} tasks, "
+               f"store {b['store_mib']:.0f} MiB; each worker's peak memory "
+               f"{', '.join(f'{p:.0f}' for p in b['worker_peak_mib'])} MiB.", ""]
+    md += [f"The scheduler ran {rows['tasks_per_s']:.0f} no-op tasks per second.", "",
+           "| grid | task level | tasks | inside octants above them |", "|---|---|---|---|"]
+    md += [f"| {1 << g['depth']}³ | {g['task_level']} | {g['tasks']} | {g['inside_above']} |" for g in growth]
+    return md
+
+
 SECTIONS = {"table1": table1, "techniques": techniques, "baselines": baselines, "growth": growth,
             "tightness": tightness, "kernels": kernels, "models": models, "solids": solids, "viewer": viewer,
-            "scale": scale, "mesh": mesh}
+            "scale": scale, "mesh": mesh, "cluster": cluster}
 
 
 def parser():
@@ -850,6 +930,12 @@ def parser():
     p.add_argument("--mesh-depths", default="8,9", help="grid depths for the 'mesh' section (256³, 512³)")
     p.add_argument("--mesh-quality-depth", type=int, default=8,
                    help="deepest grid whose meshes pymeshlab checks for self-intersections (slow above)")
+    p.add_argument("--cluster-scene", default="paper_blobs", help="scene for the 'cluster' section")
+    p.add_argument("--cluster-depth", type=int, default=11, help="grid of the overhead comparison (default 2048³)")
+    p.add_argument("--cluster-big-depth", type=int, default=13, help="one run at this grid (0: none; 8192³)")
+    p.add_argument("--cluster-workers", type=int, default=2, help="worker processes (one thread each)")
+    p.add_argument("--cluster-noop-tasks", type=int, default=5000, help="no-op tasks timed on the scheduler")
+    p.add_argument("--cluster-plan-depths", default="9,11,13,15,17", help="grids whose task counts are shown")
     p.add_argument("--out", default="implc-bench", help="folder for latest.md/.json (default ./implc-bench)")
     return p
 
@@ -867,6 +953,7 @@ def main(argv=None) -> int:
     args.viewer_depths = [int(d) for d in args.viewer_depths.split(",")]
     args.scale_depths = [int(d) for d in args.scale_depths.split(",")]
     args.mesh_depths = [int(d) for d in args.mesh_depths.split(",")]
+    args.cluster_plan_depths = [int(d) for d in args.cluster_plan_depths.split(",")]
     args.tightness_scenes = args.tightness_scenes.split(",") if args.tightness_scenes else scene.available()
     sections = args.sections.split(",")
     unknown = [s for s in sections if s not in SECTIONS]

@@ -127,3 +127,47 @@ def replacing_folder(path):
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _has_parts(folder: Path) -> bool:
+    parts = folder / "_parts"
+    return parts.is_dir() and any(p.suffix == ".npz" and not p.name.startswith(".") for p in parts.iterdir())
+
+
+@contextlib.contextmanager
+def resumable_folder(path, *, resume: bool = False, matches=None):
+    """``with resumable_folder(path) as folder: fill(folder)``: the folder ``NAME.partial`` beside
+    ``path``, renamed into place (replacing an existing folder) when the block completes. If the block
+    fails after finished work was saved in it (a ``_parts`` file), it stays for a later
+    ``resume=True``, which takes it up again where ``matches(folder)`` says it holds the same job."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{path} exists and is not a folder")
+    partial = path.with_name(path.name + ".partial")
+    if resume:
+        if not partial.is_dir():
+            raise ValueError(f"nothing to resume: {partial} does not exist (a run that stops early keeps it)")
+        if matches is not None and not matches(partial):
+            raise ValueError(f"{partial} holds another run (another surface, depth or options): run without "
+                             "resume to start over")
+    elif partial.exists():
+        shutil.rmtree(partial)
+    partial.mkdir(parents=True, exist_ok=True)
+    try:
+        try:
+            yield partial
+            os.chmod(partial, _mode_for(path, folder=True))
+        except OSError as exc:
+            raise _named(exc, path) from None
+        if path.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+            with _signals_held():
+                path.rename(old / path.name)
+                _put_in_place(partial, path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            _put_in_place(partial, path)
+    except BaseException:
+        if not _has_parts(partial):
+            shutil.rmtree(partial, ignore_errors=True)
+        raise

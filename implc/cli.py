@@ -17,6 +17,7 @@ import signal
 import sys
 import threading
 import time
+import typing
 from pathlib import Path
 
 from .errors import shorten
@@ -171,15 +172,38 @@ def cmd_voxelize(args) -> int:
     _check_surface_options(args)
     name, surface, sc = _surface_from_args(args)
     depth = args.depth if args.depth is not None else (sc.depth if sc else 9)
-    if out.suffix.lower() == ".zarr" and not args.slices:  # streamed: the voxels are never all in memory
+    zarr_out = out.suffix.lower() == ".zarr" and not args.slices
+    if args.resume and not zarr_out:
+        raise UsageError("--resume finishes an interrupted .zarr run; other outputs are written whole or not at all")
+    if args.cluster is not None:
+        from .cluster import parse_address
+        parse_address(args.cluster)  # a bad address is refused before any work
+    say = None if args.quiet else (lambda line: print(line, file=sys.stderr))
+    if zarr_out:  # streamed: the voxels are never all in memory (on a cluster: tasks own their shards)
         from .zarr_store import write_zarr
         t0 = time.perf_counter()
-        result = write_zarr(surface, depth, out, solid=args.solid, workers=args.workers,
-                            progress=not args.quiet and sys.stderr.isatty(), **TIGHTNESS[args.tightness])
+        result: typing.Any
+        try:
+            result = write_zarr(surface, depth, out, solid=args.solid, workers=args.workers, cluster=args.cluster,
+                                resume=args.resume, progress=not args.quiet and sys.stderr.isatty(), say=say,
+                                **TIGHTNESS[args.tightness])
+        except BaseException:
+            partial = out.with_name(out.name + ".partial")
+            if partial.is_dir():
+                print(f"implc: the finished tasks are kept in {partial}: the same command with --resume "
+                      "finishes the store", file=sys.stderr)
+            raise
         count, inside, seconds = result.voxels, result.inside_octants, time.perf_counter() - t0
     else:
-        result, seconds = _voxelize(surface, depth, args.workers, args.quiet, solid=args.solid,
-                                    tightness=args.tightness)
+        if args.cluster is not None:
+            from .voxelization import voxelize
+            t0 = time.perf_counter()
+            result = voxelize(surface, depth, solid=args.solid, cluster=args.cluster, say=say,
+                              progress=not args.quiet and sys.stderr.isatty(), **TIGHTNESS[args.tightness])
+            seconds = time.perf_counter() - t0
+        else:
+            result, seconds = _voxelize(surface, depth, args.workers, args.quiet, solid=args.solid,
+                                        tightness=args.tightness)
         count, inside = len(result), len(result.inside) if args.solid else 0
         if args.slices:
             from .slices import save_slices
@@ -205,12 +229,12 @@ def cmd_render(args) -> int:
     _check_surface_options(args)
     view_angles = _numbers(args.view, 2, "--view", "azimuth,elevation") if args.view else None
     style = Style(color=_color(args.color)) if args.color else Style()
-    if args.scene and Path(args.scene).suffix.lower() in (".npz", ".ply", ".npy"):
+    if args.scene and Path(args.scene).suffix.lower() in (".npz", ".ply", ".npy", ".zarr"):
         given = [flag for flag, value in (("--expr", args.expr), ("--depth", args.depth), ("--bounds", args.bounds),
                                           ("--workers", args.workers)) if value is not None]
         if given:
             raise UsageError(f"{', '.join(given)} cannot apply to a voxel file ({args.scene}): it is rendered as saved")
-        voxels = voxel_files.load_npz(args.scene)
+        voxels = voxel_files.load(args.scene)
         default_view = None
     else:
         _, surface, sc = _surface_from_args(args)
@@ -244,15 +268,15 @@ def cmd_view(args) -> int:
     if args.export is not None:
         _check_folder_writable(Path(args.export), "a static viewer")
     suffix = Path(args.scene).suffix.lower() if args.scene else ""
-    if suffix == ".npz":
+    if suffix in (".npz", ".zarr"):
         given = [flag for flag, value in (("--expr", args.expr), ("--depth", args.depth), ("--bounds", args.bounds),
                                           ("--workers", args.workers)) if value is not None]
         if given:
             raise UsageError(f"{', '.join(given)} cannot apply to a voxel file ({args.scene}): it is shown as saved")
-        voxels, name, view = voxel_files.load_npz(args.scene), Path(args.scene).stem, None
+        voxels, name, view = voxel_files.load(args.scene), Path(args.scene).stem, None
     elif suffix in (".ply", ".npy", ".stl", ".obj", ".glb", ".3mf"):
         raise UsageError(f"{args.scene} is a {suffix} file: 'implc view' shows scenes, formulas, .vm models and "
-                         "the .npz voxel files implc writes (a mesh opens in any mesh viewer; 'implc info' "
+                         "the .npz and .zarr voxel files implc writes (a mesh opens in any mesh viewer; 'implc info' "
                          "describes it)")
     else:
         _check_surface_options(args)
@@ -340,7 +364,8 @@ def cmd_info(args) -> int:
         print(f"model    {args.file}: {model.instructions} instructions, {len(model.tape)} after sharing")
         print(f"bounds   {model.bounds} (suggested by its --scale, or [-1, 1]³)")
         return 0
-    if Path(args.file).suffix.lower() == ".zarr" and Path(args.file).is_dir():
+    folder = Path(args.file)
+    if folder.is_dir() and (folder.suffix.lower() == ".zarr" or (folder / "zarr.json").is_file()):  # NAME.partial too
         from .zarr_store import describe_zarr
         try:
             lines = describe_zarr(args.file)
@@ -444,12 +469,18 @@ def _parser():
     surface_args(v)
     v.add_argument("-o", "--output", required=True,
                    help="output: .npz, .ply (point cloud), .npy (dense), .vdb (OpenVDB occupancy and normals grids) "
-                        "or .zarr (dense, Zarr v3, written in shards)")
+                        "or .zarr (a Zarr v3 store: occupancy, levels of detail, voxels with normals; in shards)")
     v.add_argument("--compress", action="store_true", help="deflate the .npz (smaller, several times slower)")
     v.add_argument("--solid", action="store_true",
                    help="also classify the inside (whole octants where F < 0): volume bounds, solid occupancy")
     v.add_argument("--slices", choices=("png", "tiff"),
                    help="write one 1-bit image per z layer into the folder -o names (with --solid: the solid)")
+    v.add_argument("--cluster", metavar="ADDRESS",
+                   help="run the tasks on a Dask cluster: tcp://host:port (a running scheduler) or local:N (N worker "
+                        "processes started here); .zarr is written by the workers (a shared folder), other outputs "
+                        "are gathered here first")
+    v.add_argument("--resume", action="store_true",
+                   help="finish the interrupted .zarr run kept in OUT.partial (same surface and options)")
     v.set_defaults(run=cmd_voxelize)
 
     m = sub.add_parser("mesh", help="mesh a scene, formula or .vm model: a closed, oriented, intersection-free "
@@ -458,7 +489,7 @@ def _parser():
     m.add_argument("-o", "--output", required=True, help="output: .stl, .obj, .ply, .glb or .3mf")
     m.set_defaults(run=cmd_mesh)
 
-    w = sub.add_parser("view", help="view a scene, formula, .vm model or .npz in the browser (levels of detail)")
+    w = sub.add_parser("view", help="view a scene, formula, .vm model, .npz or .zarr in the browser (levels of detail)")
     surface_args(w)
     w.add_argument("--port", type=int, help="port on 127.0.0.1 (default: 8765 or the next free one; 0: any)")
     w.add_argument("--no-browser", action="store_true", help="print the URL only; open no browser")
@@ -466,7 +497,7 @@ def _parser():
     w.add_argument("--export", metavar="DIR", help="write a static viewer folder (page, script, chunks) instead")
     w.set_defaults(run=cmd_view)
 
-    r = sub.add_parser("render", help="render a scene, formula or .npz to a PNG")
+    r = sub.add_parser("render", help="render a scene, formula, .npz or .zarr to a PNG")
     surface_args(r)
     r.add_argument("-o", "--output", required=True, help="output .png")
     r.add_argument("--size", type=int, default=1024, help="image size in pixels (default 1024)")

@@ -348,6 +348,17 @@ class Subdivider:
         the statistics; for the memory estimate)."""
         return self._from_root(level)[1].count
 
+    def cells_below(self, cell, level: int, to_level: int) -> tuple[np.ndarray, np.ndarray]:
+        """The cells at ``to_level`` below ``cell`` (at ``level``) that may meet the surface, in Morton
+        order, and (a solid) the inside octants found on the way: a plan for :meth:`run` that starts at
+        one octant (a cluster's task) instead of the root."""
+        if to_level == level:
+            return np.array([cell], dtype=np.uint32), np.empty((0, abi.INSIDE_WORDS), dtype=np.int32)
+        w, result = self._new_worker(to_level), _TaskResult()
+        self._run_task(w, tuple(int(c) for c in cell), level, to_level, result)
+        self._absorb(w)
+        return result.coords[: result.count].copy(), result.inside[: result.inside_count].copy()
+
     def _from_root(self, level: int) -> tuple[_Worker, _TaskResult]:
         """The subdivision of the root down to ``level``: its worker (with its counters) and its cells."""
         w, result = self._new_worker(level), _TaskResult()

@@ -47,6 +47,8 @@ class VmModel:
     tape: Tape
     bounds: tuple
     instructions: int
+    source: str = ""
+    """The ``.vm`` text it was read from: what travels to a cluster's workers (:mod:`implc.recipe`)."""
 
     def __str__(self) -> str:
         return f"{self.name}.vm ({self.instructions} instructions)"
@@ -110,7 +112,7 @@ def parse_vm(text: str, name: str = "model", where: str = "<vm>") -> VmModel:
     tape = tape.compacted()
     tape.verify()
     half = _half_width(scale, where)
-    return VmModel(name, tape, ((-half, half),) * 3, count)
+    return VmModel(name, tape, ((-half, half),) * 3, count, text)
 
 
 def _half_width(scale: Fraction | None, where) -> float:

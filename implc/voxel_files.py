@@ -95,6 +95,17 @@ def _check_readable(path: Path) -> str:
     return fmt
 
 
+def load(path: str | os.PathLike[str], region: Any = None) -> Voxels:
+    """The voxels of an ``.npz`` (:func:`load_npz`) or of a Zarr store (``.zarr``: all, or ``region``,
+    cell ranges ((i0, i1), (j0, j1), (k0, k1)): :func:`implc.zarr_store.load_zarr`)."""
+    if Path(path).is_dir():
+        from .zarr_store import load_zarr
+        return load_zarr(path, region)
+    if region is not None:
+        raise ValueError("region= reads part of a Zarr store; an .npz is read whole")
+    return load_npz(path)
+
+
 def load_npz(path: str | os.PathLike[str]) -> Voxels:
     """The :class:`~implc.voxelization.Voxels` stored in an ``.npz`` written by :func:`save_npz`, validated."""
     path = Path(path)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -296,7 +297,8 @@ def _check_memory(depth, storage, estimate_voxels, available):
 
 def voxelize(surface: Surface, depth: int = 9, *, workers: int | None = None, storage: Any = "octree",
              progress: bool = False, max_voxels: int | None = None, mean_value_levels: int = 0, prune: bool = True,
-             refine_leaves: bool | str = "auto", solid: bool = False) -> Voxels:
+             refine_leaves: bool | str = "auto", solid: bool = False, cluster: Any = None,
+             say: Callable[[str], None] | None = None) -> Voxels:
     """Voxelize a compiled surface on a 2^depth grid over its bounds.
 
     ``mean_value_levels``: how many of the deepest levels also use the mean-value form (tighter on small
@@ -312,6 +314,10 @@ def voxelize(surface: Surface, depth: int = 9, *, workers: int | None = None, st
     ``solid``: also classify the inside: octants whose enclosure lies below 0 are kept whole
     (``Voxels.inside``, never expanded), which gives ``Voxels.volume_bounds()`` and
     ``Voxels.to_dense(solid=True)``.
+    ``cluster``: find the voxels on a Dask cluster (``"local:N"``, a scheduler's address or a
+    ``distributed.Client``; :mod:`implc.cluster`) and gather them here (refused up front where the
+    estimate does not fit in memory; ``workers``, ``storage`` and ``prune`` then do not apply); ``say``
+    receives the dashboard's address.
 
     >>> import implc
     >>> ball = implc.compile(implc.x**2 + implc.y**2 + implc.z**2 - 1)
@@ -337,6 +343,13 @@ def voxelize(surface: Surface, depth: int = 9, *, workers: int | None = None, st
     if max_voxels is None:
         max_voxels = int(available * 0.8 / bytes_per_voxel(storage))
 
+    if cluster is not None:
+        if not (isinstance(storage, str) and storage == "octree"):
+            raise ValueError(f"storage={storage!r} cannot be combined with cluster=: the workers' voxels are gathered "
+                             "into Voxels here (a storage callback cannot travel to the workers)")
+        return _voxelize_on_cluster(surface, depth, cluster, progress=progress, solid=solid, say=say,
+                                    options={"mean_value_levels": mean_value_levels, "refine_leaves": refine_leaves},
+                                    available=available)
     t_start = time.perf_counter()
     subdivider = Subdivider(surface, depth, workers, surface.runtime, max_voxels=max_voxels,
                             mean_value_levels=min(mean_value_levels, depth), prune=prune,
@@ -373,6 +386,22 @@ def voxelize(surface: Surface, depth: int = 9, *, workers: int | None = None, st
     stats.seconds["setup"] = t0 - t_start - stats.seconds["plan"]
     stats.seconds["total"] = time.perf_counter() - t_start
     return Voxels(coords, normals, depth, surface.bounds, stats, storage=result, inside=inside, surface=surface)
+
+
+def _voxelize_on_cluster(surface, depth, cluster, *, progress, solid, say, options, available) -> Voxels:
+    """:func:`voxelize` with ``cluster``: the memory checked against the estimate, the tasks run there."""
+    from .cluster import connect, gather_voxels
+    from .recipe import recipe_of
+    recipe = recipe_of(surface)  # refused before any cluster starts when it cannot travel
+    sub = Subdivider(surface, depth, 1, surface.runtime, mean_value_levels=min(options["mean_value_levels"], depth),
+                     refine_leaves=options["refine_leaves"], solid=solid)
+    estimate_level = min(depth, max(2, min(depth - ESTIMATE_LEVEL, ESTIMATE_LEVEL)))
+    estimate = _estimate_voxels(sub.count_cells(estimate_level), estimate_level, depth)
+    _check_memory(depth, "coords", 2 * estimate, available)  # the parts gathered, then joined
+    with connect(cluster, say=say) as client:
+        coords, normals, inside, stats = gather_voxels(client, recipe, surface, depth, solid=solid, options=options,
+                                                       progress=progress)
+    return Voxels(coords, normals, depth, surface.bounds, stats, inside=inside, surface=surface)
 
 
 def mesh(surface: Surface, depth: int = 8, *, workers: int | None = None, progress: bool = False,

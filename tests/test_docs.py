@@ -16,7 +16,7 @@ DOCTESTED = ["implc.surface", "implc.voxelization", "implc.vm", "implc.triangle_
 methods, mesh, load_vm (the issue names these)."""
 PUBLIC_MODULES = ["implc.surface", "implc.voxelization", "implc.vm", "implc.triangle_mesh", "implc.shapes",
                   "implc.voxel_files", "implc.zarr_store", "implc.slices", "implc.render", "implc.scene",
-                  "implc.errors", "implc.untrusted"]
+                  "implc.errors", "implc.untrusted", "implc.cluster", "implc.recipe"]
 
 
 @pytest.mark.parametrize("name", DOCTESTED)
@@ -93,7 +93,8 @@ def test_notebooks_run(path, tmp_path):
 
 
 ANNOTATED = ["implc.surface", "implc.voxelization", "implc.vm", "implc.triangle_mesh", "implc.shapes",
-             "implc.voxel_files", "implc.zarr_store", "implc.slices", "implc.render", "implc.scene"]
+             "implc.voxel_files", "implc.zarr_store", "implc.slices", "implc.render", "implc.scene",
+             "implc.cluster", "implc.recipe"]
 
 
 @pytest.mark.parametrize("name", ANNOTATED)

@@ -282,11 +282,15 @@ def test_zarr_attributes_are_checked(tmp_path, capsys):
     surface = implc.compile(shapes.sphere(0.7, (0, 0, 0)))
     from implc.zarr_store import write_zarr
     write_zarr(surface, 4, tmp_path / "v.zarr")
+    group = zarr.open_group(str(tmp_path / "v.zarr"), mode="r+")
+    written = dict(group.attrs["implc"])
     for about in ({"depth": 7, "bounds": [[-1, 1]] * 3, "solid": True}, {"depth": 4, "bounds": "[-1, 1]",
                                                                           "solid": True},
-                  {"bounds": [[-1, 1]] * 3, "solid": True}, {"depth": 4, "bounds": [[-1, 1]] * 3, "solid": "yes"}):
-        array = zarr.open_array(str(tmp_path / "v.zarr"), mode="r+")
-        array.attrs["implc"] = about
+                  {"depth": None, "bounds": [[-1, 1]] * 3, "solid": True},
+                  {"depth": 4, "bounds": [[-1, 1]] * 3, "solid": "yes"},
+                  {"manifest": dict(written["manifest"], voxels="many")},
+                  {"manifest": dict(written["manifest"], bricks=-1)}):
+        group.attrs["implc"] = dict(written, **about)
         assert "damaged implc Zarr store" in one_line_error(capsys, ["info", tmp_path / "v.zarr"])
 
 

@@ -153,17 +153,18 @@ def test_zarr_holds_the_dense_solid_and_the_cli_writes_it(tmp_path, capsys):
     from implc import voxel_files
     v = implc.voxelize(implc.compile(HOLLOW), 6, solid=True)
     path = voxel_files.save(v, tmp_path / "hollow.zarr")
-    array = zarr.open(path, mode="r")
+    group = zarr.open_group(path, mode="r")
+    array = group["occupancy"]
     assert array.shape == (64, 64, 64) and array.dtype == bool and array.metadata.zarr_format == 3
     np.testing.assert_array_equal(array[:], v.to_dense(solid=True))
-    assert array.attrs["implc"]["depth"] == 6 and array.attrs["implc"]["solid"] is True
+    assert group.attrs["implc"]["depth"] == 6 and group.attrs["implc"]["solid"] is True
     shell = implc.voxelize(implc.compile(HOLLOW), 6)
     voxel_files.save(shell, path)  # replaces the store whole
-    np.testing.assert_array_equal(zarr.open(path, mode="r")[:], shell.to_dense())
+    np.testing.assert_array_equal(zarr.open_group(path, mode="r")["occupancy"][:], shell.to_dense())
     assert sorted(p.name for p in tmp_path.iterdir()) == ["hollow.zarr"], "a temporary folder was left"
     out = tmp_path / "torus.zarr"
     assert main(["voxelize", "torus", "--depth", "9", "--solid", "--quiet", "-o", str(out)]) == 0
-    big = zarr.open(out, mode="r")
+    big = zarr.open_group(out, mode="r")["occupancy"]
     direct = implc.voxelize(implc.compile(TORUS), 9, solid=True)
     layer = np.zeros((512, 512), bool)  # layer i = 200 of the dense solid, from the voxels and octants
     cells = direct.coords[direct.coords[:, 0] == 200]
@@ -176,7 +177,7 @@ def test_zarr_holds_the_dense_solid_and_the_cli_writes_it(tmp_path, capsys):
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "Zarr v3 bool array 512x512x512" in text and "depth 9" in text and "the solid" in text
+    assert "occupancy bool 512x512x512" in text and "depth 9" in text and "the solid" in text
     (tmp_path / "other.zarr").mkdir()
     assert main(["info", str(tmp_path / "other.zarr")]) == 2
     assert "cannot read" in capsys.readouterr().err
@@ -200,7 +201,7 @@ def test_zarr_written_while_voxelizing_is_the_dense_voxelization(tmp_path, monke
     for workers in (1, 2):
         out = tmp_path / f"w{workers}.zarr"
         result = zarr_store.write_zarr(surface, 7, out, solid=solid, workers=workers)
-        array = zarr.open(out, mode="r")
+        array = zarr.open_group(out, mode="r")["occupancy"]
         assert array.shards == (shard,) * 3
         np.testing.assert_array_equal(array[:], dense)
         assert result.voxels == len(v)

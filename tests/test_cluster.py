@@ -1,0 +1,190 @@
+"""implc on a Dask cluster whose scheduler and workers are separate processes (as on real hosts): the
+stores it writes are, array by array, the single-process run's; a worker killed in the middle costs only
+its tasks (a fresh worker joins, the store is the same); ``local:N`` starts and stops its own cluster; a
+surface travels as text and is rebuilt the same. Marked slow: each test starts processes."""
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zarr
+
+import implc
+from implc import scene, zarr_store
+from implc.cli import main
+from implc.recipe import TravelError, build, recipe_of
+from implc.vm import parse_vm
+
+pytestmark = pytest.mark.slow
+
+DASK = Path(sys.executable).parent / "dask"
+
+
+def arrays(path) -> dict:
+    group = zarr.open_group(str(path), mode="r")
+    return {name: a for name, a in group.members(max_depth=None) if isinstance(a, zarr.Array)}
+
+
+def assert_same_store(a, b):
+    """Every array equal: the same arrays, and each array's metadata and encoded chunk and shard files
+    byte for byte (the encoding is deterministic; reading a 2048³ occupancy as values is 8 GiB)."""
+    assert arrays(a).keys() == arrays(b).keys()
+    files_a = {p.relative_to(a): p for p in Path(a).rglob("*") if p.is_file()}
+    files_b = {p.relative_to(b): p for p in Path(b).rglob("*") if p.is_file()}
+    assert files_a.keys() == files_b.keys()
+    for name, path in files_a.items():
+        if name != Path("zarr.json"):  # the group's attributes: compared below, key by key
+            assert path.read_bytes() == files_b[name].read_bytes(), name
+    about_a = zarr.open_group(str(a), mode="r").attrs["implc"]
+    about_b = zarr.open_group(str(b), mode="r").attrs["implc"]
+    for key in ("depth", "bounds", "solid", "layout"):
+        assert about_a[key] == about_b[key]
+    for key in ("voxels", "inside_octants", "inside_voxels", "bricks", "shards", "tasks"):
+        assert about_a["manifest"][key] == about_b["manifest"][key], key
+
+
+class Cluster:
+    """A Dask scheduler and workers, each its own process, the kernel cache shared as on one host."""
+
+    def __init__(self, folder: Path):
+        self.folder = folder
+        self.file = folder / "scheduler.json"
+        self.env = dict(os.environ, DASK_DISTRIBUTED__WORKER__DAEMON="False")
+        self.scheduler = subprocess.Popen([str(DASK), "scheduler", "--scheduler-file", str(self.file), "--port", "0",
+                                           "--no-dashboard", "--host", "127.0.0.1"], env=self.env,
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        self.workers: list[subprocess.Popen] = []
+        deadline = time.time() + 60
+        while not self.file.exists() or not self.file.read_text().strip():
+            assert time.time() < deadline, "the scheduler did not start"
+            time.sleep(0.1)
+        self.address = json.loads(self.file.read_text())["address"]
+
+    def add_worker(self) -> subprocess.Popen:
+        worker = subprocess.Popen([str(DASK), "worker", "--scheduler-file", str(self.file), "--nthreads", "1",
+                                   "--no-nanny", "--no-dashboard", "--host", "127.0.0.1",
+                                   "--local-directory", str(self.folder / "work")], env=self.env,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        self.workers.append(worker)
+        return worker
+
+    def wait_for(self, count: int):
+        from distributed import Client
+        with Client(self.address, timeout="30s") as client:
+            client.wait_for_workers(count, timeout=60)
+
+    def close(self):
+        for process in self.workers + [self.scheduler]:  # the workers first, then their scheduler
+            if process.poll() is None:
+                process.send_signal(signal.SIGTERM)
+                if process is not self.scheduler:
+                    with contextlib.suppress(subprocess.TimeoutExpired):
+                        process.wait(5)
+        for process in self.workers + [self.scheduler]:
+            try:
+                process.wait(3)
+            except subprocess.TimeoutExpired:  # a worker may wait for a scheduler already gone
+                process.kill()
+                process.wait()
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    c = Cluster(tmp_path)
+    c.add_worker()
+    c.add_worker()
+    c.wait_for(2)
+    yield c
+    c.close()
+
+
+@pytest.mark.parametrize("name,solid", [("paper_blobs", True), ("csg_part", False), ("paper_sin4_sin8", False)])
+def test_separate_processes_write_the_single_process_store(cluster, tmp_path, name, solid):
+    """The CLI against a scheduler and two workers (their own processes): three scenes (the paper's blobs
+    as a solid, a CSG part through the tape engine, a spherical scene) give the single-process store."""
+    sc = scene.load(name)
+    surface = implc.compile(sc.surface, sc.bounds)
+    zarr_store.write_zarr(surface, 9, tmp_path / "here.zarr", solid=solid, workers=2)
+    args = ["voxelize", name, "--depth", "9", "-o", str(tmp_path / "there.zarr"), "--quiet",
+            "--cluster", cluster.address] + (["--solid"] if solid else [])
+    assert main(args) == 0
+    assert_same_store(tmp_path / "here.zarr", tmp_path / "there.zarr")
+    # gathered into memory instead: the same voxels as voxelize here
+    gathered = implc.voxelize(surface, 8, solid=solid, cluster=cluster.address)
+    here = implc.voxelize(surface, 8, solid=solid)
+    np.testing.assert_array_equal(gathered.coords, here.coords)
+    np.testing.assert_array_equal(gathered.normals, here.normals)
+    if solid:
+        assert sorted(map(tuple, gathered.inside.tolist())) == sorted(map(tuple, here.inside.tolist()))
+
+
+def test_a_killed_worker_costs_only_its_tasks(cluster, tmp_path):
+    """A worker killed (SIGKILL) while the run is under way at 2048³: Dask runs its tasks again elsewhere,
+    a fresh worker joins, and the store is the single-process run's."""
+    sc = scene.load("paper_blobs")
+    surface = implc.compile(sc.surface, sc.bounds)
+    out = tmp_path / "killed.zarr"
+    failures = []
+
+    def run():
+        try:
+            zarr_store.write_zarr(surface, 11, out, solid=True, cluster=cluster.address)
+        except BaseException as exc:  # noqa: BLE001 - reported by the test's thread
+            failures.append(exc)
+
+    runner = threading.Thread(target=run)
+    runner.start()
+    parts = tmp_path / "killed.zarr.partial" / "_parts"
+    deadline = time.time() + 120
+    while not (parts.is_dir() and len(list(parts.glob("*.npz"))) >= 3):
+        assert time.time() < deadline and runner.is_alive(), f"no task finished: {failures}"
+        time.sleep(0.02)
+    cluster.workers[0].kill()
+    cluster.add_worker()
+    runner.join(300)
+    assert not runner.is_alive() and not failures, failures
+    assert not parts.exists(), "the parts are removed once the store is complete"
+    zarr_store.write_zarr(surface, 11, tmp_path / "here.zarr", solid=True, workers=2)
+    assert_same_store(tmp_path / "here.zarr", out)
+
+
+def test_a_local_cluster_is_started_and_stopped(tmp_path, capsys):
+    sc = scene.load("torus")
+    surface = implc.compile(sc.surface, sc.bounds)
+    zarr_store.write_zarr(surface, 8, tmp_path / "here.zarr", solid=True, workers=2)
+    assert main(["voxelize", "torus", "--depth", "8", "--solid", "-o", str(tmp_path / "there.zarr"),
+                 "--cluster", "local:2"]) == 0
+    err = capsys.readouterr().err
+    assert "local:2: 2 workers, dashboard http://" in err
+    assert_same_store(tmp_path / "here.zarr", tmp_path / "there.zarr")
+    import distributed
+    assert not distributed.client._global_clients, "the local cluster's client was left open"
+
+
+def test_surfaces_travel_as_text():
+    """A SymPy surface as its srepr text, a .vm model as its text: rebuilt, they evaluate the same; a model
+    inlined into a SymPy expression cannot travel and says so."""
+    for name in ("paper_blobs", "csg_part", "paper_sin4_sin8"):
+        sc = scene.load(name)
+        surface = implc.compile(sc.surface, sc.bounds)
+        recipe = recipe_of(surface)
+        rebuilt = build(recipe)
+        assert rebuilt is build(recipe), "a process compiles a recipe once"
+        points = np.random.default_rng(1).uniform(-1, 1, (200, 3))
+        np.testing.assert_array_equal(rebuilt.eval(points), surface.eval(points))
+        assert rebuilt.engine == surface.engine and rebuilt.bounds == surface.bounds
+    text = "x var-x\ny var-y\nz var-z\nxx square x\nyy square y\nzz square z\ns add xx yy\nt add s zz\nc const 0.25\n" \
+           "out sub t c\n"
+    model = parse_vm(text, name="ball")
+    ball = implc.compile(model)
+    assert recipe_of(ball).kind == "vm" and build(recipe_of(ball)).eval([[0.5, 0, 0]])[0] == 0
+    with pytest.raises(TravelError, match="cannot travel"):
+        recipe_of(implc.compile(model(implc.x, implc.y, implc.z) + implc.x / 10))

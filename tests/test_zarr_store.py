@@ -1,0 +1,193 @@
+"""The Zarr store (implc.zarr_store) against the in-memory voxelization and numpy: its occupancy is the
+dense solid, each level of detail that occupancy pooled by numpy, its rows the voxels with their normals
+in Morton order; a region reads back what the voxels hold there; every shard has one writer; a stopped
+run leaves an incomplete store that readers refuse and that resume finishes without redoing its
+finished tasks. The store is the same written from voxels in memory and while voxelizing."""
+
+import json
+
+import numpy as np
+import pytest
+import zarr
+from sympy import Max, Rational, sqrt
+
+import implc
+from implc import shapes, zarr_store
+from implc.cli import main
+from implc.symbols import x, y, z
+
+HOLLOW = Max(shapes.box((0.7, 0.7, 0.7)), -(sqrt(x**2 + y**2 + z**2) - Rational(3, 10)))
+TORUS = shapes.torus(Rational(3, 5), Rational(1, 4))
+
+
+def arrays(path) -> dict:
+    group = zarr.open_group(str(path), mode="r")
+    return {name: a[...] for name, a in group.members(max_depth=None) if isinstance(a, zarr.Array)}
+
+
+def pooled(dense: np.ndarray, level: int) -> np.ndarray:
+    """The occupancy of the 2^level grid from the dense one, by numpy alone."""
+    n, m = dense.shape[0], 1 << level
+    e = n // m
+    return dense.reshape(m, e, m, e, m, e).any(axis=(1, 3, 5))
+
+
+@pytest.fixture
+def small_bricks(monkeypatch):
+    """Bricks of 8³ (chunks 4³) and row shards of 4096 rows: a 64³ or 128³ grid has many bricks, tasks
+    holding several, and row shards spanning several tasks."""
+    monkeypatch.setattr(zarr_store, "SHARD", 8)
+    monkeypatch.setattr(zarr_store, "CHUNK", 4)
+    monkeypatch.setattr(zarr_store, "ROW_CHUNK", 1024)
+    monkeypatch.setattr(zarr_store, "ROW_SHARD", 4096)
+
+
+@pytest.mark.parametrize("solid", [True, pytest.param(False, marks=pytest.mark.slow)], ids=["solid", "shell"])
+def test_the_store_is_the_voxelization(tmp_path, small_bricks, solid):
+    surface = implc.compile(HOLLOW)
+    depth = 6
+    v = implc.voxelize(surface, depth, solid=solid)
+    dense = v.to_dense(solid=solid)
+    written = zarr_store.write_zarr(surface, depth, tmp_path / "w.zarr", solid=solid, workers=2)
+    assert written.tasks > 8 and written.voxels == len(v)
+    stored = arrays(tmp_path / "w.zarr")
+    np.testing.assert_array_equal(stored["occupancy"], dense)
+    for level in range(1, depth):
+        np.testing.assert_array_equal(stored[f"lod/{level}"], pooled(dense, level), err_msg=f"level {level}")
+    np.testing.assert_array_equal(stored["voxels/coords"], v.coords)
+    np.testing.assert_array_equal(stored["voxels/normals"], v.normals)
+    bricks = stored["bricks"].astype(np.int64)
+    starts = stored["voxels/rows"]
+    assert starts[0] == 0 and starts[-1] == len(v) and np.all(np.diff(starts) >= 0)
+    for b in range(0, len(bricks), 7):  # each brick's rows are its voxels
+        rows = v.coords[starts[b]:starts[b + 1]].astype(np.int64)
+        assert np.all(rows >> 3 == bricks[b])
+    if solid:
+        inside = np.concatenate([stored["inside/coarse"], stored["inside/octants"]])
+        key = lambda rows: sorted(map(tuple, rows.tolist()))  # noqa: E731
+        assert key(inside) == key(v.inside)
+        lo, hi = written.volume_bounds()
+        assert (lo, hi) == v.volume_bounds()
+    back = zarr_store.load_zarr(tmp_path / "w.zarr")
+    np.testing.assert_array_equal(back.coords, v.coords)
+    np.testing.assert_array_equal(back.normals, v.normals)
+    if solid:
+        np.testing.assert_array_equal(back.to_dense(solid=True), dense)
+    # the same store from the voxels in memory (another path to the same tasks)
+    zarr_store.save_zarr(v, tmp_path / "s.zarr")
+    saved = arrays(tmp_path / "s.zarr")
+    assert saved.keys() == stored.keys()
+    for name in stored:
+        np.testing.assert_array_equal(saved[name], stored[name], err_msg=name)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.zarr", "w.zarr"], "a temporary folder was left"
+
+
+def test_a_region_reads_what_the_voxels_hold_there(tmp_path, small_bricks):
+    surface = implc.compile(TORUS)
+    v = implc.voxelize(surface, 7, solid=True)
+    zarr_store.save_zarr(v, tmp_path / "t.zarr")
+    for region in (((10, 70), (0, 45), (33, 128)), ((64, 65), (0, 128), (0, 128)), ((0, 128),) * 3):
+        part = zarr_store.load_zarr(tmp_path / "t.zarr", region)
+        box = np.array(region)
+        mine = np.all((v.coords >= box[:, 0]) & (v.coords < box[:, 1]), axis=1)
+        np.testing.assert_array_equal(part.coords, v.coords[mine])
+        np.testing.assert_array_equal(part.normals, v.normals[mine])
+        size = 1 << (7 - v.inside[:, 3].astype(np.int64))
+        first = v.inside[:, :3].astype(np.int64) * size[:, None]
+        meets = np.all((first < box[:, 1]) & (first + size[:, None] > box[:, 0]), axis=1)
+        assert sorted(map(tuple, part.inside.tolist())) == sorted(map(tuple, v.inside[meets].tolist()))
+    with pytest.raises(ValueError, match="region must be"):
+        zarr_store.load_zarr(tmp_path / "t.zarr", ((0, 200), (0, 1), (0, 1)))
+
+
+def test_every_shard_has_exactly_one_writer(tmp_path, small_bricks):
+    """Tasks own whole bricks and their shards at every level of detail they write: no shard key is
+    written by two tasks, and every shard file of those arrays is one a task reported."""
+    surface = implc.compile(HOLLOW)
+    written = zarr_store.write_zarr(surface, 7, tmp_path / "h.zarr", solid=True, workers=2)
+    keys = [k for task in written.shard_writers for k in task]
+    assert len(keys) == len(set(keys)) > written.tasks
+    layout = zarr_store.Layout.of(7, surface.bounds, True)
+    by_tasks = ["occupancy"] + [f"lod/{k}" for k in range(layout.client_level + 1, 7)]
+    assert len(by_tasks) >= 2
+    on_disk = set()
+    for array in by_tasks:
+        folder = tmp_path / "h.zarr" / array / "c"
+        on_disk |= {f"{array}/{'/'.join(f.relative_to(folder).parts)}" for f in folder.rglob("*") if f.is_file()}
+    assert on_disk == set(keys)
+
+
+def test_a_stopped_run_is_incomplete_and_resume_finishes_it(tmp_path, small_bricks, monkeypatch, capsys):
+    surface = implc.compile(HOLLOW)
+    calls = []
+    real = zarr_store.task_voxels
+    monkeypatch.setattr(zarr_store, "task_voxels", lambda *a, **k: (calls.append(a[2]), real(*a, **k))[1])
+    zarr_store.write_zarr(surface, 6, tmp_path / "ref.zarr", solid=True, workers=1)
+    subdividing = len(calls)  # the tasks that subdivide (those inside an octant of the plan do not)
+    calls.clear()
+
+    def stopping(*args, **kwargs):
+        calls.append(args[2])
+        if len(calls) == 6:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(zarr_store, "task_voxels", stopping)
+    out = tmp_path / "h.zarr"
+    with pytest.raises(KeyboardInterrupt):
+        zarr_store.write_zarr(surface, 6, out, solid=True, workers=1)
+    partial = tmp_path / "h.zarr.partial"
+    assert not out.exists() and partial.is_dir()
+    finished = len(list((partial / "_parts").glob("*.npz")))
+    ran = len(calls) - 1  # the sixth raised; the pool's thread may have finished one more before it stopped
+    assert finished >= ran >= 5
+    with pytest.raises(zarr_store.StoreError, match="incomplete"):
+        zarr_store.load_zarr(partial)
+    assert main(["info", str(partial)]) == 2
+    assert "incomplete" in capsys.readouterr().err
+    # another run's options do not resume it
+    with pytest.raises(ValueError, match="another run"):
+        zarr_store.write_zarr(surface, 6, out, solid=False, resume=True)
+    calls.clear()
+    monkeypatch.setattr(zarr_store, "task_voxels", lambda *a, **k: (calls.append(a[2]), real(*a, **k))[1])
+    resumed = zarr_store.write_zarr(surface, 6, out, solid=True, workers=1, resume=True)
+    assert resumed.resumed == finished and len(calls) == subdividing - ran
+    assert not partial.exists()
+    a, b = arrays(tmp_path / "ref.zarr"), arrays(out)
+    assert a.keys() == b.keys()
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    with pytest.raises(ValueError, match="nothing to resume"):
+        zarr_store.write_zarr(surface, 6, out, solid=True, resume=True)
+
+
+def test_a_damaged_or_foreign_store_is_one_line(tmp_path, capsys):
+    out = tmp_path / "t.zarr"
+    zarr_store.write_zarr(implc.compile(TORUS), 5, out, solid=False)
+    meta = out / "zarr.json"
+    about = json.loads(meta.read_text())
+    for change, message in ((lambda a: a["attributes"]["implc"].pop("manifest"), "incomplete"),
+                            (lambda a: a["attributes"]["implc"].__setitem__("format", 1), "format 1"),
+                            (lambda a: a["attributes"]["implc"].__setitem__("depth", 40), "depth 40"),
+                            (lambda a: a["attributes"].pop("implc"), "not a store implc wrote")):
+        changed = json.loads(json.dumps(about))
+        change(changed)
+        meta.write_text(json.dumps(changed))
+        assert main(["info", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    zarr.create_array(store=str(tmp_path / "a.zarr"), shape=(4,), dtype="int8")
+    assert main(["info", str(tmp_path / "a.zarr")]) == 2
+    assert "cannot read" in capsys.readouterr().err
+
+
+def test_the_cli_checks_cluster_options_before_any_work(tmp_path, capsys):
+    cases = [(["--cluster", "nowhere"], "not a scheduler address"),
+             (["--cluster", "local:0"], "worker count"),
+             (["--resume"], "nothing to resume")]
+    for extra, message in cases:
+        assert main(["voxelize", "torus", "--depth", "4", "-o", str(tmp_path / "t.zarr"), "--quiet", *extra]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["voxelize", "torus", "--depth", "4", "-o", str(tmp_path / "t.npz"), "--resume"]) == 2
+    assert "--resume finishes an interrupted .zarr run" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
