@@ -824,15 +824,14 @@ def cluster(args, out):
     import distributed
 
     from implc import zarr_store
-    from implc.cluster import plan_tasks, task_level
+    from implc.cluster import local_cluster, plan_tasks, task_level
     sc = scene.load(args.cluster_scene)
     s = implc.compile(sc.surface, sc.bounds)
     workers = args.cluster_workers
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        local = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                         dashboard_address=":0")
+        local = local_cluster(workers)  # as implc's local:N starts it
         client = distributed.Client(local)
         startup = time.perf_counter() - t0
         try:

@@ -6,6 +6,8 @@ flushed to disk and renamed over the target in one step (``os.replace``), so a r
 or SIGTERM sees either the old file or the whole new one. On any exception the temporary file is removed
 and the target is untouched. :func:`replacing_folder` does the same for a folder (a Zarr store, a slice
 stack): the old folder is moved aside, the new one renamed into place, then the old one removed.
+:func:`resumable_folder` builds a folder under the fixed name ``NAME.partial`` instead, kept when the
+block fails after saving finished work in it, so that a later run can finish it.
 
 The new file gets the mode a plain write would give it (the umask's), or the old file's mode when it
 replaces one; an error while writing (a full disk) names the target; the renaming and its record in
@@ -101,6 +103,18 @@ def replacing(path):
         raise
 
 
+def _folder_in_place(new: Path, path: Path) -> None:
+    """``new`` renamed to ``path``; an existing folder there moved aside first and removed after."""
+    if path.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+        with _signals_held():  # the old folder aside and the new one in, as one step for a signal
+            path.rename(old / path.name)
+            _put_in_place(new, path)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        _put_in_place(new, path)
+
+
 @contextlib.contextmanager
 def replacing_folder(path):
     """``with replacing_folder(path) as tmp: fill(tmp)``: a new, empty folder beside ``path`` that
@@ -116,14 +130,7 @@ def replacing_folder(path):
             os.chmod(tmp, _mode_for(path, folder=True))
         except OSError as exc:
             raise _named(exc, path) from None
-        if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
-            with _signals_held():  # the old folder aside and the new one in, as one step for a signal
-                path.rename(old / path.name)
-                _put_in_place(tmp, path)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            _put_in_place(tmp, path)
+        _folder_in_place(tmp, path)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -159,14 +166,7 @@ def resumable_folder(path, *, resume: bool = False, matches=None):
             os.chmod(partial, _mode_for(path, folder=True))
         except OSError as exc:
             raise _named(exc, path) from None
-        if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
-            with _signals_held():
-                path.rename(old / path.name)
-                _put_in_place(partial, path)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            _put_in_place(partial, path)
+        _folder_in_place(partial, path)
     except BaseException:
         if not _has_parts(partial):
             shutil.rmtree(partial, ignore_errors=True)

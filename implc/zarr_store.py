@@ -213,9 +213,8 @@ class _Level:
 class _TaskWriter:
     """Writes one task's bricks and level-of-detail shards, and records the shard keys it wrote."""
 
-    def __init__(self, group, layout: Layout, folder: Path, cell, full_shards: _FullShards):
+    def __init__(self, group, layout: Layout, folder: Path, full_shards: _FullShards):
         self.layout, self.folder, self.full_shards = layout, folder, full_shards
-        self.task_origin = np.asarray(cell, np.int64)  # at the task level
         self.levels: list[_Level] = []
         for level in range(max(layout.client_level, 1), layout.depth + 1):
             array = group["occupancy"] if level == layout.depth else group[f"lod/{level}"]
@@ -287,7 +286,7 @@ def store_task(folder: Path, layout: Layout, task: int, cell: Any, voxels: TaskV
     t0 = time.perf_counter()
     depth, shift = layout.depth, layout.depth - layout.brick_level
     group = zarr.open_group(str(folder), mode="r+")
-    writer = _TaskWriter(group, layout, folder, cell, _FULL)
+    writer = _TaskWriter(group, layout, folder, _FULL_SHARDS)
     coords, normals, inside = voxels.coords, voxels.normals, voxels.inside
     fine = inside[inside[:, 3] > layout.brick_level] if len(inside) else inside
     coarse = inside[inside[:, 3] <= layout.brick_level] if len(inside) else inside
@@ -340,7 +339,7 @@ def store_task(folder: Path, layout: Layout, task: int, cell: Any, voxels: TaskV
     return summary
 
 
-_FULL = _FullShards()
+_FULL_SHARDS = _FullShards()  # per process: the encoded full shard of each shape, made on first use
 
 
 def _inside_voxels(rows: np.ndarray, depth: int) -> int:

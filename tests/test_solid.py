@@ -183,8 +183,9 @@ def test_zarr_holds_the_dense_solid_and_the_cli_writes_it(tmp_path, capsys):
     assert "cannot read" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("shard,chunk", [(8, 4), (16, 8), (64, 32)],
-                         ids=["shards below octants", "shards below tasks", "shards above tasks"])
+@pytest.mark.parametrize("shard,chunk", [pytest.param(8, 4, marks=pytest.mark.slow),
+                                         pytest.param(16, 8, marks=pytest.mark.slow), (64, 32)],
+                         ids=["shards below octants", "shards below tasks", "shards above tasks"])  # small: slow
 @pytest.mark.parametrize("solid", [True, False], ids=["solid", "shell"])
 def test_zarr_written_while_voxelizing_is_the_dense_voxelization(tmp_path, monkeypatch, shard, chunk, solid):
     """write_zarr streams each task's voxels and octants into shards as tasks finish: whatever the shard size

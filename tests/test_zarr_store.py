@@ -34,8 +34,10 @@ def pooled(dense: np.ndarray, level: int) -> np.ndarray:
 
 @pytest.fixture
 def small_bricks(monkeypatch):
-    """Bricks of 8³ (chunks 4³) and row shards of 4096 rows: a 64³ or 128³ grid has many bricks, tasks
-    holding several, and row shards spanning several tasks."""
+    """Bricks of 8³ (chunks 4³), row shards of 4096 rows, the caller writing only the levels of detail
+    up to one below the tasks': a 64³ grid has many bricks, tasks holding several, row shards spanning
+    several tasks, and levels of detail written by the tasks."""
+    monkeypatch.setattr(zarr_store, "CLIENT_LEVELS", 1)
     monkeypatch.setattr(zarr_store, "SHARD", 8)
     monkeypatch.setattr(zarr_store, "CHUNK", 4)
     monkeypatch.setattr(zarr_store, "ROW_CHUNK", 1024)
@@ -84,32 +86,32 @@ def test_the_store_is_the_voxelization(tmp_path, small_bricks, solid):
 
 def test_a_region_reads_what_the_voxels_hold_there(tmp_path, small_bricks):
     surface = implc.compile(TORUS)
-    v = implc.voxelize(surface, 7, solid=True)
+    v = implc.voxelize(surface, 6, solid=True)
     zarr_store.save_zarr(v, tmp_path / "t.zarr")
-    for region in (((10, 70), (0, 45), (33, 128)), ((64, 65), (0, 128), (0, 128)), ((0, 128),) * 3):
+    for region in (((5, 35), (0, 23), (17, 64)), ((32, 33), (0, 64), (0, 64)), ((0, 64),) * 3):
         part = zarr_store.load_zarr(tmp_path / "t.zarr", region)
         box = np.array(region)
         mine = np.all((v.coords >= box[:, 0]) & (v.coords < box[:, 1]), axis=1)
         np.testing.assert_array_equal(part.coords, v.coords[mine])
         np.testing.assert_array_equal(part.normals, v.normals[mine])
-        size = 1 << (7 - v.inside[:, 3].astype(np.int64))
+        size = 1 << (6 - v.inside[:, 3].astype(np.int64))
         first = v.inside[:, :3].astype(np.int64) * size[:, None]
         meets = np.all((first < box[:, 1]) & (first + size[:, None] > box[:, 0]), axis=1)
         assert sorted(map(tuple, part.inside.tolist())) == sorted(map(tuple, v.inside[meets].tolist()))
     with pytest.raises(ValueError, match="region must be"):
-        zarr_store.load_zarr(tmp_path / "t.zarr", ((0, 200), (0, 1), (0, 1)))
+        zarr_store.load_zarr(tmp_path / "t.zarr", ((0, 65), (0, 1), (0, 1)))
 
 
 def test_every_shard_has_exactly_one_writer(tmp_path, small_bricks):
     """Tasks own whole bricks and their shards at every level of detail they write: no shard key is
     written by two tasks, and every shard file of those arrays is one a task reported."""
     surface = implc.compile(HOLLOW)
-    written = zarr_store.write_zarr(surface, 7, tmp_path / "h.zarr", solid=True, workers=2)
+    written = zarr_store.write_zarr(surface, 6, tmp_path / "h.zarr", solid=True, workers=2)
     keys = [k for task in written.shard_writers for k in task]
     assert len(keys) == len(set(keys)) > written.tasks
-    layout = zarr_store.Layout.of(7, surface.bounds, True)
-    by_tasks = ["occupancy"] + [f"lod/{k}" for k in range(layout.client_level + 1, 7)]
-    assert len(by_tasks) >= 2
+    layout = zarr_store.Layout.of(6, surface.bounds, True)
+    by_tasks = ["occupancy"] + [f"lod/{k}" for k in range(layout.client_level + 1, 6)]
+    assert by_tasks == ["occupancy", "lod/4", "lod/5"]
     on_disk = set()
     for array in by_tasks:
         folder = tmp_path / "h.zarr" / array / "c"
@@ -191,3 +193,18 @@ def test_the_cli_checks_cluster_options_before_any_work(tmp_path, capsys):
     assert main(["voxelize", "torus", "--depth", "4", "-o", str(tmp_path / "t.npz"), "--resume"]) == 2
     assert "--resume finishes an interrupted .zarr run" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_render_and_info_read_a_store(tmp_path, capsys):
+    """implc render draws a store as it draws the same voxels from an .npz (the same PNG, byte for byte)."""
+    from implc import voxel_files
+    v = implc.voxelize(implc.compile(TORUS), 6, solid=True)
+    voxel_files.save(v, tmp_path / "t.npz")
+    voxel_files.save(v, tmp_path / "t.zarr")
+    for name in ("t.npz", "t.zarr"):
+        assert main(["render", str(tmp_path / name), "-o", str(tmp_path / f"{name}.png"), "--size", "64",
+                     "--quiet"]) == 0
+    assert (tmp_path / "t.npz.png").read_bytes() == (tmp_path / "t.zarr.png").read_bytes()
+    assert main(["info", str(tmp_path / "t.zarr")]) == 0
+    assert f"{len(v)} boundary voxels" in capsys.readouterr().out
+    assert voxel_files.load(tmp_path / "t.zarr", ((0, 64), (0, 64), (0, 32))).coords[:, 2].max() < 32
