@@ -188,3 +188,33 @@ def test_surfaces_travel_as_text():
     assert recipe_of(ball).kind == "vm" and build(recipe_of(ball)).eval([[0.5, 0, 0]])[0] == 0
     with pytest.raises(TravelError, match="cannot travel"):
         recipe_of(implc.compile(model(implc.x, implc.y, implc.z) + implc.x / 10))
+
+
+def test_ctrl_c_cancels_the_cluster_and_resume_finishes(cluster, tmp_path):
+    """implc voxelize --cluster interrupted (SIGINT) once some tasks are done: exit 130, nothing under the
+    output's name, the finished tasks kept in OUT.partial and no more tasks land there afterwards (the
+    cluster's work was cancelled); --resume finishes it and the store is the single-process run's."""
+    out = tmp_path / "blobs.zarr"
+    env = dict(os.environ)
+    command = [sys.executable, "-m", "implc", "voxelize", "paper_blobs", "--depth", "11", "--solid", "-o", str(out),
+               "--cluster", cluster.address, "--quiet"]
+    run = subprocess.Popen(command, env=env, stderr=subprocess.PIPE, text=True)
+    parts = tmp_path / "blobs.zarr.partial" / "_parts"
+    deadline = time.time() + 120
+    while not (parts.is_dir() and len(list(parts.glob("[0-9]*.npz"))) >= 3):
+        assert time.time() < deadline and run.poll() is None, run.stderr.read() if run.poll() is not None else ""
+        time.sleep(0.02)
+    run.send_signal(signal.SIGINT)
+    _, err = run.communicate(timeout=60)
+    assert run.returncode == 130, err
+    assert "--resume" in err and not out.exists()
+    time.sleep(0.5)
+    kept = sorted(p.name for p in parts.glob("[0-9]*.npz"))
+    time.sleep(3)
+    assert sorted(p.name for p in parts.glob("[0-9]*.npz")) == kept, "tasks went on after the interrupt"
+    assert 3 <= len(kept) < 52
+    done = subprocess.run(command + ["--resume"], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    sc = scene.load("paper_blobs")
+    zarr_store.write_zarr(implc.compile(sc.surface, sc.bounds), 11, tmp_path / "here.zarr", solid=True)
+    assert_same_store(tmp_path / "here.zarr", out)
