@@ -824,7 +824,7 @@ def cluster(args, out):
     import distributed
 
     from implc import zarr_store
-    from implc.cluster import local_cluster, plan_tasks, task_level
+    from implc.cluster import local_cluster, plan_tasks
     sc = scene.load(args.cluster_scene)
     s = implc.compile(sc.surface, sc.bounds)
     workers = args.cluster_workers
@@ -867,7 +867,7 @@ def cluster(args, out):
             local.close()
     growth = []
     for depth in args.cluster_plan_depths:
-        level = task_level(depth, depth - 8)
+        level = zarr_store.Layout.of(depth, s.bounds, True).task_level
         cells, inside = plan_tasks(s, depth, level, solid=True, options={})
         growth.append({"depth": depth, "task_level": level, "tasks": len(cells), "inside_above": len(inside)})
     rows["plan"] = growth

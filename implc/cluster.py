@@ -42,6 +42,8 @@ class ClusterError(ValueError):
 def task_level(depth: int, brick_level: int) -> int:
     """The level of a run's tasks: octants of at most 2^TASK_EDGE_LOG2 cells per axis, at level
     MIN_TASK_LEVEL or deeper, never below the bricks (``brick_level``: each brick lies in one task)."""
+    if not 0 <= brick_level <= depth:
+        raise ValueError(f"the bricks' level must be from 0 to the depth {depth}, got {brick_level}")
     return min(brick_level, max(MIN_TASK_LEVEL, depth - TASK_EDGE_LOG2))
 
 

@@ -7,6 +7,7 @@ engine) and :func:`build` keeps the result for every later task.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import threading
 from dataclasses import dataclass
@@ -14,6 +15,7 @@ from typing import Any
 
 import sympy
 
+from .kernel_cache import package_fingerprint
 from .surface import Surface
 from .surface import compile as compile_surface
 from .vm import VmModel, parse_vm
@@ -35,6 +37,9 @@ class SurfaceRecipe:
     vector_width: int
     rounding: str
     engine: str
+    software: str = ""
+    """implc's source fingerprint and llvmlite's version where the recipe was made: a worker running
+    other software refuses it (its enclosures could differ)."""
 
     @property
     def key(self) -> str:
@@ -57,7 +62,7 @@ def recipe_of(surface: Surface) -> SurfaceRecipe:
         if not expr.source:
             raise TravelError(f"the model {expr.name} was built without its .vm text, which is what travels to "
                               "a cluster's workers: read it with implc.load_vm or implc.vm.parse_vm")
-        return SurfaceRecipe("vm", expr.source, expr.name, **options)
+        return SurfaceRecipe("vm", expr.source, expr.name, **options, software=software())
     inlined = sorted({str(f.func) for f in expr.atoms(sympy.Function) if getattr(f.func, "implc_tape", None)})
     if inlined:
         raise TravelError(f"this expression applies the .vm model(s) {', '.join(inlined)}, which cannot travel to a "
@@ -71,7 +76,14 @@ def recipe_of(surface: Surface) -> SurfaceRecipe:
     if back != expr:
         raise TravelError("this expression cannot travel to a cluster's workers: its printed form reads back as "
                           "another expression (a custom SymPy class or function?)")
-    return SurfaceRecipe("sympy", source, "", **options)
+    return SurfaceRecipe("sympy", source, "", **options, software=software())
+
+
+@functools.lru_cache(maxsize=1)
+def software() -> str:
+    """This process's implc (the fingerprint of its source) and llvmlite version."""
+    import llvmlite
+    return f"implc {package_fingerprint()[:16]}, llvmlite {llvmlite.__version__}"
 
 
 def _read_srepr(source: str) -> Any:
@@ -89,6 +101,9 @@ _KEEP = 8  # surfaces a process keeps compiled (a parameter sweep sends many, on
 
 def build(recipe: SurfaceRecipe) -> Surface:
     """The surface ``recipe`` describes, compiled once per process and kept for the next tasks."""
+    if recipe.software and recipe.software != software():
+        raise TravelError(f"this worker runs {software()}, the run was started with {recipe.software}: install the "
+                          "same implc and llvmlite on every worker")
     with _LOCK:
         surface = _BUILT.get(recipe.key)
         if surface is None:

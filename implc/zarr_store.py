@@ -59,7 +59,7 @@ from .cluster import (
     worker_threads,
 )
 from .morton import morton_codes
-from .recipe import SurfaceRecipe, build, recipe_of
+from .recipe import SurfaceRecipe, build, recipe_of, software
 from .subdivide import SubdivisionStats, default_workers
 from .surface import usable_bounds
 from .untrusted import printable
@@ -435,8 +435,9 @@ def write_zarr(surface: Surface, depth: int, path: str | os.PathLike[str], *, so
     options = {"mean_value_levels": mean_value_levels, "refine_leaves": refine_leaves}
     recipe = recipe_of(surface) if cluster is not None else None
     layout = Layout.of(depth, surface.bounds, solid)
-    plan_about = json.loads(json.dumps({"surface": _surface_key(surface), "options": options, "depth": depth,
-                                        "solid": layout.solid, "bounds": layout.bounds, "layout": layout.describe()}))
+    plan_about = json.loads(json.dumps({"surface": _surface_key(surface), "software": software(), "options": options,
+                                        "depth": depth, "solid": layout.solid, "bounds": layout.bounds,
+                                        "layout": layout.describe()}))
     t0 = time.perf_counter()
     path = Path(path)
     with resumable_folder(path, resume=resume, matches=lambda folder: _plan_of(folder) == plan_about) as folder:

@@ -25,7 +25,8 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
                    "--models-dir", str(tmp_path / "models"), "--models-depths", "5,6", "--solid-depths", "5,6",
                    "--viewer-scenes", "torus", "--viewer-depths", "7", "--scale-scenes", "torus",
                    "--scale-depths", "6,7", "--mesh-scenes", "torus", "--mesh-models", "ball", "--mesh-depths", "5",
-                   "--mesh-quality-depth", "5"])
+                   "--mesh-quality-depth", "5", "--cluster-scene", "torus", "--cluster-depth", "7",
+                   "--cluster-big-depth", "8", "--cluster-noop-tasks", "50", "--cluster-plan-depths", "7,9"])
     assert status == 0
     assert "Table 1 at 32³" in capsys.readouterr().out
     assert {p.name: p.read_bytes() for p in results.iterdir()} == quoted
@@ -57,6 +58,10 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
     assert 0 <= large["storage_s"] < large["wall_s"] and 0 < large["yield"] <= 1.5
     (view,) = data["viewer"]
     assert view["chunks"] >= 1 and view["voxels"] > 0 and (view["points"] is None or view["points"] > 0)
+    cluster = data["cluster"]  # both runs timed, the big run measured, the plan grown
+    assert cluster["overhead"]["here_s"] > 0 and cluster["overhead"]["voxels"] > 0 and cluster["tasks_per_s"] > 0
+    assert cluster["big"]["voxels"] > cluster["overhead"]["voxels"] and all(cluster["big"]["worker_peak_mib"])
+    assert [g["depth"] for g in cluster["plan"]] == [7, 9] and cluster["plan"][1]["tasks"] >= 1
     for r in data["mesh"]:  # closed, manifold meshes from implc; marching cubes' figures beside them
         assert r["surface"] in ("torus", "ball") and r["triangles"] > 0
         quality = r["implc"]

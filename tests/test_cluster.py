@@ -188,6 +188,9 @@ def test_surfaces_travel_as_text():
     assert recipe_of(ball).kind == "vm" and build(recipe_of(ball)).eval([[0.5, 0, 0]])[0] == 0
     with pytest.raises(TravelError, match="cannot travel"):
         recipe_of(implc.compile(model(implc.x, implc.y, implc.z) + implc.x / 10))
+    import dataclasses
+    with pytest.raises(TravelError, match="install the same implc"):
+        build(dataclasses.replace(recipe_of(ball), software="implc 0123456789abcdef, llvmlite 0.1"))
 
 
 def test_ctrl_c_cancels_the_cluster_and_resume_finishes(cluster, tmp_path):
