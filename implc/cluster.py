@@ -153,7 +153,6 @@ def connect(cluster: Any, *, say: Callable[[str], None] | None = None) -> Iterat
         yield cluster
         return
     distributed = _distributed()
-    local = None
     with contextlib.ExitStack() as stack:
         if cluster.startswith(LOCAL):
             local = local_cluster(int(cluster[len(LOCAL):]))
@@ -182,9 +181,9 @@ def run_tasks(client: Any, function: Callable[..., Any], tasks: Sequence[tuple],
     results in the tasks' order; ``on_result`` sees each as it arrives. ``shared`` travels with every
     task (a recipe is text: small, and a worker that joins late needs nothing else). Ctrl-C or a
     failure cancels the tasks still queued or running before it propagates."""
-    results: list[Any] = [None] * len(tasks)
     if client is None:
         return _run_here(function, tasks, shared, on_result, threads)
+    results: list[Any] = [None] * len(tasks)
     distributed = _distributed()
     token = f"{name}-{time.time_ns():x}"
     futures = [client.submit(function, *shared, *task, key=f"{token}-{i}", pure=False)
@@ -196,8 +195,8 @@ def run_tasks(client: Any, function: Callable[..., Any], tasks: Sequence[tuple],
                 result = future.result()
             except Exception as exc:
                 if type(exc).__name__ == "KilledWorker":  # Dask gave up on it: its workers kept dying
-                    raise ClusterError(f"a task's workers died {exc.args[1:] and 'repeatedly' or ''} (Dask's "
-                                       f"KilledWorker: {printable(str(exc), 200)}); see the workers' logs") from None
+                    raise ClusterError(f"a task's workers died repeatedly (Dask's KilledWorker: "
+                                       f"{printable(str(exc), 200)}); see the workers' logs") from None
                 raise
             results[index[future.key]] = result
             if on_result is not None:
