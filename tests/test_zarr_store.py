@@ -208,3 +208,19 @@ def test_render_and_info_read_a_store(tmp_path, capsys):
     assert main(["info", str(tmp_path / "t.zarr")]) == 0
     assert f"{len(v)} boundary voxels" in capsys.readouterr().out
     assert voxel_files.load(tmp_path / "t.zarr", ((0, 64), (0, 64), (0, 32))).coords[:, 2].max() < 32
+
+
+def test_view_exports_a_store_as_it_exports_the_voxels(tmp_path):
+    """implc view --export of a store writes the same static viewer as of the same voxels in an .npz."""
+    from implc import voxel_files
+    v = implc.voxelize(implc.compile(TORUS), 6)
+    voxel_files.save(v, tmp_path / "t.npz")
+    voxel_files.save(v, tmp_path / "t.zarr")
+    for name in ("t.npz", "t.zarr"):
+        assert main(["view", str(tmp_path / name), "--export", str(tmp_path / f"{name}.view"), "--quiet"]) == 0
+    a = {p.relative_to(tmp_path / "t.npz.view"): p.read_bytes() for p in (tmp_path / "t.npz.view").rglob("*")
+         if p.is_file()}
+    b = {p.relative_to(tmp_path / "t.zarr.view"): p.read_bytes() for p in (tmp_path / "t.zarr.view").rglob("*")
+         if p.is_file()}
+    assert a.keys() == b.keys() and len(a) > 2
+    assert [k for k in a if a[k] != b[k]] == []
