@@ -116,6 +116,23 @@ def _folder_in_place(new: Path, path: Path) -> None:
 
 
 @contextlib.contextmanager
+def _filled_into_place(folder: Path, path: Path, keep=None):
+    """Yield ``folder``; when the block completes, give it the mode ``path`` would have and put it in
+    place as ``path``. On failure it is removed, unless ``keep(folder)`` says it holds work to keep."""
+    try:
+        try:
+            yield folder
+            os.chmod(folder, _mode_for(path, folder=True))
+        except OSError as exc:
+            raise _named(exc, path) from None
+        _folder_in_place(folder, path)
+    except BaseException:
+        if keep is None or not keep(folder):
+            shutil.rmtree(folder, ignore_errors=True)
+        raise
+
+
+@contextlib.contextmanager
 def replacing_folder(path):
     """``with replacing_folder(path) as tmp: fill(tmp)``: a new, empty folder beside ``path`` that
     becomes ``path`` (replacing an existing folder) only if the block completes."""
@@ -124,28 +141,15 @@ def replacing_folder(path):
         raise ValueError(f"{path} exists and is not a folder")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent))
-    try:
-        try:
-            yield tmp
-            os.chmod(tmp, _mode_for(path, folder=True))
-        except OSError as exc:
-            raise _named(exc, path) from None
-        _folder_in_place(tmp, path)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
-def _has_parts(folder: Path) -> bool:
-    parts = folder / "_parts"
-    return parts.is_dir() and any(p.suffix == ".npz" and not p.name.startswith(".") for p in parts.iterdir())
+    with _filled_into_place(tmp, path) as folder:
+        yield folder
 
 
 @contextlib.contextmanager
-def resumable_folder(path, *, resume: bool = False, matches=None):
+def resumable_folder(path, *, resume: bool = False, matches=None, keep=None):
     """``with resumable_folder(path) as folder: fill(folder)``: the folder ``NAME.partial`` beside
     ``path``, renamed into place (replacing an existing folder) when the block completes. If the block
-    fails after finished work was saved in it (a ``_parts`` file), it stays for a later
+    fails where ``keep(folder)`` says finished work was saved in it, it stays for a later
     ``resume=True``, which takes it up again where ``matches(folder)`` says it holds the same job."""
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -160,14 +164,5 @@ def resumable_folder(path, *, resume: bool = False, matches=None):
     elif partial.exists():
         shutil.rmtree(partial)
     partial.mkdir(parents=True, exist_ok=True)
-    try:
-        try:
-            yield partial
-            os.chmod(partial, _mode_for(path, folder=True))
-        except OSError as exc:
-            raise _named(exc, path) from None
-        _folder_in_place(partial, path)
-    except BaseException:
-        if not _has_parts(partial):
-            shutil.rmtree(partial, ignore_errors=True)
-        raise
+    with _filled_into_place(partial, path, keep) as folder:
+        yield folder

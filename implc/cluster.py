@@ -16,7 +16,7 @@ import contextlib
 import logging
 import resource
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -65,15 +65,35 @@ class TaskVoxels:
     seconds: float
 
 
+def subdivider_for(surface: Any, depth: int, *, solid: bool, options: dict, workers: int = 1) -> Subdivider:
+    """The subdivider of a run with the voxelizer's tightness ``options`` (``mean_value_levels``,
+    ``refine_leaves``; their defaults where absent)."""
+    return Subdivider(surface, depth, workers, surface.runtime, solid=solid,
+                      mean_value_levels=min(options.get("mean_value_levels", 0), depth),
+                      refine_leaves=options.get("refine_leaves", "auto"))
+
+
+def run_stats(depth: int, threads: int, seconds: float, tasks: Iterable[tuple[int, list, float]]) -> SubdivisionStats:
+    """The statistics of a run from its tasks' (interval evaluations, second-look counts, busy seconds),
+    over ``seconds`` of wall time on ``threads``."""
+    stats = SubdivisionStats(depth=depth, workers=threads, kept_per_level=[1] + [0] * depth)
+    busy = 0.0
+    for evaluations, tightened, task_seconds in tasks:
+        stats.interval_evaluations += evaluations
+        stats.tightened = [a + b for a, b in zip(stats.tightened, tightened)]
+        busy += task_seconds
+    stats.worker_busy = [busy / threads] * threads
+    stats.seconds["subdivide"] = stats.seconds["total"] = seconds
+    return stats
+
+
 def task_voxels(surface: Any, depth: int, cell: Any, level: int, *, solid: bool, options: dict, workers: int = 1,
                 to_level: int | None = None) -> TaskVoxels:
     """The voxels below the octant ``cell`` at ``level`` (its threads share the cells at ``to_level``,
     default :func:`cell_level` with the bricks at the task level), as :func:`implc.voxelize` finds them."""
     t0 = time.perf_counter()
     to_level = cell_level(depth, level, level) if to_level is None else to_level
-    sub = Subdivider(surface, depth, workers, surface.runtime, solid=solid,
-                     mean_value_levels=min(options.get("mean_value_levels", 0), depth),
-                     refine_leaves=options.get("refine_leaves", "auto"))
+    sub = subdivider_for(surface, depth, solid=solid, options=options, workers=workers)
     cells, pre = sub.cells_below(cell, level, to_level)
     coords: list[np.ndarray] = []
     normals: list[np.ndarray] = []
@@ -226,10 +246,7 @@ def _run_here(function, tasks, shared, on_result, threads: int) -> list[Any]:
 
 def plan_tasks(surface: Any, depth: int, level: int, *, solid: bool, options: dict) -> tuple[np.ndarray, np.ndarray]:
     """The octants at ``level`` that may meet the surface (the tasks) and the inside octants above them."""
-    sub = Subdivider(surface, depth, 1, surface.runtime, solid=solid,
-                     mean_value_levels=min(options.get("mean_value_levels", 0), depth),
-                     refine_leaves=options.get("refine_leaves", "auto"))
-    cells, inside = sub.cells_below((0, 0, 0), 0, level)
+    cells, inside = subdivider_for(surface, depth, solid=solid, options=options).cells_below((0, 0, 0), 0, level)
     return cells, inside if solid else np.empty((0, abi.INSIDE_WORDS), np.int32)
 
 
@@ -245,41 +262,37 @@ def gather_voxels(client: Any, recipe: SurfaceRecipe, surface: Any, depth: int, 
     level = task_level(depth, depth - 1)
     cells, plan_inside = plan_tasks(surface, depth, level, solid=solid, options=options)
     threads = worker_threads(client)
-    stats = SubdivisionStats(depth=depth, workers=threads, kept_per_level=[1] + [0] * depth)
-    stats.task_level, stats.tasks = level, len(cells)
-    bar = _bar(progress, len(cells), f"voxelize {1 << depth}³ on the cluster")
-    try:
+    with task_progress(progress, len(cells), f"voxelize {1 << depth}³ on the cluster") as advance:
         parts = run_tasks(client, _gather_task, [(level, tuple(map(int, c))) for c in cells],
                           shared=(recipe, depth, solid, options), name="implc-voxelize",
-                          on_result=lambda r: _advance(bar, len(r.coords)))
-    finally:
-        if bar is not None:
-            bar.close()
-    for part in parts:
-        stats.interval_evaluations += part.evaluations
-        stats.tightened = [a + b for a, b in zip(stats.tightened, part.tightened)]
-    stats.worker_busy = [sum(p.seconds for p in parts) / threads] * threads
+                          on_result=lambda r: advance(len(r.coords)))
+    stats = run_stats(depth, threads, time.perf_counter() - t0,
+                      ((p.evaluations, p.tightened, p.seconds) for p in parts))
+    stats.task_level, stats.tasks = level, len(cells)
     coords = np.concatenate([p.coords for p in parts]) if parts else np.empty((0, 3), np.uint32)
     normals = np.concatenate([p.normals for p in parts]) if parts else np.empty((0, 3), np.float32)
     inside = np.concatenate([plan_inside] + [p.inside for p in parts]) if solid else None
-    stats.seconds["subdivide"] = stats.seconds["total"] = time.perf_counter() - t0
     return coords, normals, inside, stats
 
 
-def _bar(progress: bool, total: int, desc: str):
+@contextlib.contextmanager
+def task_progress(progress: bool, total: int, desc: str) -> Iterator[Callable[[int], None]]:
+    """``advance(voxels)`` for each finished task: a progress bar of tasks with the voxels so far and
+    their rate (with ``progress``; otherwise it does nothing), closed after the block."""
     if not progress:
-        return None
+        yield lambda voxels: None
+        return
     from tqdm import tqdm
     bar = tqdm(total=total, unit="task", desc=desc, leave=False)
-    bar.voxels, bar.started = 0, time.perf_counter()
-    return bar
+    started, found = time.perf_counter(), [0]
 
+    def advance(voxels: int) -> None:
+        found[0] += voxels
+        rate = found[0] / max(time.perf_counter() - started, 1e-9)
+        bar.set_postfix_str(f"{found[0]:,} voxels, {rate / 1e6:.1f} M/s", refresh=False)
+        bar.update(1)
 
-def _advance(bar, voxels: int) -> None:
-    """One task more on the progress bar, with the voxels so far and their rate."""
-    if bar is None:
-        return
-    bar.voxels += voxels
-    rate = bar.voxels / max(time.perf_counter() - bar.started, 1e-9)
-    bar.set_postfix_str(f"{bar.voxels:,} voxels, {rate / 1e6:.1f} M/s", refresh=False)
-    bar.update(1)
+    try:
+        yield advance
+    finally:
+        bar.close()

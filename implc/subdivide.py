@@ -354,15 +354,18 @@ class Subdivider:
         one octant (a cluster's task) instead of the root."""
         if to_level == level:
             return np.array([cell], dtype=np.uint32), np.empty((0, abi.INSIDE_WORDS), dtype=np.int32)
-        w, result = self._new_worker(to_level), _TaskResult()
-        self._run_task(w, tuple(int(c) for c in cell), level, to_level, result)
+        w, result = self._below(tuple(int(c) for c in cell), level, to_level)
         self._absorb(w)
         return result.coords[: result.count].copy(), result.inside[: result.inside_count].copy()
 
     def _from_root(self, level: int) -> tuple[_Worker, _TaskResult]:
         """The subdivision of the root down to ``level``: its worker (with its counters) and its cells."""
-        w, result = self._new_worker(level), _TaskResult()
-        self._run_task(w, (0, 0, 0), 0, level, result)
+        return self._below((0, 0, 0), 0, level)
+
+    def _below(self, cell, level: int, to_level: int) -> tuple[_Worker, _TaskResult]:
+        """The subdivision of ``cell`` (at ``level``) down to ``to_level``: its worker and its cells."""
+        w, result = self._new_worker(to_level), _TaskResult()
+        self._run_task(w, cell, level, to_level, result)
         return w, result
 
     def _absorb(self, w: _Worker):

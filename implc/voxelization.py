@@ -166,14 +166,19 @@ class Voxels:
 
     def inside_voxels(self) -> int:
         """How many voxels the inside octants cover."""
-        levels = self._solid()[:, 3].astype(np.int64)
-        return int(np.sum(np.left_shift(np.int64(1), 3 * (self.depth - levels)))) if len(levels) else 0
+        return inside_voxel_count(self._solid(), self.depth)
 
     def volume_bounds(self) -> tuple[float, float]:
         """(lo, hi) with lo <= the exact volume of {F < 0} within the bounds <= hi: the inside octants'
         volume, and that plus the boundary voxels' (every other cell's enclosure lies above 0). Computed
         exactly in rationals from the float bounds, then rounded outward."""
         return volume_bounds(self.bounds, self.depth, self.inside_voxels(), len(self))
+
+
+def inside_voxel_count(octants: np.ndarray, depth: int) -> int:
+    """How many voxels of the 2^depth grid the octant rows (i, j, k, level) cover."""
+    levels = octants[:, 3].astype(np.int64)
+    return int(np.sum(np.left_shift(np.int64(1), 3 * (depth - levels)))) if len(levels) else 0
 
 
 def volume_bounds(bounds: Any, depth: int, inside_voxels: int, boundary_voxels: int) -> tuple[float, float]:
@@ -276,6 +281,12 @@ leaves): from about level 5 on, surface cells grow 4x per level within about ±1
 while above it a cell may hold several blobs (Scene 1: 1176 cells at level 4, 2296 at level 5)."""
 
 
+def _estimate_level(depth, plan_level):
+    """The level whose kept cells the estimate counts: :data:`ESTIMATE_LEVEL` or six levels above the
+    leaves, not above the plan's level (whose cells are counted already)."""
+    return min(depth, max(plan_level, min(depth - ESTIMATE_LEVEL, ESTIMATE_LEVEL)))
+
+
 def _estimate_voxels(cells, level, depth):
     """Surface cells grow about 4x per level (from ``cells`` kept at ``level``)."""
     return cells * 4 ** (depth - level)
@@ -355,7 +366,7 @@ def voxelize(surface: Surface, depth: int = 9, *, workers: int | None = None, st
                             mean_value_levels=min(mean_value_levels, depth), prune=prune,
                             refine_leaves=refine_leaves, solid=solid)
     cells, level = subdivider.plan()
-    estimate_level = min(depth, max(level, min(depth - ESTIMATE_LEVEL, ESTIMATE_LEVEL)))
+    estimate_level = _estimate_level(depth, level)
     counted = len(cells) if estimate_level == level else subdivider.count_cells(estimate_level)
     estimate = _estimate_voxels(counted, estimate_level, depth)
     _check_memory(depth, storage, estimate, available)
@@ -390,13 +401,12 @@ def voxelize(surface: Surface, depth: int = 9, *, workers: int | None = None, st
 
 def _voxelize_on_cluster(surface, depth, cluster, *, progress, solid, say, options, available) -> Voxels:
     """:func:`voxelize` with ``cluster``: the memory checked against the estimate, the tasks run there."""
-    from .cluster import connect, gather_voxels
+    from .cluster import MIN_TASK_LEVEL, connect, gather_voxels, subdivider_for
     from .recipe import recipe_of
     recipe = recipe_of(surface)  # refused before any cluster starts when it cannot travel
-    sub = Subdivider(surface, depth, 1, surface.runtime, mean_value_levels=min(options["mean_value_levels"], depth),
-                     refine_leaves=options["refine_leaves"], solid=solid)
-    estimate_level = min(depth, max(2, min(depth - ESTIMATE_LEVEL, ESTIMATE_LEVEL)))
-    estimate = _estimate_voxels(sub.count_cells(estimate_level), estimate_level, depth)
+    estimate_level = _estimate_level(depth, MIN_TASK_LEVEL)
+    counted = subdivider_for(surface, depth, solid=solid, options=options).count_cells(estimate_level)
+    estimate = _estimate_voxels(counted, estimate_level, depth)
     _check_memory(depth, "coords", 2 * estimate, available)  # the parts gathered, then joined
     with connect(cluster, say=say) as client:
         coords, normals, inside, stats = gather_voxels(client, recipe, surface, depth, solid=solid, options=options,

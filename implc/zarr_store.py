@@ -47,14 +47,14 @@ from . import abi
 from .atomic_file import replacing_folder, resumable_folder
 from .cluster import (
     TaskVoxels,
-    _advance,
-    _bar,
     cell_level,
     connect,
     peak_memory,
     plan_tasks,
+    run_stats,
     run_tasks,
     task_level,
+    task_progress,
     task_voxels,
     worker_threads,
 )
@@ -63,7 +63,15 @@ from .recipe import SurfaceRecipe, build, recipe_of, software
 from .subdivide import SubdivisionStats, default_workers
 from .surface import usable_bounds
 from .untrusted import printable
-from .voxelization import Voxels, _check_count, _check_depth, _check_leaf_options, paint_cubes, volume_bounds
+from .voxelization import (
+    Voxels,
+    _check_count,
+    _check_depth,
+    _check_leaf_options,
+    inside_voxel_count,
+    paint_cubes,
+    volume_bounds,
+)
 
 if TYPE_CHECKING:
     from .surface import Surface
@@ -278,6 +286,12 @@ def _part_path(folder: Path, task: int) -> Path:
     return folder / "_parts" / f"{task:08d}.npz"
 
 
+def _has_parts(folder: Path) -> bool:
+    """Whether a stopped run left finished tasks in ``folder`` (worth keeping for ``resume``)."""
+    parts = folder / "_parts"
+    return parts.is_dir() and any(p.suffix == ".npz" and not p.name.startswith(".") for p in parts.iterdir())
+
+
 def store_task(folder: Path, layout: Layout, task: int, cell: Any, voxels: TaskVoxels, plan_octants: np.ndarray,
                full: bool) -> dict:
     """Write one task's shards from what it found (``voxels``; ``full``: its octant lies inside, every
@@ -327,7 +341,8 @@ def store_task(folder: Path, layout: Layout, task: int, cell: Any, voxels: TaskV
                "coarse": len(coarse), "bricks": len(listed), "shards": writer.written,
                "evaluations": voxels.evaluations, "tightened": voxels.tightened,
                "seconds": voxels.seconds + time.perf_counter() - t0,
-               "peak_memory": peak_memory(), "inside_voxels": _inside_voxels(np.concatenate([coarse, fine]), depth)}
+               "peak_memory": peak_memory(),
+               "inside_voxels": inside_voxel_count(np.concatenate([coarse, fine]), depth)}
     part = _part_path(folder, task)
     part.parent.mkdir(exist_ok=True)
     tmp = part.with_name(f".{part.stem}.{os.getpid()}.tmp.npz")
@@ -340,12 +355,6 @@ def store_task(folder: Path, layout: Layout, task: int, cell: Any, voxels: TaskV
 
 
 _FULL_SHARDS = _FullShards()  # per process: the encoded full shard of each shape, made on first use
-
-
-def _inside_voxels(rows: np.ndarray, depth: int) -> int:
-    if not len(rows):
-        return 0
-    return int(np.sum(np.left_shift(np.int64(1), 3 * (depth - rows[:, 3].astype(np.int64)))))
 
 
 def _write_task(recipe: SurfaceRecipe, folder: str, layout: Layout, options: dict, task: int, cell, full: bool,
@@ -440,7 +449,8 @@ def write_zarr(surface: Surface, depth: int, path: str | os.PathLike[str], *, so
                                         "layout": layout.describe()}))
     t0 = time.perf_counter()
     path = Path(path)
-    with resumable_folder(path, resume=resume, matches=lambda folder: _plan_of(folder) == plan_about) as folder:
+    with resumable_folder(path, resume=resume, matches=lambda folder: _plan_of(folder) == plan_about,
+                          keep=_has_parts) as folder:
         if not (folder / "zarr.json").exists():
             _create(folder, layout, plan_about)
         cells, plan_inside = plan_tasks(surface, depth, layout.task_level, solid=solid, options=options)
@@ -448,23 +458,17 @@ def write_zarr(surface: Surface, depth: int, path: str | os.PathLike[str], *, so
         done = sum(_part_path(folder, t).exists() for t in range(len(tasks)))
         with contextlib.nullcontext() if cluster is None else connect(cluster, say=say) as client:
             threads = workers if client is None else worker_threads(client)
-            bar = _bar(progress, len(tasks), f"voxelize {1 << depth}³ to Zarr")
+            # here: the surface itself, the tasks on this process's threads; there: the recipe travels
+            function = _write_task if client is not None else functools.partial(_write_task, surface=surface)
             t_start = time.perf_counter()
-            try:
-                args = [(t, cell, full, rows) for t, (cell, full, rows) in enumerate(tasks)]
-                if client is None:  # here: the surface itself, every thread on each task
-                    local = functools.partial(_write_task, workers=1, surface=surface)
-                    summaries = run_tasks(None, local, args, shared=(None, str(folder), layout, options),
-                                          on_result=lambda s: _advance(bar, s["voxels"]), threads=workers)
-                else:
-                    summaries = run_tasks(client, _write_task, args, shared=(recipe, str(folder), layout, options),
-                                          name="implc-zarr", on_result=lambda s: _advance(bar, s["voxels"]))
-            finally:
-                if bar is not None:
-                    bar.close()
+            with task_progress(progress, len(tasks), f"voxelize {1 << depth}³ to Zarr") as advance:
+                summaries = run_tasks(client, function, [(t, *task) for t, task in enumerate(tasks)],
+                                      shared=(recipe, str(folder), layout, options), name="implc-zarr",
+                                      on_result=lambda s: advance(s["voxels"]), threads=threads)
             t_tasks = time.perf_counter()
             _finish(folder, layout, summaries, client, threads)
-        stats = gather_parts_stats(summaries, depth, threads, t_tasks - t_start)
+        stats = run_stats(depth, threads, t_tasks - t_start,
+                          ((s["evaluations"], s["tightened"], s["seconds"]) for s in summaries))
         stats.task_level, stats.tasks = layout.task_level, len(tasks)
     shards = sum(len(s["shards"]) for s in summaries)
     return ZarrWrite(path, depth, surface.bounds, sum(s["voxels"] for s in summaries),
@@ -587,18 +591,6 @@ def _pooled(grid: np.ndarray) -> np.ndarray:
     jk = j[:, :, 0, :] | j[:, :, 1, :]
     i = jk.reshape(half, 2, half, half)
     return i[:, 0] | i[:, 1]
-
-
-def gather_parts_stats(summaries: list[dict], depth: int, threads: int, seconds: float) -> SubdivisionStats:
-    """The statistics of a run from its tasks' summaries."""
-    stats = SubdivisionStats(depth=depth, workers=threads, kept_per_level=[1] + [0] * depth)
-    for s in summaries:
-        stats.interval_evaluations += s["evaluations"]
-        stats.tightened = [a + b for a, b in zip(stats.tightened, s["tightened"])]
-    busy = sum(s["seconds"] for s in summaries)
-    stats.worker_busy = [busy / threads] * threads
-    stats.seconds["subdivide"] = stats.seconds["total"] = seconds
-    return stats
 
 
 def save_zarr(voxels: Voxels, path: str | os.PathLike[str]) -> Path:
