@@ -74,6 +74,10 @@ BOUND_MONOTONE = _entry("implc_bound_monotone", "lo:f64* hi:f64* side:f64* out:f
 MEAN_VALUE_ENTRIES = (INTERVAL_MVF, OCTANT_MVF, INTERVAL_MONOTONE)
 BOUND_ENTRIES = (BOUND_MONOTONE,)
 """... and the voxelizer's monotonicity bound, in a small module compiled on first use."""
+BOX_GRADIENT = _entry("implc_box_gradient", "lo:f64* hi:f64* out:f64* n:i64")
+BOX_GRADIENT_ENTRIES = (BOX_GRADIENT,)
+"""... and the enclosures of F and its partials over boxes (eight doubles per box: F's lo, hi, then each
+partial's), in a small module compiled on a surface's first mesh."""
 
 # -- the generic runtime module (implc.codegen.runtime_module), one per process ------------------------
 SUBDIVIDE = _entry("implc_subdivide",
@@ -125,7 +129,13 @@ TAPE_SUBDIVIDE = _entry("implc_tape_subdivide",
 TAPE_BOX_GRADIENT = _entry("implc_tape_box_gradient", "program:i64* slots:f64* lo:f64* hi:f64* out:f64* n:i64")
 """Enclosures of F and its partials over boxes: eight doubles per box in ``out`` (F's lo, hi, then each
 partial's lo, hi), as the tape engine's second look uses them."""
-TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE, TAPE_BOX_GRADIENT)
+TAPE_GROUPED = _entry("implc_tape_grouped",
+                      "program:i64* slots:f64* choices:i8* need:i32* marks:i8* remap:i32* work:i32* lo:f64* hi:f64* "
+                      "starts:i64* groups:i64 pts:f64* pts_hi:f64* out_value:f64* out_grad:f64* mode:i64")
+"""F (mode 0), F and its gradient (1) at points, or enclosures of F and its partials over boxes (2), the
+rows grouped by box, each group's program simplified over its box (:mod:`implc.codegen.tape_points`);
+``choices``: 16 bytes per instruction, ``need`` zeros, ``work`` room for one program."""
+TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE, TAPE_BOX_GRADIENT, TAPE_GROUPED)
 
 # -- layouts shared by native code and Python ------------------------------------------------------
 MAX_DEPTH = 21

@@ -58,6 +58,9 @@ QEF_CUTOFF = 0.01
 along those directions)."""
 POINT_MARGIN = 1.0 / 32
 """Cell and face points stay this fraction of the cell inside their cell or face."""
+GROUP_CELLS = 8
+"""F is sampled in groups of this many cells per axis: on the tape engine each group runs the program
+simplified over its box."""
 MAX_DEPTH = 14
 """The deepest grid contoured: vertex keys hold (2^depth + 1)³ corners times 64 kinds of edge."""
 
@@ -71,9 +74,16 @@ SQUARE = ((0, 0), (1, 0), (1, 1), (0, 1))
 
 @dataclass
 class MeshStats:
-    """What a contouring did: cells, triangles, feature cells, the cells it had to add, seconds per stage."""
+    """What a contouring did: cells, triangles, feature cells, the cells it had to add, seconds per stage;
+    and how many of the crossed cells are proven regular: some partial of F keeps its sign over the whole
+    cell (its enclosure excludes 0), so F is strictly monotone along that axis there and the surface in the
+    cell is a graph over the cell's face across it — no singular point, no fold, no closed piece inside.
+    The others (``unproven_cells``: at a singular point, a thin feature below the grid, a sharp crease or
+    where the enclosure is too wide) are meshed all the same, but nothing proves the mesh's topology there."""
     cells: int = 0
     crossed_cells: int = 0
+    regular_cells: int = 0
+    unproven_cells: int = 0
     feature_cells: int = 0
     added_cells: int = 0
     cap_triangles: int = 0
@@ -85,7 +95,8 @@ class MeshStats:
         total = self.seconds.get("total", 0.0)
         return (f"{self.triangles} triangles, {self.vertices} vertices from {self.crossed_cells} crossed cells "
                 f"of {self.cells} kept ({self.feature_cells} feature cells, {self.added_cells} added by the "
-                f"signs, {self.cap_triangles} cap triangles), {total:.3f} s")
+                f"signs, {self.cap_triangles} cap triangles; {self.regular_cells} proven regular, "
+                f"{self.unproven_cells} unproven), {total:.3f} s")
 
 
 # -- tables ------------------------------------------------------------------------------------------
@@ -222,6 +233,7 @@ class _Grid:
         self.lo = np.array([float(lo) for lo, _ in bounds])
         self.hi = np.array([float(hi) for _, hi in bounds])
         self.step = (self.hi - self.lo) / self.n
+        self.groups_per_axis = max(1, self.n // GROUP_CELLS)
 
     def key(self, ijk: np.ndarray) -> np.ndarray:
         """Corner keys."""
@@ -246,14 +258,37 @@ class _Grid:
         return out
 
     def values(self, points: np.ndarray) -> np.ndarray:
-        """F at points: the point kernel, or on the tape engine (whose point entry computes the gradient
-        too) the midpoint of its interval over the point, 1.7× cheaper there and within a few ulps."""
+        """F at points: the point kernel, or on the tape engine the midpoint of its interval over the point
+        (1.7× cheaper there than its dual numbers, and within a few ulps), each point's program simplified
+        over its group of cells (:meth:`implc.Surface.eval_grouped`)."""
+        points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
+        if self.surface.engine != "tape":  # the compiled kernels have no use for the groups
+            return self.surface.eval(points)
+        return self.surface.eval_grouped(points, self.groups(points), self.group_boxes)[0]
+
+    def gradients(self, points: np.ndarray) -> np.ndarray:
+        """F's analytic gradient at points, as :meth:`values` groups them."""
         points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
         if self.surface.engine != "tape":
-            return self.surface.eval(points)
-        lo, hi = self.surface.interval(points, points)
-        with np.errstate(invalid="ignore", over="ignore"):
-            return lo / 2 + hi / 2  # NaN where F may be undefined (the whole line): outside, as for eval
+            return self.surface.gradient(points)
+        return self.surface.eval_grouped(points, self.groups(points), self.group_boxes, gradient=True)[1]
+
+    def groups(self, points: np.ndarray) -> np.ndarray:
+        """The group of :data:`GROUP_CELLS`³ cells each point lies in (by its coordinates: a point on a
+        group's face may go to either side, and every group's box reaches a cell beyond its cells)."""
+        m = self.groups_per_axis
+        g = (points - self.lo) * (1.0 / (self.step * GROUP_CELLS))
+        np.clip(g, 0, m - 1, out=g)  # and truncated below: the floor of what is not negative
+        g = g.astype(np.int64) @ np.array([m * m, m, 1], np.int64)
+        return g
+
+    def group_boxes(self, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The boxes of groups: their cells and one more cell all round, within the bounds."""
+        m = self.groups_per_axis
+        g = np.stack([labels // (m * m), labels // m % m, labels % m], axis=-1)
+        lo = np.maximum(self.lo + (g * GROUP_CELLS - 1) * self.step, self.lo)
+        hi = np.minimum(self.lo + ((g + 1) * GROUP_CELLS + 1) * self.step, self.hi)
+        return lo, hi
 
     @property
     def geometry(self) -> np.ndarray:
@@ -783,11 +818,13 @@ def _edge_roots(grid: _Grid, keys, a, b, fa, fb) -> np.ndarray:
     return points
 
 
-def _unit_normals(surface, vertices, on_surface) -> np.ndarray:
+def _unit_normals(grid: _Grid, vertices, on_surface) -> np.ndarray:
     """F's analytic gradient at the surface vertices, normalised (NaN where it is not usable)."""
     normals = np.full_like(vertices, np.nan)
-    if on_surface.any():
-        normals[on_surface] = surface.gradient(vertices[on_surface])
+    if on_surface.all():
+        normals = grid.gradients(vertices)
+    elif on_surface.any():
+        normals[on_surface] = grid.gradients(vertices[on_surface])
     with np.errstate(invalid="ignore", divide="ignore"):
         normals /= np.linalg.norm(normals, axis=1)[:, None]
     normals[~np.isfinite(normals).all(1)] = np.nan
@@ -837,7 +874,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     caps = index.number(caps)
     t2 = time.perf_counter()
     vertices, on_surface, ends = _vertices(grid, index.keys(), _NO_POINTS, _NO_POINTS, witnesses)
-    normals = _unit_normals(surface, vertices, on_surface)
+    normals = _unit_normals(grid, vertices, on_surface)
     t3 = time.perf_counter()
     feature_rows = _feature_cells(runtime, todo.cells, kuhn, owner, normals) if features else []
     stats.feature_cells = len(feature_rows)
@@ -848,12 +885,28 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     stats.cap_triangles = len(mesh.caps)
     normals = _fill_normals(normals, vertices, faces)
     t4 = time.perf_counter()
+    crossed_cells = todo.cells[todo.crossed()]
+    unproven = crossed_cells[~_regular(grid, crossed_cells)]
+    stats.regular_cells, stats.unproven_cells = len(crossed_cells) - len(unproven), len(unproven)
+    t5 = time.perf_counter()
     stats.triangles, stats.vertices = len(faces), len(vertices)
     stats.seconds = {"signs": t1 - t0, "triangles": t2 - t1, "vertices": t3 - t2, "features": t4 - t3,
-                     "total": t4 - t0}
+                     "proof": t5 - t4, "total": t5 - t0}
     result = Mesh(vertices, faces, normals, stats=stats, bounds=tuple(zip(grid.lo.tolist(), grid.hi.tolist())))
     result.witnesses = ends
+    result.unproven_cells = unproven
     return result
+
+
+def _regular(grid: _Grid, cells: np.ndarray) -> np.ndarray:
+    """Whether some partial of F keeps its sign over each cell (its enclosure over the cell excludes 0):
+    the cell is proven regular (:class:`MeshStats`)."""
+    if not len(cells):
+        return np.zeros(0, bool)
+    lo, hi = grid.world(cells), grid.world(cells + 1)
+    enclosures = grid.surface.gradient_enclosures(lo, hi, grid.groups((lo + hi) / 2), grid.group_boxes)
+    partials = enclosures[:, 2:].reshape(-1, 3, 2)
+    return np.any((partials[:, :, 0] > 0) | (partials[:, :, 1] < 0), axis=1)
 
 
 def _never(cells):
@@ -939,6 +992,6 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
         mesh.caps = index.number(_cap_triangles(grid, face_points, is_feature)[0])
     keys = index.keys()[first_new:]
     vertices, on_surface, ends = _vertices(grid, keys, cell_points, face_points, mesh.ends is not None)
-    mesh.add_vertices(vertices, _unit_normals(grid.surface, vertices, on_surface), ends)
+    mesh.add_vertices(vertices, _unit_normals(grid, vertices, on_surface), ends)
     mesh.orphans = True
     return added

@@ -20,7 +20,8 @@ from .jit import NativeModule
 
 class TapeEngine:
     """The tape-engine module's entry points for one rounding mode: ``interval``, ``gradient``,
-    ``subdivide`` and ``box_gradient`` (signatures in :mod:`implc.abi`; programs from :mod:`implc.tape_program`)."""
+    ``subdivide``, ``box_gradient`` and ``grouped`` (signatures in :mod:`implc.abi`; programs from
+    :mod:`implc.tape_program`)."""
 
     def __init__(self, directed: bool):
         self.directed = directed
@@ -30,6 +31,7 @@ class TapeEngine:
         self.gradient = self.native.bind(abi.TAPE_GRADIENT)
         self.subdivide = self.native.bind(abi.TAPE_SUBDIVIDE)
         self.box_gradient = self.native.bind(abi.TAPE_BOX_GRADIENT)
+        self.grouped = self.native.bind(abi.TAPE_GROUPED)
 
 
 class Runtime:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -17,7 +18,14 @@ from numpy.typing import ArrayLike
 
 from . import abi
 from .abi import MAX_DEPTH
-from .codegen.kernels import WIDTH, WIDTHS, build_bound_module, build_mean_value_module, build_module
+from .codegen.kernels import (
+    WIDTH,
+    WIDTHS,
+    build_bound_module,
+    build_box_gradient_module,
+    build_mean_value_module,
+    build_module,
+)
 from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape
@@ -149,6 +157,7 @@ class Surface:
         self._native: NativeModule | None = None  # compiled on first use
         self._mean_value_native: NativeModule | None = None  # compiled on first use
         self._bound_native: NativeModule | None = None  # compiled on first use
+        self._box_gradient_native: NativeModule | None = None  # compiled on the first mesh
         self._bound: dict[str, object] = {}
         self._engine = self.runtime.tape_engine(directed) if engine == "tape" else None  # shared, cached
         if engine == "jit":
@@ -195,6 +204,12 @@ class Surface:
                     lambda: build_bound_module(self.tape, self.gradient_tape, width=self.width, directed=self.directed),
                     source_key="bound" + self._key)
             return self._bound_native
+        if entry in abi.BOX_GRADIENT_ENTRIES:
+            if self._box_gradient_native is None:  # the mesher's: compiled on the first mesh
+                self._box_gradient_native = NativeModule(
+                    lambda: build_box_gradient_module(self.gradient_tape, width=self.width, directed=self.directed),
+                    source_key="box-gradient" + self._key)
+            return self._box_gradient_native
         if entry not in abi.MEAN_VALUE_ENTRIES:
             raise LookupError(f"{entry.name} is not a surface kernel")
         if self._mean_value_native is None:  # about three times the others' size: compiled on first use
@@ -205,10 +220,10 @@ class Surface:
         return self._mean_value_native
 
     def kernel(self, entry: abi.Entry) -> Any:
-        """The compiled kernel ``entry`` (one of :data:`implc.abi.SURFACE_ENTRIES`, ``MEAN_VALUE_ENTRIES`` or
-        ``BOUND_ENTRIES``) as a ctypes function with the ABI's prototype, valid while this Surface
-        lives. The low-level seam under :meth:`eval`, :meth:`interval` and the voxelizer: arrays go in as
-        addresses, ``n`` a multiple of :attr:`width`."""
+        """The compiled kernel ``entry`` (one of :data:`implc.abi.SURFACE_ENTRIES`, ``MEAN_VALUE_ENTRIES``,
+        ``BOUND_ENTRIES`` or ``BOX_GRADIENT_ENTRIES``) as a ctypes function with the ABI's prototype, valid
+        while this Surface lives. The low-level seam under :meth:`eval`, :meth:`interval` and the voxelizer:
+        arrays go in as addresses, ``n`` a multiple of :attr:`width`."""
         if entry.name not in self._bound:
             self._bound[entry.name] = self._module_of(entry).bind(entry)
         return self._bound[entry.name]
@@ -302,6 +317,89 @@ class Surface:
         """(F, its gradient) at each point: (N,) and (N, 3), in one pass."""
         values, gradients = self._value_and_gradient(points)
         return values, gradients
+
+    def eval_grouped(self, points: np.ndarray, groups: np.ndarray, boxes: Callable[[np.ndarray], tuple],
+                     gradient: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """(F, its gradient or None) at ``points`` ((N, 3)), point i lying in the box of group
+        ``groups[i]`` (int64 labels; ``boxes(labels)`` gives the (lo, hi) corners, (M, 3) each, of the
+        sorted distinct labels asked for): on the tape engine each group's points run the program
+        simplified over its box (``implc_tape_grouped``), far shorter than the whole on Min/Max models; the
+        compiled kernels ignore the groups. F is the point kernel's value, or on the tape engine the middle
+        of its enclosure at the point (NaN where undefined) unless the gradient is asked for too."""
+        points = _rows("points", points)
+        if self.engine != "tape":
+            if gradient:
+                return self._value_and_gradient(points)
+            return self.eval(points), None
+        values, grads = self._grouped(points, None, groups, boxes, 1 if gradient else 0)
+        return values, grads if gradient else None
+
+    def gradient_enclosures(self, lo: ArrayLike, hi: ArrayLike, groups: np.ndarray | None = None,
+                            boxes: Callable[[np.ndarray], tuple] | None = None) -> np.ndarray:
+        """Enclosures of F and of its three partials over each box [lo[i], hi[i]]: (N, 8), F's lo, hi,
+        then each partial's lo, hi (NaN where a partial may be undefined or jump). Where a Min/Max may take
+        either operand a partial's enclosure is the hull of both (the generalized gradient: an enclosure
+        that excludes 0 still proves F strictly monotone along that axis). ``groups`` and ``boxes`` as for
+        :meth:`eval_grouped` (on the tape engine, each box's program simplified over its group's box)."""
+        lo, hi = _rows("lo", lo), _rows("hi", hi)
+        if self.engine != "tape":
+            (out,) = self._run(self.kernel(abi.BOX_GRADIENT), [lo, hi], [(8,)])
+            return out
+        if groups is None or boxes is None:  # one group: the bounds
+            groups = np.zeros(len(lo), np.int64)
+            bounds = np.array(self.bounds, dtype=np.float64)
+
+            def boxes(labels):
+                return bounds[None, :, 0], bounds[None, :, 1]
+        return self._grouped(lo, hi, groups, boxes, 2)[1]
+
+    def _grouped(self, rows: np.ndarray, rows_hi: np.ndarray | None, groups, boxes, mode: int):
+        """``implc_tape_grouped`` over ``rows`` (points, or boxes' lo corners with ``rows_hi``) grouped by
+        ``groups``: (values, (N, 3) gradients or (N, 8) enclosures)."""
+        n = len(rows)
+        width = 8 if mode == 2 else 3
+        values, grads = np.empty(n), np.empty((n, width))
+        if not n:
+            return values, grads
+        order = np.argsort(groups, kind="stable")
+        ordered = np.asarray(groups)[order]
+        first = np.flatnonzero(np.concatenate([[True], ordered[1:] != ordered[:-1]]))
+        counts = np.diff(np.append(first, n))
+        lo, hi = (np.ascontiguousarray(a, dtype=np.float64) for a in boxes(ordered[first]))
+        padded = (counts + 7) & ~7  # whole blocks of eight: a group's last row repeated
+        starts = np.zeros(len(first) + 1, np.int64)
+        np.cumsum(padded, out=starts[1:])
+        at_row = np.arange(n) + np.repeat(starts[:-1] - first, counts)  # each sorted row's place
+        source = np.repeat(first + counts - 1, padded)
+        source[at_row] = np.arange(n)
+        taken = order[source]
+        padded_rows = np.ascontiguousarray(rows[taken])
+        padded_hi = padded_rows if rows_hi is None else np.ascontiguousarray(rows_hi[taken])
+        total = int(starts[-1])
+        out_value = np.empty(total)
+        out_grad = np.empty((total if mode else 8, width))
+        program = self.program
+        assert program is not None  # the tape engine's surfaces have one
+        length = max(len(program), 1)
+        slots = slot_scratch(program.slot_count)
+        choices = np.empty(2 * length * 8, dtype=np.uint8)  # the groups' choices, then the points'
+        need = np.zeros(program.slot_count, dtype=np.int32)
+        marks = np.empty(length, dtype=np.uint8)
+        remap = np.empty(program.slot_count, dtype=np.int32)
+        work = np.empty(length * abi.INSTRUCTION_WORDS, dtype=np.int32)
+        step = max(1, len(first) * CHUNK // total)  # about CHUNK rows per call: Ctrl-C between calls
+        for at in range(0, len(first), step):
+            count = min(step, len(first) - at)
+            self.tape_engine.grouped(
+                program.header.ctypes.data, slots.ctypes.data, choices.ctypes.data, need.ctypes.data,
+                marks.ctypes.data, remap.ctypes.data, work.ctypes.data, lo[at:].ctypes.data, hi[at:].ctypes.data,
+                starts[at:].ctypes.data, count, padded_rows.ctypes.data, padded_hi.ctypes.data,
+                out_value.ctypes.data, out_grad.ctypes.data, mode)
+            need[:] = 0  # each call's stamps start again from one
+        values[order] = out_value[at_row]
+        if mode:
+            grads[order] = out_grad[at_row]
+        return values, grads
 
     def interval(self, lo: ArrayLike, hi: ArrayLike, mean_value: bool = False,
                  monotone: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -24,7 +24,7 @@ operands an instruction reads.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -61,6 +61,7 @@ class TapeProgram:
     variable_slots: np.ndarray  # (3,) int32, -1 where the coordinate is unused
     output: int
     slot_count: int
+    header: np.ndarray = field(init=False, repr=False, compare=False)  # what native code receives
 
     def __post_init__(self):
         header = np.zeros(abi.PROGRAM_WORDS, dtype=np.int64)

@@ -26,7 +26,9 @@ class MeshFileError(ValueError):
 class Mesh:
     """A triangle mesh in world coordinates: ``vertices`` (V, 3) float64, ``faces`` (F, 3) int64 vertex
     indices, counter-clockwise seen from outside, ``normals`` (V, 3) float64 unit normals at the vertices
-    (F's analytic gradient where the vertex lies on F = 0), ``stats`` (how it was made) and ``bounds``."""
+    (F's analytic gradient where the vertex lies on F = 0), ``stats`` (how it was made) and ``bounds``;
+    from contouring, ``unproven_cells`` ((k, 3) grid indices: the crossed cells not proven regular, see
+    :class:`implc.contour.MeshStats`)."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None = None, *,
                  stats: Any = None, bounds: tuple | None = None):
@@ -36,6 +38,7 @@ class Mesh:
         self.stats = stats
         self.bounds = bounds
         self.witnesses = None  # (V, 2, 3) where contouring was asked to keep them (implc.mesh(..., witnesses=True))
+        self.unproven_cells = np.zeros((0, 3), np.int64)  # cells the mesh crosses where no partial keeps its sign
 
     def __repr__(self) -> str:
         return f"Mesh({len(self.vertices)} vertices, {len(self.faces)} triangles)"

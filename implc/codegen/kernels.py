@@ -42,7 +42,7 @@ from ..ir import Tape
 from ..regions import plan_regions
 from . import elementary
 from .control import define, for_range
-from .interval_rules import emit_interval
+from .interval_rules import emit_interval, emit_interval_outputs
 from .mean_value import emit_mean_value, emit_monotone_bound, emit_monotone_form
 from .point import emit_point
 from .pruned_gradient import emit_pruned_gradient
@@ -277,5 +277,25 @@ def build_bound_module(value_tape: Tape, gradient_tape: Tape, name: str = "surfa
         else:
             value = emit_monotone_bound(vb, value_tape, gradient_tape, lo_coords, hi_coords, above)
         store_lanes(b, out, i, value, width)
+    b.ret_void()
+    return str(module)
+
+
+def build_box_gradient_module(gradient_tape: Tape, name: str = "surface_box_gradient", width: int = WIDTH,
+                              directed: bool = False) -> str:
+    """The LLVM IR of ``implc_box_gradient``: enclosures of F and of its three partials over boxes (eight
+    doubles per box: F's lo, hi, then each partial's), by the interval rules over the gradient tape; in a
+    module of its own, compiled on a surface's first mesh (which proves where its cells are regular)."""
+    module = ir.Module(name=name)
+    fn, b, blocks = _kernel(module, abi.BOX_GRADIENT, width)
+    lo, hi, out, _ = fn.args
+    with for_range(b, blocks) as i:
+        vb = VectorBuilder(b, width, directed, elementary.outlines(gradient_tape))
+        parts = emit_interval_outputs(vb, gradient_tape, load_xyz(b, lo, i, width), load_xyz(b, hi, i, width))
+        rows = b.gep(out, [b.mul(i, ir.Constant(I64, 8 * width))])
+        for k, value in enumerate(v for pair in parts for v in pair):  # lane j of value k: entry k of box j
+            for j in range(width):
+                b.store(b.extract_element(value, ir.Constant(ir.IntType(32), j)),
+                        b.gep(rows, [ir.Constant(I64, 8 * j + k)]))
     b.ret_void()
     return str(module)

@@ -3,9 +3,10 @@
 Exports (signatures in :mod:`implc.abi`): ``implc_tape_interval`` (enclosures over boxes, rows of an
 (n, 3) array; an undefined result is the whole line), ``implc_tape_gradient`` (F and its gradient at
 points), ``implc_tape_box_gradient`` (enclosures of F and its partials over boxes, as the second look at
-the leaves uses them) and ``implc_tape_subdivide`` (:mod:`.tape_subdivision`). The same for every surface, so it is
-compiled once per rounding mode and cached (:class:`implc.runtime.Runtime`); a surface run by the engine
-compiles nothing of its own.
+the leaves uses them), ``implc_tape_subdivide`` (:mod:`.tape_subdivision`) and ``implc_tape_grouped`` (F at
+points grouped by box, each group's program simplified over its box: :mod:`.tape_points`). The same for
+every surface, so it is compiled once per rounding mode and cached (:class:`implc.runtime.Runtime`); a
+surface run by the engine compiles nothing of its own.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from .control import I64, define, for_range, load_at, local_array
 from .interval_rules import whole_line_if_undefined
 from .kernels import load_xyz, store_lanes, store_xyz
 from .tape_eval import LANES, V8, emit_tape_box_gradient, emit_tape_dual, emit_tape_interval, emit_tape_prefill
+from .tape_points import emit_tape_grouped
 from .tape_simplify import emit_tape_simplify
 from .tape_subdivision import emit_tape_normals, emit_tape_subdivide
 from .tape_tighten import emit_tape_tighten
@@ -46,6 +48,7 @@ def build_tape_engine(directed: bool) -> str:
     box_gradient = emit_tape_box_gradient(module, directed)
     tighten = emit_tape_tighten(module, interval, box_gradient, directed)
     emit_tape_subdivide(module, prefill, interval, simplify, normals, tighten)
+    emit_tape_grouped(module, prefill, interval, simplify, dual, box_gradient)
     null_remap = ir.Constant(_P(ir.IntType(32)), None)
 
     @contextmanager
