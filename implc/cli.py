@@ -258,8 +258,10 @@ def cmd_render(args) -> int:
 
 def cmd_view(args) -> int:
     from . import voxel_files
-    from .view_server import DEFAULT_PORT, ViewServer
-    from .viewer import export, lod_chunks
+    from .mesh_payload import MeshPayload
+    from .triangle_mesh import MeshFileError, is_mesh_file
+    from .triangle_mesh import load as load_mesh
+    from .viewer import lod_chunks
     if args.port is not None:
         _check_range(args.port, "--port", 0, 65535)
     if args.budget is not None:
@@ -274,30 +276,57 @@ def cmd_view(args) -> int:
         if given:
             raise UsageError(f"{', '.join(given)} cannot apply to a voxel file ({args.scene}): it is shown as saved")
         voxels, name, view = voxel_files.load(args.scene), Path(args.scene).stem, None
+    elif suffix in (".ply", ".stl", ".obj", ".glb", ".3mf") and is_mesh_file(args.scene):
+        given = [flag for flag, value in (("--expr", args.expr), ("--depth", args.depth), ("--bounds", args.bounds),
+                                          ("--workers", args.workers), ("--budget", args.budget)) if value is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)} cannot apply to a mesh file ({args.scene}): it is shown as saved")
+        try:
+            mesh = load_mesh(args.scene)
+        except MeshFileError as error:
+            raise UsageError(str(error)) from None
+        return _view(MeshPayload(mesh, name=Path(args.scene).stem), args, budget,
+                     f"{len(mesh.faces)} triangles, {len(mesh.vertices)} vertices")
     elif suffix in (".ply", ".npy", ".stl", ".obj", ".glb", ".3mf"):
-        raise UsageError(f"{args.scene} is a {suffix} file: 'implc view' shows scenes, formulas, .vm models and "
-                         "the .npz and .zarr voxel files implc writes (a mesh opens in any mesh viewer; 'implc info' "
-                         "describes it)")
+        raise UsageError(f"{args.scene} is a {suffix} file: 'implc view' shows scenes, formulas, .vm models, "
+                         "the .npz and .zarr voxel files implc writes and meshes ('implc info' describes it)")
     else:
         _check_surface_options(args)
         name, surface, sc = _surface_from_args(args)
         depth = args.depth if args.depth is not None else (sc.depth if sc else 9)
         voxels, _ = _voxelize(surface, depth, args.workers, args.quiet, tightness=args.tightness)
         view = sc.view if sc else None
-    chunks = lod_chunks(voxels, name=name, view=view)
+        if args.mesh:
+            t0 = time.perf_counter()
+            mesh = voxels.mesh()
+            if not args.quiet:
+                print(f"{name}: meshed in {time.perf_counter() - t0:.2f} s", file=sys.stderr)
+            return _view(MeshPayload(mesh, name=name, view=view), args, budget,
+                         f"{len(mesh.faces)} triangles, {len(mesh.vertices)} vertices at {1 << voxels.depth}³")
+    if args.mesh:
+        raise UsageError(f"--mesh meshes a surface: {args.scene} is a voxel file (mesh its surface, or 'implc mesh')")
+    return _view(lod_chunks(voxels, name=name, view=view), args, budget,
+                 f"{len(voxels)} voxels at {1 << voxels.depth}³")
+
+
+def _view(shown, args, budget: int, what: str) -> int:
+    """Export ``shown`` (the chunks of voxels, or a mesh's payload) as a static viewer, or serve it."""
+    from .view_server import DEFAULT_PORT, ViewServer
+    from .viewer import export
+    name = shown.name
     if args.export is not None:
-        export(chunks, args.export, budget=budget)
+        export(shown, args.export, budget=budget)
         if not args.quiet:
-            print(f"wrote a static viewer of {name} ({len(voxels)} voxels at {1 << voxels.depth}³) to {args.export}: "
+            print(f"wrote a static viewer of {name} ({what}) to {args.export}: "
                   f"any static file server shows it, e.g. python3 -m http.server -d {args.export}")
         return 0
     try:
-        server = ViewServer(chunks, port=args.port, budget=budget)
+        server = ViewServer(shown, port=args.port, budget=budget)
     except OSError as exc:
         raise UsageError(f"cannot listen on 127.0.0.1:{args.port if args.port is not None else DEFAULT_PORT}: "
                          f"{exc.strerror or exc}") from None
     try:
-        print(f"implc view: {name}, {len(voxels)} voxels at {1 << voxels.depth}³\n{server.url}\n"
+        print(f"implc view: {name}, {what}\n{server.url}\n"
               "(Ctrl-C stops the server)", flush=True)
         if not args.no_browser:
             import webbrowser
@@ -489,12 +518,15 @@ def _parser():
     m.add_argument("-o", "--output", required=True, help="output: .stl, .obj, .ply, .glb or .3mf")
     m.set_defaults(run=cmd_mesh)
 
-    w = sub.add_parser("view", help="view a scene, formula, .vm model, .npz or .zarr in the browser (levels of detail)")
+    w = sub.add_parser("view", help="view a scene, formula, .vm model, .npz or .zarr in the browser (levels of "
+                                    "detail), or a mesh (.stl, .obj, .ply, .glb, .3mf; --mesh for a surface's)")
     surface_args(w)
     w.add_argument("--port", type=int, help="port on 127.0.0.1 (default: 8765 or the next free one; 0: any)")
     w.add_argument("--no-browser", action="store_true", help="print the URL only; open no browser")
     w.add_argument("--budget", type=int, help="points the page draws at most per frame (default 1000000)")
     w.add_argument("--export", metavar="DIR", help="write a static viewer folder (page, script, chunks) instead")
+    w.add_argument("--mesh", action="store_true", help="show the surface's mesh (as 'implc mesh' makes it) instead "
+                                                         "of its voxels; a mesh file is shown as a mesh anyway")
     w.set_defaults(run=cmd_view)
 
     r = sub.add_parser("render", help="render a scene, formula, .npz or .zarr to a PNG")

@@ -85,6 +85,16 @@ class Mesh:
                 "degenerate": int(np.sum(repeated | ~(area2 > 0))),
                 "split_vertices": _split_vertices(f, len(self.vertices)), "volume": self.volume}
 
+    def show(self, *, height: int = 480, name: str = "", view: tuple[float, float] | None = None,
+             max_bytes: int | None = None) -> Any:
+        """The interactive viewer for a notebook (Jupyter displays what this returns): the page and the
+        whole mesh inlined in one document (refused beyond ``max_bytes``, default 24 MiB: about 700,000
+        triangles); ``view``: (azimuth, elevation) in degrees. ``.save("x.html")`` writes it as a file."""
+        from .mesh_payload import MeshPayload
+        from .viewer import EMBED_BYTES, NotebookView
+        return NotebookView(MeshPayload(self, name=name, view=view), height=height,
+                            max_bytes=EMBED_BYTES if max_bytes is None else max_bytes)
+
     # -- files ------------------------------------------------------------------------------------
     def to_trimesh(self) -> Any:
         """A ``trimesh.Trimesh`` of this mesh (vertices not merged, faces not reordered)."""

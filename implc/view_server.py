@@ -6,7 +6,8 @@ with its port (against DNS rebinding) and an origin-form target (``/TOKEN/...``,
 (``http://127.0.0.1:PORT/TOKEN/``). A connection that sends nothing for :data:`READ_TIMEOUT` seconds is
 closed, at most :data:`MAX_CONNECTIONS` are served at once (others wait in the listen queue), and a client
 that hangs up early is forgotten without a traceback. Its routes are the page's files, ``meta.json``,
-``chunks/<level>-<i>-<j>-<k>.bin`` and ``sections/<axis>-<index>-<level>.bin``, all served from memory:
+``chunks/<level>-<i>-<j>-<k>.bin`` and ``sections/<axis>-<index>-<level>.bin`` (for a mesh, ``mesh.bin``
+instead), all served from memory:
 no file system path is ever read, anything
 else is 404 (a path with ``..`` or ``.`` segments, encoded or not, included), a missing or wrong token
 403, a foreign Host 403.
@@ -23,6 +24,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from urllib.parse import unquote, urlsplit
 
 from .lod_chunks import LodChunks
+from .mesh_payload import MeshPayload
 from .viewer import ASSET_TYPES, asset
 
 DEFAULT_PORT = 8765
@@ -36,12 +38,13 @@ SECTION_PATH = re.compile(r"sections/(\d)-(\d{1,7})-(\d{1,2})\.bin")
 
 
 class ViewServer:
-    """Serves one voxelization's viewer; ``url`` carries the token. ``port=None`` takes the first free
+    """Serves one voxelization's (or one mesh's) viewer; ``url`` carries the token. ``port=None`` takes the first free
     port from :data:`DEFAULT_PORT` on, ``0`` any free port; a given port that is taken raises OSError."""
 
-    def __init__(self, chunks: LodChunks, *, port: int | None = None, budget: int = 1_000_000):
+    def __init__(self, chunks: LodChunks | MeshPayload, *, port: int | None = None, budget: int = 1_000_000):
         self.chunks, self.token = chunks, secrets.token_urlsafe(24)
         self.meta = chunks.meta_json(budget)
+        self.mesh = chunks.body() if isinstance(chunks, MeshPayload) else None
         self.assets = {name: asset(name) for name in ASSET_TYPES}
         handler = type("Handler", (_Handler,), {"owner": self})
         candidates = [port] if port is not None else [DEFAULT_PORT + i for i in range(PORT_TRIES)] + [0]
@@ -92,6 +95,8 @@ class ViewServer:
             return self.assets[rest], ASSET_TYPES[rest]
         if rest == "meta.json":
             return self.meta, "application/json"
+        if isinstance(self.chunks, MeshPayload):
+            return (self.mesh, "application/octet-stream") if rest == "mesh.bin" and self.mesh is not None else None
         for pattern, make in ((CHUNK_PATH, self.chunks.chunk), (SECTION_PATH, self.chunks.section)):
             match = pattern.fullmatch(rest)
             if match:

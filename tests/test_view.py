@@ -2,7 +2,8 @@
 the page in a real browser (Debian's Chromium, headless with SwiftShader's WebGL2, driven by Playwright
 for Python with the system browser; never a downloaded one): it loads without errors, shows the surface
 where the PNG renderer does, turns under a drag, fetches deeper chunks when zoomed, and works as a static
-export and inlined in a notebook's iframe."""
+export and inlined in a notebook's iframe; a mesh (from implc or a file) shows where the PNG renderer shows
+the voxels it was made from, is cut away, and works served, exported and inlined."""
 
 import http.client
 import json
@@ -22,6 +23,8 @@ import pytest
 
 import implc
 from implc.lod_chunks import CHUNK_LEVELS, HEADER_BYTES, LodChunks, decode_normals, encode_normals
+from implc.mesh_payload import MAGIC as MESH_MAGIC
+from implc.mesh_payload import MeshPayload
 from implc.morton import morton_codes
 from implc.render import View, render_voxels
 from implc.scene import load as load_scene
@@ -448,3 +451,111 @@ def test_a_wheel_carries_the_page(tmp_path):
     (wheel,) = tmp_path.glob("implc-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
     assert {f"implc/viewer_assets/{n}" for n in ("index.html", "viewer.js", "viewer.css")} <= names
+
+
+# -- a mesh in the page ----------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def torus_mesh():
+    voxels, sc = _scene_voxels("torus", 7)
+    return voxels, voxels.mesh(), sc
+
+
+def test_mesh_bin_holds_the_mesh_and_the_server_serves_only_it(torus_mesh):
+    _, mesh, sc = torus_mesh
+    payload = MeshPayload(mesh, name="torus", view=sc.view)
+    body = payload.body()
+    header = np.frombuffer(body[:32], "<u4")
+    v, t = len(mesh.vertices), len(mesh.faces)
+    assert header[0] == MESH_MAGIC and header[2] == v and header[3] == t and len(body) == payload.size
+    positions = np.frombuffer(body, "<f4", 3 * v, 32).reshape(-1, 3)
+    normals = np.frombuffer(body, "<f4", 3 * v, 32 + 12 * v).reshape(-1, 3)
+    faces = np.frombuffer(body, "<u4", 3 * t, 32 + 24 * v).reshape(-1, 3)
+    np.testing.assert_allclose(positions, mesh.vertices, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1, atol=1e-5)
+    assert np.array_equal(faces, mesh.faces)
+    with ViewServer(payload, port=0).start() as s:
+        meta = json.loads(_get(s, f"/{s.token}/meta.json")[1])
+        assert meta["kind"] == "mesh" and meta["triangles"] == t
+        assert _get(s, f"/{s.token}/mesh.bin")[1] == body
+        assert _get(s, f"/{s.token}/chunks/0-0-0-0.bin")[0] == 404
+
+
+def test_a_mesh_shows_where_the_png_renderer_shows_its_voxels_and_is_cut_away(browser, torus_mesh):
+    voxels, mesh, sc = torus_mesh
+    with ViewServer(MeshPayload(mesh, name="torus", view=sc.view), port=0).start() as s:
+        page, errors = _open(browser, s.url)
+        _settle(page)
+        stats = page.evaluate("window.implcViewer.stats()")
+        assert stats["triangles"] == len(mesh.faces)
+        assert f"{len(mesh.faces):,} triangles" in page.inner_text("#overlay")
+        whole = _pixels(page)
+        page.evaluate("window.implcViewer.setCut(2, 0.0)")
+        _settle(page)
+        cut = _pixels(page)
+        assert errors == []
+        page.close()
+    shown = np.abs(whole - BACKGROUND).sum(axis=2) > 12
+    png = render_voxels(voxels, size=512, view=View(*sc.view, perspective=True))
+    expected = np.abs(png.astype(int) - BACKGROUND).sum(axis=2) > 12
+    assert (shown & expected).sum() / (shown | expected).sum() >= 0.9
+    assert np.unique(whole[shown].sum(axis=1)).size > 50  # shaded by its normals, not one flat colour
+    changed = np.abs(cut - whole).sum(axis=2) > 24  # the upper half gone
+    assert changed.sum() > 0.2 * shown.sum()
+
+
+def test_a_mesh_shows_the_same_exported_and_inlined_and_a_mesh_file_is_framed_by_its_extent(browser, torus_mesh,
+                                                                                            tmp_path):
+    """export() and Mesh.show() give the served picture; 'implc view part.stl --export DIR' frames the file's
+    own extent (a file carries no bounds) and shows every triangle."""
+    from implc.cli import main
+    _, mesh, sc = torus_mesh
+    payload = MeshPayload(mesh, view=sc.view)
+    with ViewServer(payload, port=0).start() as s:
+        page, _ = _open(browser, s.url)
+        _settle(page)
+        served = _mask(page)
+        page.close()
+    export(payload, tmp_path / "site")
+    mesh.save(tmp_path / "torus.stl")
+    assert main(["view", str(tmp_path / "torus.stl"), "--export", str(tmp_path / "file"), "--quiet"]) == 0
+    assert {"index.html", "viewer.js", "meta.json", "mesh.bin"} <= set(os.listdir(tmp_path / "file"))
+    meta = json.loads((tmp_path / "file" / "meta.json").read_text())
+    np.testing.assert_allclose(meta["bounds"], np.stack([mesh.vertices.min(0), mesh.vertices.max(0)], 1), rtol=1e-6)
+    shown = {}
+    for name in ("site", "file"):
+        httpd = _serve_folder(tmp_path / name)
+        try:
+            page, errors = _open(browser, f"http://127.0.0.1:{httpd.server_address[1]}/index.html")
+            _settle(page)
+            shown[name] = _mask(page)
+            assert errors == [] and page.evaluate("window.implcViewer.stats()")["triangles"] == len(mesh.faces)
+            page.close()
+        finally:
+            httpd.shutdown()
+            httpd.server_close()
+    assert np.array_equal(shown["site"], served)
+    assert shown["file"].sum() > served.sum()  # framed closer: the torus fills more of the page
+    inline = mesh.show(view=sc.view)
+    assert isinstance(inline, NotebookView) and "http" not in inline.document.split("<body>")[1]
+    page, errors = _open(browser, inline.save(tmp_path / "mesh.html").as_uri())
+    _settle(page)
+    assert np.array_equal(_mask(page), served) and errors == []
+    page.close()
+
+
+def test_a_mesh_too_large_for_a_notebook_is_refused_in_one_line(torus_mesh):
+    with pytest.raises(ValueError, match="more than the 0 MiB a notebook view carries"):
+        torus_mesh[1].show(max_bytes=1000)
+
+
+def test_a_voxel_file_with_mesh_is_refused_and_a_surface_with_mesh_exports_a_mesh(tmp_path, capsys):
+    from implc.cli import main
+    voxels, _ = _scene_voxels("torus", 5)
+    from implc import voxel_files
+    voxel_files.save(voxels, tmp_path / "t.npz")
+    assert main(["view", str(tmp_path / "t.npz"), "--mesh", "--export", str(tmp_path / "a")]) == 2
+    assert "--mesh meshes a surface" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists()
+    assert main(["view", "torus", "--depth", "5", "--mesh", "--export", str(tmp_path / "b"), "--quiet"]) == 0
+    meta = json.loads((tmp_path / "b" / "meta.json").read_text())
+    assert meta["kind"] == "mesh" and meta["triangles"] == len(voxels.mesh().faces)

@@ -1,5 +1,6 @@
 // implc's viewer: the voxels as shaded point splats in WebGL2, streamed as chunks of the octree's levels
-// of detail (implc/lod_chunks.py documents the chunk format). Written for implc; no library.
+// of detail (implc/lod_chunks.py documents the chunk format), or a triangle mesh drawn whole
+// (implc/mesh_payload.py documents mesh.bin). Written for implc; no library.
 "use strict";
 
 (function () {
@@ -9,7 +10,7 @@
   const FOV = 35 * Math.PI / 180, FOCAL = 1.05 / Math.tan(FOV / 2), SPLAT = 1.2;
   const REFINE_PIXELS = 1.0;  // refine a chunk while its points cover more than this many pixels
   const MAX_REQUESTS = 6;
-  const HEADER = 64, MAGIC = 0x43504D49;
+  const HEADER = 64, MAGIC = 0x43504D49, MESH_MAGIC = 0x484D4D49, MESH_HEADER = 32;
 
   const embed = window.IMPLC_EMBED || null;
   const params = new URLSearchParams(location.search);
@@ -71,6 +72,28 @@
       color = vec4(clamp(base * (${AMBIENT} + ${1 - AMBIENT} * diffuse) + ${SPECULAR} * spec, 0.0, 1.0), 1.0);
     }`;
 
+  // a mesh: positions and normals per vertex, shaded as the splats are; the cut-away discards what lies beyond
+  const MESH_VERTEX = `#version 300 es
+    layout(location = 0) in vec3 position;
+    layout(location = 1) in vec3 vertexNormal;
+    uniform vec3 eye, right, up, forward;
+    uniform float aspect, near, far;
+    out vec3 normal;
+    out vec3 world;
+    void main() {
+      vec3 p = position - eye;
+      float x = dot(p, right), y = dot(p, up), z = dot(p, forward);
+      gl_Position = vec4(x * ${FOCAL.toFixed(9)} / aspect, y * ${FOCAL.toFixed(9)},
+                         (z - near) / (far - near) * 2.0 * z - z, z);
+      normal = vertexNormal;
+      world = position;
+    }`;
+  const MESH_FRAGMENT = FRAGMENT.replace("in vec3 normal;", `in vec3 normal;
+    in vec3 world;
+    uniform int clipAxis;
+    uniform float clipLimit;`).replace("void main() {", `void main() {
+      if (clipAxis >= 0 && world[clipAxis] > clipLimit) discard;`);
+
   function compile(type, source) {
     const shader = gl.createShader(type);
     gl.shaderSource(shader, source);
@@ -83,6 +106,15 @@
   gl.attachShader(program, compile(gl.FRAGMENT_SHADER, FRAGMENT));
   gl.linkProgram(program);
   if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(program));
+  const meshProgram = gl.createProgram();
+  gl.attachShader(meshProgram, compile(gl.VERTEX_SHADER, MESH_VERTEX));
+  gl.attachShader(meshProgram, compile(gl.FRAGMENT_SHADER, MESH_FRAGMENT));
+  gl.linkProgram(meshProgram);
+  if (!gl.getProgramParameter(meshProgram, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(meshProgram));
+  const meshUniform = {};
+  for (const name of ["eye", "right", "up", "forward", "aspect", "near", "far", "clipAxis", "clipLimit"]) {
+    meshUniform[name] = gl.getUniformLocation(meshProgram, name);
+  }
   const uniform = {};
   for (const name of ["origin", "cellSize", "eye", "right", "up", "forward", "aspect", "near", "far",
                       "pixelsPerUnit", "splat", "clipAxis", "clipLimit", "fixedNormal", "fixedNormals"]) {
@@ -201,6 +233,74 @@
     node.hi = node.lo.map((v, a) => v + shift * node.cellSize[a]);
     node.state = "ready";
     api.deepest = Math.max(api.deepest, node.level);
+  }
+
+  // ---- a mesh: mesh.bin, uploaded whole ----
+  const mesh = { state: "none", vao: null, vertices: 0, triangles: 0 };
+
+  async function loadMesh() {
+    mesh.state = "loading";
+    inFlight++;
+    api.requests++;
+    try {
+      let bytes;
+      if (embed) { bytes = base64Bytes(embed.mesh); } else {
+        const response = await fetch("mesh.bin");
+        if (!response.ok) throw new Error(`mesh.bin: HTTP ${response.status}`);
+        bytes = await response.arrayBuffer();
+      }
+      const header = new Uint32Array(bytes, 0, MESH_HEADER / 4);
+      if (header[0] !== MESH_MAGIC) throw new Error("mesh.bin: not an implc mesh");
+      const vertices = header[2], triangles = header[3];
+      const positions = new Float32Array(bytes, MESH_HEADER, 3 * vertices);
+      const normals = new Float32Array(bytes, MESH_HEADER + 12 * vertices, 3 * vertices);
+      const indices = new Uint32Array(bytes, MESH_HEADER + 24 * vertices, 3 * triangles);
+      mesh.vao = gl.createVertexArray();
+      gl.bindVertexArray(mesh.vao);
+      for (const [location, data] of [[0, positions], [1, normals]]) {
+        gl.bindBuffer(gl.ARRAY_BUFFER, gl.createBuffer());
+        gl.bufferData(gl.ARRAY_BUFFER, data, gl.STATIC_DRAW);
+        gl.enableVertexAttribArray(location);
+        gl.vertexAttribPointer(location, 3, gl.FLOAT, false, 0, 0);
+      }
+      gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, gl.createBuffer());
+      gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, indices, gl.STATIC_DRAW);
+      gl.bindVertexArray(null);
+      Object.assign(mesh, { vertices, triangles, state: "ready" });
+    } catch (error) {
+      mesh.state = "missing";
+      api.errors.push(String(error));
+      overlay.textContent = String(error);
+    }
+    inFlight--;
+    changed();
+  }
+
+  function drawMesh(view, aspect, near, far) {
+    gl.useProgram(meshProgram);
+    gl.uniform3fv(meshUniform.eye, view.eye);
+    gl.uniform3fv(meshUniform.right, view.right);
+    gl.uniform3fv(meshUniform.up, view.up);
+    gl.uniform3fv(meshUniform.forward, view.forward);
+    gl.uniform1f(meshUniform.aspect, aspect);
+    gl.uniform1f(meshUniform.near, near);
+    gl.uniform1f(meshUniform.far, far);
+    gl.uniform1i(meshUniform.clipAxis, plane.axis);
+    if (plane.axis >= 0) {
+      const [lo, hi] = meta.bounds[plane.axis];
+      gl.uniform1f(meshUniform.clipLimit, lo + plane.fraction * (hi - lo));
+    }
+    if (mesh.state === "ready") {
+      gl.bindVertexArray(mesh.vao);
+      gl.drawElements(gl.TRIANGLES, 3 * mesh.triangles, gl.UNSIGNED_INT, 0);
+      gl.bindVertexArray(null);
+    }
+  }
+
+  function meshOverlay() {
+    overlay.textContent = `${meta.name ? meta.name + "\n" : ""}mesh: ${meta.triangles.toLocaleString("en")} triangles, ` +
+      `${meta.vertices.toLocaleString("en")} vertices${plane.axis >= 0 ? ", cut " + "xyz"[plane.axis] : ""}` +
+      `${mesh.state === "loading" ? ", loading" : ""}\nframe ${lastFrame.toFixed(1)} ms`;
   }
 
   // ---- a cut-away: the plane's axis and where it lies (a fraction of the bounds), the section drawn ----
@@ -325,6 +425,19 @@
     gl.enable(gl.DEPTH_TEST);
     const view = basis(), aspect = width / height, pixelsPerUnit = FOCAL * height / 2;
     const near = Math.max(camera.distance - 2 * radius, radius * 1e-3), far = camera.distance + 2 * radius;
+    if (meta.kind === "mesh") {
+      drawMesh(view, aspect, near, far);
+      lastFrame = performance.now() - started;
+      meshOverlay();
+      lastRequested = 0;
+      lastChunks = mesh.state === "ready" ? 1 : 0;
+      if (mesh.state === "ready" && firstDrawn) {
+        api.timings.firstFrame = performance.now();
+        firstDrawn();
+        firstDrawn = null;
+      }
+      return;
+    }
     requestedThisFrame = 0;
     const chunksDrawn = selectCut(view, pixelsPerUnit, aspect);
     lastRequested = requestedThisFrame;
@@ -391,6 +504,7 @@
 
   // settled: the last frame asked for nothing new and nothing is on its way
   api.stats = () => ({ points: lastDrawn, chunks: lastChunks, frameMs: lastFrame, requests: api.requests,
+                       triangles: mesh.state === "ready" ? mesh.triangles : 0,
                        deepest: api.deepest, loading: inFlight + queue.length, budget,
                        settled: !pending && lastRequested === 0 && inFlight + queue.length === 0 && lastChunks > 0 });
   api.setView = (azimuth, elevation, distance) => {
@@ -475,7 +589,7 @@
     home = { azimuth: view[0], elevation: view[1], distance: radius / Math.tan(FOV / 2) * 1.05, target: center };
     Object.assign(camera, JSON.parse(JSON.stringify(home)));
     document.title = `implc view${meta.name ? " · " + meta.name : ""}`;
-    request(0, [0, 0, 0]);
+    if (meta.kind === "mesh") { loadMesh(); changed(); } else { request(0, [0, 0, 0]); }
   }
   start().catch((error) => { api.errors.push(String(error)); overlay.textContent = String(error); });
 })();
