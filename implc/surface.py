@@ -8,8 +8,11 @@ arrays, run the compiled code over whole vectors and handle the ragged tail.
 from __future__ import annotations
 
 import math
+import os
 import sys
 from collections.abc import Callable
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -40,6 +43,34 @@ DEFAULT_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
 ROUNDINGS = ("auto", "directed", "widen")
 CHUNK = 1 << 16
 """Rows per native call of the batched entry points (a multiple of every vector width)."""
+
+
+def in_parallel(jobs: list[Callable[[], None]]) -> None:
+    """Run independent native calls (each releases the GIL) on the process's cores, at most one thread
+    per core; the first error (or Ctrl-C) cancels the jobs not started and is raised once those running
+    finish."""
+    workers = min(len(jobs), _cores())
+    if workers <= 1:
+        for job in jobs:
+            job()
+        return
+    with ThreadPoolExecutor(workers, thread_name_prefix="implc-eval") as pool:
+        futures = [pool.submit(job) for job in jobs]
+        try:
+            done, _ = wait(futures, return_when=FIRST_EXCEPTION)
+            for future in done:
+                future.result()
+        except BaseException:
+            for future in futures:
+                future.cancel()
+            raise
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - non-Linux
+        return os.cpu_count() or 1
 
 
 def check_bounds(bounds: Any) -> tuple[tuple[float, float], ...]:
@@ -251,16 +282,18 @@ class Surface:
 
     # -- batched evaluation -----------------------------------------------------------------------
     def _run(self, kernel, inputs: list[np.ndarray], out_shapes: list[tuple], extra=()) -> list[np.ndarray]:
-        """Run ``kernel`` over whole vectors, in chunks of :data:`CHUNK` rows (Ctrl-C is seen between
-        them), then once more over the zero-padded tail (``extra``: trailing arguments, e.g. NULL live
-        masks)."""
+        """Run ``kernel`` over whole vectors, in chunks of :data:`CHUNK` rows spread over the cores (Ctrl-C is
+        seen between them), then once more over the zero-padded tail (``extra``: trailing arguments, e.g.
+        NULL live masks)."""
         n = len(inputs[0])
         outs = [np.empty((n, *shape), dtype=np.float64) for shape in out_shapes]
         width = self.width
         main = n - n % width
-        for start in range(0, main, CHUNK):
+
+        def chunk(start):
             count = min(CHUNK, main - start)
             kernel(*[a[start:].ctypes.data for a in inputs], *[o[start:].ctypes.data for o in outs], count, *extra)
+        in_parallel([partial(chunk, start) for start in range(0, main, CHUNK)])
         if main < n:
             tail_in = [np.zeros((width, 3)) for _ in inputs]
             for pad, a in zip(tail_in, inputs):
@@ -381,21 +414,21 @@ class Surface:
         program = self.program
         assert program is not None  # the tape engine's surfaces have one
         length = max(len(program), 1)
-        slots = slot_scratch(program.slot_count)
-        choices = np.empty(2 * length * 8, dtype=np.uint8)  # the groups' choices, then the points'
-        need = np.zeros(program.slot_count, dtype=np.int32)
-        marks = np.empty(length, dtype=np.uint8)
-        remap = np.empty(program.slot_count, dtype=np.int32)
-        work = np.empty(length * abi.INSTRUCTION_WORDS, dtype=np.int32)
-        step = max(1, len(first) * CHUNK // total)  # about CHUNK rows per call: Ctrl-C between calls
-        for at in range(0, len(first), step):
-            count = min(step, len(first) - at)
+
+        def batch(at, count):  # its own scratch: batches run at once on several cores
+            slots = slot_scratch(program.slot_count)
+            choices = np.empty(2 * length * 8, dtype=np.uint8)  # the groups' choices, then the points'
+            need = np.zeros(program.slot_count, dtype=np.int32)  # each call's stamps start from one
+            marks = np.empty(length, dtype=np.uint8)
+            remap = np.empty(program.slot_count, dtype=np.int32)
+            work = np.empty(length * abi.INSTRUCTION_WORDS, dtype=np.int32)
             self.tape_engine.grouped(
                 program.header.ctypes.data, slots.ctypes.data, choices.ctypes.data, need.ctypes.data,
                 marks.ctypes.data, remap.ctypes.data, work.ctypes.data, lo[at:].ctypes.data, hi[at:].ctypes.data,
                 starts[at:].ctypes.data, count, padded_rows.ctypes.data, padded_hi.ctypes.data,
                 out_value.ctypes.data, out_grad.ctypes.data, mode)
-            need[:] = 0  # each call's stamps start again from one
+        step = max(1, len(first) * CHUNK // total)  # about CHUNK rows per call: Ctrl-C between calls
+        in_parallel([partial(batch, at, min(step, len(first) - at)) for at in range(0, len(first), step)])
         values[order] = out_value[at_row]
         if mode:
             grads[order] = out_grad[at_row]

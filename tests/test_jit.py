@@ -12,6 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
+import pytest
 import sympy
 
 import implc
@@ -154,3 +155,33 @@ def test_inspection_texts():
     s = implc.compile(x * y - 1)
     assert "mul" in s.ir
     assert "define void @\"implc_interval\"" in s.llvm_ir or "define void @implc_interval" in s.llvm_ir
+
+
+@pytest.mark.parametrize("engine", ["jit", "tape"])
+def test_large_batches_spread_over_threads_give_numpys_values(engine):
+    """Surface.eval and .gradient over many chunks (run on several threads at once) against numpy's own
+    evaluation of the expression and of SymPy's derivatives, row for row."""
+    from implc.surface import CHUNK
+    expr = sympy.sin(3 * x) * y + sympy.exp(z / 2) - x * z
+    surface = implc.compile(expr, engine=engine)
+    points = np.random.default_rng(5).uniform(-1, 1, (5 * CHUNK + 13, 3))
+    truth = sympy.lambdify((x, y, z), expr, "numpy")(*points.T)
+    np.testing.assert_allclose(surface.eval(points), truth, rtol=1e-13, atol=1e-13)
+    partials = np.stack([sympy.lambdify((x, y, z), sympy.diff(expr, v), "numpy")(*points.T) for v in (x, y, z)], 1)
+    np.testing.assert_allclose(surface.gradient(points), partials, rtol=1e-12, atol=1e-12)
+
+
+def test_parallel_jobs_raise_the_first_error_and_cancel_the_rest():
+    from implc.surface import in_parallel
+    ran = []
+
+    def fails():
+        raise ValueError("this job failed")
+
+    def slow():
+        time.sleep(0.001)
+        ran.append(1)
+    started = time.monotonic()
+    with pytest.raises(ValueError, match="this job failed"):
+        in_parallel([fails] + [slow] * 5000)
+    assert len(ran) < 1000 and time.monotonic() - started < 2  # the jobs not started were cancelled
