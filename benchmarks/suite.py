@@ -771,7 +771,8 @@ def mesh(args, out):
             quality = depth <= args.mesh_quality_depth
             row = {"surface": name, "depth": depth, "voxelize_cpu_s": statistics.median(vox_cpu),
                    "mesh_cpu_s": statistics.median(mesh_cpu), "triangles": len(m.faces),
-                   "feature_cells": m.stats.feature_cells,
+                   "feature_cells": m.stats.feature_cells, "crossed_cells": m.stats.crossed_cells,
+                   "unproven_cells": m.stats.unproven_cells,
                    "implc": mesh_quality(m.vertices, m.faces, surface, cell, quality)}
             try:
                 import skimage  # noqa: F401
@@ -788,11 +789,12 @@ def mesh(args, out):
             rows.append(row)
     out["mesh"] = rows
     md = ["### Meshes: implc.mesh against scikit-image's marching cubes on the dense grid (CPU seconds, medians)", "",
-          "| surface | grid | voxelize s | mesh s | mesh / voxelize | triangles | open, flipped, degenerate "
+          "| surface | grid | voxelize s | mesh s | mesh / voxelize | triangles | unproven cells "
+          "| open, flipped, degenerate "
           "| manifold3d "
           "| self-intersecting | max distance (cells) | normal vs ∇F median, p99 ° | marching cubes: sample + mc s "
           "| peak GiB | triangles | open edges | manifold3d | self-intersecting | max distance |",
-          "|---" * 18 + "|"]
+          "|---" * 19 + "|"]
     fmt = lambda v: "–" if v is None else str(v)  # noqa: E731
     for r in rows:
         q, mc = r["implc"], r["marching_cubes"]
@@ -801,11 +803,14 @@ def mesh(args, out):
                  f"{fmt(mc['quality']['self_intersecting'])} | {mc['quality']['max_distance_cells']:.3f} |"
                  if mc else " – | – | – | – | – | – | – |")
         md.append(f"| {r['surface']} | {1 << r['depth']}³ | {r['voxelize_cpu_s']:.3f} | {r['mesh_cpu_s']:.3f} | "
-                  f"{r['mesh_cpu_s'] / r['voxelize_cpu_s']:.1f}× | {r['triangles']} | {q['open_edges']}, "
+                  f"{r['mesh_cpu_s'] / r['voxelize_cpu_s']:.1f}× | {r['triangles']} | "
+                  f"{r['unproven_cells']} of {r['crossed_cells']} | {q['open_edges']}, "
                   f"{q['flipped_edges']}, {q['degenerate']} | {fmt(q['manifold3d'])} | {fmt(q['self_intersecting'])} | "
                   f"{q['max_distance_cells']:.3f} | {q['normal_deviation_median_deg']:.1f}, "
                   f"{q['normal_deviation_p99_deg']:.1f} |{cells}")
-    md += ["", "Distance: |F| / |∇F| at each vertex (first order), in cells. Open edges: edges not in exactly two "
+    md += ["", "Unproven cells: crossed cells where no partial of F keeps its sign (MeshStats; the others are "
+           "proven to hold a graph of F = 0). "
+           "Distance: |F| / |∇F| at each vertex (first order), in cells. Open edges: edges not in exactly two "
            "triangles (marching cubes leaves the solid open where it meets the grid's faces). Self-intersections "
            f"counted by pymeshlab up to {1 << args.mesh_quality_depth}³ (– above)."]
     return md

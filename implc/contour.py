@@ -267,9 +267,13 @@ class _Grid:
         (1.7× cheaper there than its dual numbers, and within a few ulps), each point's program simplified
         over its group of cells (:meth:`implc.Surface.eval_grouped`)."""
         points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
-        if not self.grouped:
+        if self.grouped:
+            return self.surface.eval_grouped(points, self.groups(points), self.group_boxes)[0]
+        if self.surface.engine != "tape":
             return self.surface.eval(points)
-        return self.surface.eval_grouped(points, self.groups(points), self.group_boxes)[0]
+        lo, hi = self.surface.interval(points, points)  # as eval_grouped does, over the whole program
+        with np.errstate(invalid="ignore", over="ignore"):
+            return lo / 2 + hi / 2  # NaN where F may be undefined (the whole line): outside, as for eval
 
     def gradients(self, points: np.ndarray) -> np.ndarray:
         """F's analytic gradient at points, as :meth:`values` groups them."""
@@ -905,10 +909,25 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
 
 def _regular(grid: _Grid, cells: np.ndarray) -> np.ndarray:
     """Whether some partial of F keeps its sign over each cell (its enclosure over the cell excludes 0):
-    the cell is proven regular (:class:`MeshStats`)."""
+    the cell is proven regular (:class:`MeshStats`). First over the cells' parents (2³ cells: what holds over
+    a box holds over each box inside it, and the surface's cells share a parent three or four at a time),
+    then over the cells of the parents not proven."""
+    regular = np.zeros(len(cells), bool)
     if not len(cells):
+        return regular
+    parent_keys, parent_of = np.unique(grid.cell_key(cells // 2), return_inverse=True)
+    parents = grid.cell_unkey(parent_keys)
+    regular = _keeps_a_sign(grid, grid.world(np.minimum(2 * parents, grid.n)),
+                            grid.world(np.minimum(2 * parents + 2, grid.n)))[parent_of]
+    rest = np.flatnonzero(~regular)
+    regular[rest] = _keeps_a_sign(grid, grid.world(cells[rest]), grid.world(cells[rest] + 1))
+    return regular
+
+
+def _keeps_a_sign(grid: _Grid, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Whether some partial's enclosure over each box [lo, hi] excludes 0."""
+    if not len(lo):
         return np.zeros(0, bool)
-    lo, hi = grid.world(cells), grid.world(cells + 1)
     if grid.grouped:
         enclosures = grid.surface.gradient_enclosures(lo, hi, grid.groups((lo + hi) / 2), grid.group_boxes)
     else:

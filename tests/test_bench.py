@@ -64,6 +64,7 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
     assert [g["depth"] for g in cluster["plan"]] == [7, 9] and cluster["plan"][1]["tasks"] >= 1
     for r in data["mesh"]:  # closed, manifold meshes from implc; marching cubes' figures beside them
         assert r["surface"] in ("torus", "ball") and r["triangles"] > 0
+        assert r["unproven_cells"] == 0 < r["crossed_cells"]  # smooth, no singular point: every cell proven
         quality = r["implc"]
         assert (quality["open_edges"], quality["flipped_edges"], quality["degenerate"]) == (0, 0, 0)
         assert quality["manifold3d"] == "NoError" and quality["self_intersecting"] == 0
