@@ -10,7 +10,8 @@ With ``--workers 1,2`` each process times every worker count in turn, and the ta
 yield t1 / (n · tn) of each revision (the wall-time yield of the paper's Table 1).
 
 With ``--task mesh`` each process voxelizes once and times ``Voxels.mesh()`` in CPU seconds (the
-contouring, which runs on one thread), the count column then being triangles.
+contouring, which runs on one thread), the count column then being triangles; ``--task implc.mesh`` times
+what a user calls, ``implc.mesh(surface, depth)`` (its voxelization and the contouring, CPU seconds).
 
 A case is a scene name, "union of 50 spheres" or the path of a ``.vm`` model (read with ``implc.load_vm``
 where the revision has it, else converted to SymPy with ``evaluate=False``, keeping the DAG).
@@ -83,6 +84,13 @@ else:
     s = implc.compile(sc.surface, sc.bounds)
 v = implc.voxelize(s, depth, workers=1)  # warm: runtime module, memory
 times = {w: [] for w in workers}
+if task == "implc.mesh":
+    implc.mesh(s, depth)  # warm
+    for _ in range(repeats):
+        t0 = time.process_time(); n = len(implc.mesh(s, depth).faces)
+        times[workers[0]].append(time.process_time() - t0)
+    print(json.dumps({"seconds": {w: statistics.median(t) for w, t in times.items() if t}, "voxels": n}))
+    sys.exit(0)
 if task == "mesh":
     v.mesh()  # warm
     for _ in range(repeats):
@@ -116,11 +124,12 @@ def main(argv=None) -> int:
     p.add_argument("--rounds", type=int, default=3, help="processes per revision and case, interleaved")
     p.add_argument("--cases", default=",".join(CASES))
     p.add_argument("--workers", default="1", help="worker counts, comma-separated (e.g. 1,2: adds the yield)")
-    p.add_argument("--task", choices=("voxelize", "mesh"), default="voxelize",
-                   help="what is timed: voxelize (wall seconds) or mesh (Voxels.mesh(), CPU seconds)")
+    p.add_argument("--task", choices=("voxelize", "mesh", "implc.mesh"), default="voxelize",
+                   help="what is timed: voxelize (wall seconds), mesh (Voxels.mesh(), CPU seconds) or implc.mesh "
+                        "(voxelizing and meshing, CPU seconds)")
     args = p.parse_args(argv)
     workers = [int(w) for w in args.workers.split(",")]
-    if args.task == "mesh":
+    if args.task != "voxelize":
         workers = workers[:1]
     with tempfile.TemporaryDirectory() as tmp:
         old = Path(tmp) / "old"
@@ -142,7 +151,7 @@ def main(argv=None) -> int:
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, capture_output=True,
                            check=False)  # best effort: the temporary folder goes anyway
-    what = "Voxelize (wall s)" if args.task == "voxelize" else "Mesh (CPU s)"
+    what = {"voxelize": "Voxelize (wall s)", "mesh": "Mesh (CPU s)", "implc.mesh": "implc.mesh (CPU s)"}[args.task]
     print(f"### {what} at {1 << args.depth}³: {args.revision} against this tree "
           f"(medians of {args.rounds} processes x {args.repeats} runs)\n")
     header = ["case"]

@@ -136,6 +136,14 @@ def _voxelize(surface, depth, workers, quiet, solid=False, tightness="default"):
     return voxels, time.perf_counter() - t0
 
 
+def _tightness(args) -> str:
+    """--tightness as given, or its default: the natural mode where the voxels are only meshed (the mesh is
+    the same for every tightness, :func:`implc.mesh`), the default mode otherwise."""
+    if args.tightness is not None:
+        return args.tightness
+    return "natural" if args.command == "mesh" or getattr(args, "mesh", False) else "default"
+
+
 def _check_surface_options(args):
     _check_range(args.depth, "--depth", 1, 21)
     if args.workers is not None and args.workers < 1:
@@ -490,9 +498,10 @@ def _parser():
         p.add_argument("--depth", type=int, help="grid depth: 2^depth cells per axis (default: the scene's, or 9)")
         p.add_argument("--workers", type=int, help="threads (default: all usable cores)")
         p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
-        p.add_argument("--tightness", choices=tuple(TIGHTNESS), default="default",
+        p.add_argument("--tightness", choices=tuple(TIGHTNESS),
                        help="leaves kept: natural (every leaf its enclosure keeps), default (those the linear model "
-                            "misses tested again: about 1.00-1.03 voxels per sign-change cell) or tightest (slowest)")
+                            "misses tested again: about 1.00-1.03 voxels per sign-change cell) or tightest (slowest); "
+                            "a mesh is the same for each, and made from the natural mode's unless this says otherwise")
 
     v = sub.add_parser("voxelize", help="voxelize a scene or formula and write .npz, .ply, .npy, .vdb or .zarr")
     surface_args(v)
@@ -610,6 +619,8 @@ def _run(argv) -> int:
         return cmd_bench(argv[1:])
     parser = _parser()
     args = parser.parse_args(_attach_negative_values(argv))
+    if hasattr(args, "tightness"):
+        args.tightness = _tightness(args)
     _check_no_empty_values(parser, args)
     global _output
     _output = getattr(args, "output", None) or getattr(args, "export", None)

@@ -417,9 +417,14 @@ def _voxelize_on_cluster(surface, depth, cluster, *, progress, solid, say, optio
 def mesh(surface: Surface, depth: int = 8, *, workers: int | None = None, progress: bool = False,
          features: bool = True, witnesses: bool = False, **options: Any) -> Mesh:
     """The boundary of the solid {F < 0} within ``surface``'s bounds as a closed, oriented,
-    intersection-free triangle mesh on the 2^depth grid: :func:`voxelize` (``options`` are its tightness
-    options) finds the cells the surface may meet, then :meth:`Voxels.mesh` contours them (``features``,
-    ``witnesses``: see there).
+    intersection-free triangle mesh on the 2^depth grid: :func:`voxelize` finds the cells the surface may
+    meet, then :meth:`Voxels.mesh` contours them (``features``, ``witnesses``: see there).
+
+    The voxelization runs in the natural mode (:data:`NATURAL`) unless ``options`` (its tightness options)
+    say otherwise: the mesh does not depend on them. A tighter voxelization keeps fewer cells, but it drops
+    only cells proven not to meet the surface, whose sampled corners all agree, and the contouring meshes
+    the cells whose samples change sign (and the neighbours they reach): the same cells, the same mesh,
+    found sooner (bear at 256³: 0.38 s natural, 2.8 s with the default's second look).
 
     >>> import implc
     >>> ball = implc.compile(implc.x**2 + implc.y**2 + implc.z**2 - 0.5)
@@ -429,7 +434,7 @@ def mesh(surface: Surface, depth: int = 8, *, workers: int | None = None, progre
     """
     if _check_depth(depth) > MESH_MAX_DEPTH:  # refused before the voxelization, not after it
         raise ValueError(f"meshes are made at depth 1 to {MESH_MAX_DEPTH}, not {depth}")
-    voxels = voxelize(surface, depth, workers=workers, progress=progress, **options)
+    voxels = voxelize(surface, depth, workers=workers, progress=progress, **{**NATURAL, **options})
     return voxels.mesh(features=features, witnesses=witnesses)
 
 

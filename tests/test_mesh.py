@@ -269,6 +269,44 @@ def test_the_same_mesh_for_every_worker_count():
     assert np.array_equal(one.vertices, two.vertices) and np.array_equal(one.faces, two.faces)
 
 
+@pytest.mark.parametrize("name", ["paper_blobs", "box_minus_ball", "vm"])
+def test_the_same_mesh_for_every_tightness(name):
+    """A tighter voxelization drops only cells proven not to meet the surface (their sampled corners agree):
+    the natural mode's voxels, more cells, give the very mesh of the default's and the tightest's; which is
+    why implc.mesh voxelizes in the natural mode."""
+    if name == "vm":
+        s = implc.compile(parse_vm(CSG, name="csg"), engine="tape")
+    else:
+        expr, bounds = (load_scene(name).surface, load_scene(name).bounds) if name in SCENES else SURFACES[name]
+        s = implc.compile(expr, bounds)
+    voxels = [implc.voxelize(s, 6, **mode) for mode in (implc.NATURAL, {}, implc.TIGHTEST)]
+    assert len(voxels[0]) >= len(voxels[1]) >= len(voxels[2])
+    if name == "paper_blobs":
+        assert len(voxels[0]) > len(voxels[1]), "the case the test is for: the natural mode keeps more cells"
+    meshes = [v.mesh() for v in voxels]
+    for other in meshes[1:]:
+        assert np.array_equal(meshes[0].vertices, other.vertices) and np.array_equal(meshes[0].faces, other.faces)
+    made = implc.mesh(s, 6)
+    assert made.stats.cells == len(voxels[0]) and np.array_equal(made.faces, meshes[0].faces)
+
+
+def test_the_mesh_command_voxelizes_in_the_natural_mode_unless_told(tmp_path, monkeypatch):
+    import implc.voxelization as voxelization
+    seen = []
+    real = voxelization.voxelize
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("refine_leaves", "auto"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(voxelization, "voxelize", spy)
+    out = str(tmp_path / "t.stl")
+    assert main(["mesh", "torus", "--depth", "4", "-o", out, "--quiet"]) == 0
+    assert main(["mesh", "torus", "--depth", "4", "-o", out, "--quiet", "--tightness", "default"]) == 0
+    assert main(["voxelize", "torus", "--depth", "4", "-o", str(tmp_path / "t.npz"), "--quiet"]) == 0
+    assert seen == [False, "auto", "auto"]
+
+
 def test_a_solid_filling_the_bounds_is_the_box():
     s = implc.compile(x + y + z - 10, ((-1, 1),) * 3)  # F < 0 everywhere: the mesh is the box itself
     mesh = implc.mesh(s, 3)
