@@ -41,6 +41,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import big_arrays
+
 EDGE_MARGIN = 1.0 / 256
 """How far inside its edge (as a fraction of the edge) a surface vertex is kept: no triangle degenerates."""
 ROOT_STEPS = 3
@@ -318,7 +320,7 @@ class _Grid:
 
     def corner_values(self, keys: np.ndarray) -> np.ndarray:
         """F at the corners ``keys``, each sampled once for the whole contouring (and remembered)."""
-        index = self._corner_index(keys.size // 3)
+        index = self._corner_index(keys.size // 6)  # a band of cells has about one corner per cell
         before = index.count
         numbers = index.number(keys)
         if index.count > before:
@@ -398,20 +400,26 @@ class _Cells:
         self.grid = grid
         self.cells = np.zeros((0, 3), np.int64)
         self.inside = np.zeros((0, 8), bool)
-        self.index = _KeyIndex(grid.runtime, 2 * len(cells) + 1024)
+        self.signs = np.zeros(0, np.uint8)  # the same, bit c for corner c
+        self.index = _KeyIndex(grid.runtime, len(cells) + len(cells) // 8 + 1024)  # room for the cells added
         self.add(cells)
 
     def add(self, more: np.ndarray) -> int:
         """Append the cells of ``more`` not yet here (their corners sampled), in the order of their keys;
         returns how many."""
+        keys = self.grid.cell_key(more)
+        if self.index.count:  # most are here already (the neighbours close() proposes): only the others sorted
+            keys = keys[self.index.number(keys, insert=False) < 0]
         before = self.index.count
-        self.index.number(np.sort(self.grid.cell_key(more)))
+        self.index.number(np.sort(keys))
         fresh = self.index.keys()[before:]
         if not len(fresh):
             return 0
         cells = self.grid.cell_unkey(fresh)
         self.cells = np.concatenate([self.cells, cells])
-        self.inside = np.concatenate([self.inside, _corner_signs(self.grid, cells)])
+        inside = _corner_signs(self.grid, cells)
+        self.inside = np.concatenate([self.inside, inside])
+        self.signs = np.concatenate([self.signs, np.packbits(inside, axis=1, bitorder="little").reshape(-1)])
         return len(fresh)
 
     def close(self, seeds: np.ndarray, start: int = 0) -> int:
@@ -420,13 +428,13 @@ class _Cells:
         returns how many were added."""
         added = self.add(seeds)
         while True:
-            inside = self.inside[start:]
-            crossed = _both_signs(inside)
+            signs = self.signs[start:]
             candidates = []
             for axis in range(3):
                 for side in (0, 1):
-                    face = [c for c in range(8) if (c >> axis) & 1 == side]
-                    neighbours = self.cells[start:][crossed & _both_signs(inside[:, face])]
+                    face = np.uint8(sum(1 << c for c in range(8) if (c >> axis) & 1 == side))
+                    on_face = signs & face
+                    neighbours = self.cells[start:][(on_face != 0) & (on_face != face)]
                     neighbours[:, axis] += 1 if side else -1
                     candidates.append(neighbours[(neighbours[:, axis] >= 0) & (neighbours[:, axis] < self.grid.n)])
             start = len(self.cells)
@@ -436,7 +444,7 @@ class _Cells:
             added += fresh
 
     def crossed(self) -> np.ndarray:
-        return _both_signs(self.inside)
+        return (self.signs != 0) & (self.signs != 0xFF)
 
 
 # -- triangles ---------------------------------------------------------------------------------------
@@ -480,10 +488,23 @@ class _KeyIndex:
         return numbers
 
     def number(self, keys: np.ndarray, insert: bool = True) -> np.ndarray:
-        """The numbers of ``keys`` (absent ones inserted, or −1 with ``insert=False``)."""
-        while insert and self.count + keys.size > self.limit:
-            self._grow()
-        return self._call(keys.reshape(-1), insert).reshape(keys.shape)
+        """The numbers of ``keys`` (absent ones inserted, or −1 with ``insert=False``). Inserted a slice at
+        a time that cannot pass the limit even if all its keys are new, so that the table grows with the
+        keys it holds, not with the repeats it is shown (a cell's corners are shown up to eight times)."""
+        flat = np.ascontiguousarray(keys.reshape(-1), dtype=np.int64)
+        if not insert or self.count + len(flat) <= self.limit:
+            return self._call(flat, insert).reshape(keys.shape)
+        numbers = np.empty(len(flat), np.int64)
+        start = 0
+        while start < len(flat):
+            room = self.limit - self.count
+            if room < min(len(flat) - start, self.limit // 4):
+                self._grow()
+                continue
+            stop = start + min(len(flat) - start, room)
+            numbers[start:stop] = self._call(flat[start:stop], True)
+            start = stop
+        return numbers.reshape(keys.shape)
 
     def kuhn_triangles(self, grid, cells: np.ndarray, inside: np.ndarray):
         """Marching tetrahedra over the Kuhn split of each cell (native), its vertices numbered here: the
@@ -491,26 +512,24 @@ class _KeyIndex:
         lowest = np.ascontiguousarray(grid.key(cells), dtype=np.int64)
         flags = np.ascontiguousarray(inside, dtype=np.uint8)
         offsets = np.ascontiguousarray(grid.key(CORNERS), dtype=np.int64)
-        faces, owners = [], []
-        start = 0
+        # room for the most a cell can give (6 tetrahedra, 2 triangles each): the pages never written cost nothing
+        faces = big_arrays.empty((12 * len(cells), 3), np.int64)
+        owners = big_arrays.empty(12 * len(cells), np.int64)
+        start = written = 0
         while start < len(cells):
             count = min(KUHN_CHUNK, len(cells) - start)
-            out = np.empty((12 * count, 3), np.int64)
-            owner = np.empty(12 * count, np.int64)
             self.state[1] = 0
             done = self.runtime.kuhn_triangles(
                 lowest[start:].ctypes.data, offsets.ctypes.data, flags[start:].ctypes.data, count,
                 KUHN_PACKED.ctypes.data, self.table.ctypes.data, self.bits, self.uniques.ctypes.data, self.limit,
-                self.state.ctypes.data, out.ctypes.data, owner.ctypes.data)
-            written = int(self.state[1])
-            faces.append(out[:written])
-            owners.append(owner[:written] + start)
+                self.state.ctypes.data, faces[written:].ctypes.data, owners[written:].ctypes.data)
+            fresh = int(self.state[1])
+            owners[written:written + fresh] += start
+            written += fresh
             start += done
             if done < count:
                 self._grow()
-        if not faces:
-            return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
-        return np.concatenate(faces), np.concatenate(owners)
+        return faces[:written], owners[:written]
 
 
 def _face_ids(grid: _Grid, cells: np.ndarray, axis: int, side: int) -> np.ndarray:
@@ -1007,7 +1026,7 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
     first_new = index.count
     keep = ~fanned[mesh.owner]
     fresh = np.arange(before, len(todo.cells))
-    fresh = fresh[~fanned[fresh] & _both_signs(todo.inside[before:])]  # added by the signs: Kuhn
+    fresh = fresh[~fanned[fresh] & todo.crossed()[before:]]  # added by the signs: Kuhn
     kuhn, owner = index.kuhn_triangles(grid, todo.cells[fresh], todo.inside[fresh])
     rows = np.flatnonzero(fanned)
     fan = index.number(_fan_triangles(grid, todo.cells[rows], todo.inside[rows], is_feature(todo.cells[rows]),

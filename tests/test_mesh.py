@@ -258,6 +258,10 @@ def test_the_key_index_numbers_keys_in_first_seen_order_as_it_grows():
     assert np.array_equal(index.keys()[numbers], keys)
     absent = np.array([5, (1 << 50) + 1])
     assert np.array_equal(index.number(absent, insert=False), [-1, -1]) or 5 in keys
+    shown = _KeyIndex(Runtime.shared(), 16)  # a table sized by the keys it holds, not by the repeats shown
+    distinct = np.arange(5000, dtype=np.int64) * 7919
+    assert np.array_equal(shown.number(np.tile(distinct, 40)), np.tile(np.arange(5000), 40))
+    assert shown.count == 5000 and shown.limit == 8192
 
 
 # -- properties of the construction ------------------------------------------------------------------
