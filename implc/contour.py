@@ -41,8 +41,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import big_arrays
-
 EDGE_MARGIN = 1.0 / 256
 """How far inside its edge (as a fraction of the edge) a surface vertex is kept: no triangle degenerates."""
 ROOT_STEPS = 3
@@ -517,8 +515,8 @@ class _KeyIndex:
         flags = np.ascontiguousarray(inside, dtype=np.uint8)
         offsets = np.ascontiguousarray(grid.key(CORNERS), dtype=np.int64)
         # room for the most a cell can give (6 tetrahedra, 2 triangles each): the pages never written cost nothing
-        faces = big_arrays.empty((12 * len(cells), 3), np.int64)
-        owners = big_arrays.empty(12 * len(cells), np.int64)
+        faces = np.empty((12 * len(cells), 3), np.int64)
+        owners = np.empty(12 * len(cells), np.int64)
         start = written = 0
         while start < len(cells):
             count = min(KUHN_CHUNK, len(cells) - start)
@@ -885,9 +883,9 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     Kuhn split everywhere (creases chamfered). ``witnesses=True`` keeps, for each vertex, the ends of the
     edge it was found on (``Mesh.witnesses``, (V, 2, 3): two points of one cell where F has opposite
     signs, the negative one first), so that anyone can check where it lies. Returns an :class:`implc.Mesh`."""
-    from .triangle_mesh import Mesh
     if not 1 <= depth <= MAX_DEPTH:
         raise ValueError(f"meshes are made at depth 1 to {MAX_DEPTH}, not {depth}")
+    from .triangle_mesh import Mesh
     stats = MeshStats()
     t0 = time.perf_counter()
     grid = _Grid(surface, depth, surface.bounds if bounds is None else bounds)
@@ -1011,31 +1009,54 @@ _NO_POINTS = _Points(None, np.zeros(0, np.int64), np.zeros((0, 3)))
 
 
 class _Pieces:
-    """The mesh as it is assembled: vertices (numbered by the vertex index) with their normals and
-    witnesses (or None); the cells' triangles with the row of the cell each came from; the caps'."""
+    """The mesh as it is assembled, in blocks joined once at the end (fresh memory is what a big mesh costs
+    most): the vertices (numbered by the vertex index) with their normals and witnesses (or None), a block
+    per pass; the first pass's triangles with the row of the cell each came from, which of them stay
+    (``keep``, after the feature pass), the triangles the feature pass added; the caps'."""
 
     def __init__(self, vertices, normals, ends, faces, owner, caps):
-        self.vertices, self.normals, self.ends = vertices, normals, ends
+        self.vertices, self.normals, self.ends = vertices, normals, ends  # the first pass's
+        self.added: list[tuple] = []  # the feature pass's vertices, normals, witnesses
         self.faces, self.owner, self.caps = faces, owner, caps
-        self.orphans = False  # vertices no triangle uses (after the feature pass)
+        self.keep: np.ndarray | None = None
+        self.more: list[np.ndarray] = []
 
     def add_vertices(self, vertices, normals, ends):
-        self.vertices = np.concatenate([self.vertices, vertices])
-        self.normals = np.concatenate([self.normals, normals])
-        if self.ends is not None:
-            self.ends = np.concatenate([self.ends, ends])
+        self.added.append((vertices, normals, ends))
 
     def compacted(self):
-        """(vertices, normals, faces, witnesses) with the vertices no triangle uses left out."""
-        faces = np.concatenate([self.faces, self.caps])
-        if not self.orphans:
+        """(vertices, normals, faces, witnesses), each written once, with the vertices no triangle uses left
+        out (those of the first pass's triangles that the feature pass replaced)."""
+        if self.keep is None and not len(self.caps):
+            return self.vertices, self.normals, self.faces, self.ends
+        kept = len(self.faces) if self.keep is None else int(np.count_nonzero(self.keep))
+        faces = np.empty((kept + sum(map(len, self.more)) + len(self.caps), 3), np.int64)
+        if self.keep is None:
+            faces[:kept] = self.faces
+        else:
+            np.compress(self.keep, self.faces, axis=0, out=faces[:kept])
+        at = kept
+        for block in [*self.more, self.caps]:
+            faces[at:at + len(block)] = block
+            at += len(block)
+        blocks = [(self.vertices, self.normals, self.ends), *self.added]
+        if not self.added:
             return self.vertices, self.normals, faces, self.ends
-        used = np.zeros(len(self.vertices), bool)
+        used = np.zeros(sum(len(b[0]) for b in blocks), bool)
         used[faces.reshape(-1)] = True
         renumber = np.cumsum(used) - 1
+        np.take(renumber, faces, out=faces, mode="clip")  # in place: each index read before its slot is written
         rows = np.flatnonzero(used)  # np.take of rows: several times faster than a boolean mask on (V, 3)
-        ends = None if self.ends is None else np.take(self.ends, rows, axis=0)
-        return np.take(self.vertices, rows, axis=0), np.take(self.normals, rows, axis=0), np.take(renumber, faces), ends
+        out = [np.empty((len(rows), 3)), np.empty((len(rows), 3))]
+        if self.ends is not None:
+            out.append(np.empty((len(rows), 2, 3)))
+        first = 0
+        for block in blocks:  # the rows of each block, taken straight into the outputs
+            lo, hi = np.searchsorted(rows, [first, first + len(block[0])])
+            for source, target in zip(block, out):
+                np.take(source, rows[lo:hi] - first, axis=0, out=target[lo:hi])
+            first += len(block[0])
+        return out[0], out[1], faces, (out[2] if self.ends is not None else None)
 
 
 def _corner_signs(grid: _Grid, cells: np.ndarray) -> np.ndarray:
@@ -1071,20 +1092,18 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
     cell_points, face_points = _place_points(grid, feature_cells, grid.cell_unkey(fanned_keys), index,
                                              mesh.vertices, mesh.normals)
     first_new = index.count
-    keep = ~fanned[mesh.owner]
+    mesh.keep = ~fanned[mesh.owner]
     fresh = np.arange(before, len(todo.cells))
     fresh = fresh[~fanned[fresh] & todo.crossed()[before:]]  # added by the signs: Kuhn
     kuhn, owner = index.kuhn_triangles(grid, todo.cells[fresh], todo.inside[fresh])
     rows = np.flatnonzero(fanned)
     fan = index.number(_fan_triangles(grid, todo.cells[rows], todo.inside[rows], is_feature(todo.cells[rows]),
                                       cell_points, face_points, is_feature))
-    mesh.faces = np.concatenate([mesh.faces[keep], kuhn, fan])
-    mesh.owner = np.concatenate([mesh.owner[keep], fresh[owner], np.full(len(fan), -1)])
+    mesh.more = [kuhn, fan]
     boundary = (feature_cells == 0) | (feature_cells == grid.n - 1)
     if boundary.any():
         mesh.caps = index.number(_cap_triangles(grid, face_points, is_feature)[0])
     keys = index.keys()[first_new:]
     vertices, on_surface, ends = _vertices(grid, keys, cell_points, face_points, mesh.ends is not None)
     mesh.add_vertices(vertices, _unit_normals(grid, vertices, on_surface), ends)
-    mesh.orphans = True
     return added
