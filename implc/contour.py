@@ -948,7 +948,7 @@ def _regular(grid: _Grid, cells: np.ndarray) -> np.ndarray:
 
 
 def _prove(grid: _Grid, lo, hi, wanted: np.ndarray, levels: int, signs: np.ndarray | None = None) -> np.ndarray:
-    """Which of the ``wanted`` signs of F's partials (n, 6): rising along x y z, falling along x y z) are
+    """Which of the ``wanted`` signs of F's partials ((n, 6): rising along x, y, z, then falling) are
     proven over each box [lo, hi]: by the box's own enclosures (``signs`` where known), or else by its 8
     sub-boxes, down to ``levels`` levels. A partial keeping one sign over every sub-box keeps it over the
     box they cover; so below a box only the signs that every proven sub-box shares are still sought, and

@@ -61,7 +61,6 @@ class NativeModule:
         tuning = llvm.create_pipeline_tuning_options(speed_level=self.opt_level)
         builder = llvm.create_pass_builder(self._target_machine, tuning)
         builder.getModulePassManager().run(module, builder)
-        self.optimized_ir = str(module)
         return self._target_machine.emit_object(module)
 
     def address(self, name: str) -> int:

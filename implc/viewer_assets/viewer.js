@@ -276,15 +276,20 @@
     changed();
   }
 
+  // the camera, as both programs (splats and mesh) read it
+  function cameraUniforms(u, view, aspect, near, far) {
+    gl.uniform3fv(u.eye, view.eye);
+    gl.uniform3fv(u.right, view.right);
+    gl.uniform3fv(u.up, view.up);
+    gl.uniform3fv(u.forward, view.forward);
+    gl.uniform1f(u.aspect, aspect);
+    gl.uniform1f(u.near, near);
+    gl.uniform1f(u.far, far);
+  }
+
   function drawMesh(view, aspect, near, far) {
     gl.useProgram(meshProgram);
-    gl.uniform3fv(meshUniform.eye, view.eye);
-    gl.uniform3fv(meshUniform.right, view.right);
-    gl.uniform3fv(meshUniform.up, view.up);
-    gl.uniform3fv(meshUniform.forward, view.forward);
-    gl.uniform1f(meshUniform.aspect, aspect);
-    gl.uniform1f(meshUniform.near, near);
-    gl.uniform1f(meshUniform.far, far);
+    cameraUniforms(meshUniform, view, aspect, near, far);
     gl.uniform1i(meshUniform.clipAxis, plane.axis);
     if (plane.axis >= 0) {
       const [lo, hi] = meta.bounds[plane.axis];
@@ -442,13 +447,7 @@
     const chunksDrawn = selectCut(view, pixelsPerUnit, aspect);
     lastRequested = requestedThisFrame;
     gl.useProgram(program);
-    gl.uniform3fv(uniform.eye, view.eye);
-    gl.uniform3fv(uniform.right, view.right);
-    gl.uniform3fv(uniform.up, view.up);
-    gl.uniform3fv(uniform.forward, view.forward);
-    gl.uniform1f(uniform.aspect, aspect);
-    gl.uniform1f(uniform.near, near);
-    gl.uniform1f(uniform.far, far);
+    cameraUniforms(uniform, view, aspect, near, far);
     gl.uniform1f(uniform.pixelsPerUnit, pixelsPerUnit);
     // the cut-away: at the finest point level drawn, the layer the plane falls in, cells beyond it hidden
     let section = null, clipLimit = 0;
