@@ -190,7 +190,7 @@ class Surface:
         self._bound_native: NativeModule | None = None  # compiled on first use
         self._box_gradient_native: NativeModule | None = None  # compiled on the first mesh
         self._bound: dict[str, object] = {}
-        self._engine = self.runtime.tape_engine(directed) if engine == "tape" else None  # shared, cached
+        self._engine = Runtime.shared_tape_engine(directed) if engine == "tape" else None  # shared, cached
         if engine == "jit":
             self._module_of(abi.POINT)  # this surface's kernels: compiled now, or loaded from the cache
 
