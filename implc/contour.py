@@ -267,9 +267,10 @@ class _Grid:
         return out
 
     def values(self, points: np.ndarray) -> np.ndarray:
-        """F at points: the point kernel, or on the tape engine the midpoint of its interval over the point
-        (1.7× cheaper there than its dual numbers, and within a few ulps), each point's program simplified
-        over its group of cells (:meth:`implc.Surface.eval_grouped`)."""
+        """F at points: the point kernel; on the tape engine, for a long program, each point's program
+        simplified over its group of cells (:meth:`implc.Surface.eval_grouped`), and for a short one the
+        midpoint of its interval over the point (1.7× cheaper there than its dual numbers, and within a
+        few ulps)."""
         points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
         if self.grouped:
             return self.surface.eval_grouped(points, self.groups(points), self.group_boxes)[0]

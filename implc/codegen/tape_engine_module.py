@@ -48,7 +48,7 @@ def build_tape_engine(directed: bool) -> str:
     box_gradient = emit_tape_box_gradient(module, directed)
     tighten = emit_tape_tighten(module, interval, box_gradient, directed)
     emit_tape_subdivide(module, prefill, interval, simplify, normals, tighten)
-    emit_tape_grouped(module, prefill, interval, simplify, dual, box_gradient)
+    emit_tape_grouped(module, prefill, interval, simplify, emit_tape_dual(module, partials=False), dual, box_gradient)
     null_remap = ir.Constant(_P(ir.IntType(32)), None)
 
     @contextmanager

@@ -14,6 +14,8 @@ switch on the opcode, eight lanes (the eight children of an octant, or eight poi
 - ``tape_dual(header, instructions, length, output, slots, points, result)``: F and its gradient at eight
   points (three vectors), forward mode (value and three partials per slot), into ``result`` (value, dx,
   dy, dz): for normals.
+- ``tape_point(header, instructions, length, output, slots, points, result)``: F alone at eight points, by
+  ``tape_dual``'s value rules: for sampling (the mesher's).
 - ``tape_box_gradient(header, instructions, length, output, slots, box, result)``: enclosures of F and of
   its three partials over eight boxes (as ``tape_interval``'s), forward mode with the interval rules
   (an interval and three interval partials per slot), into ``result`` (eight vectors: F's lo, hi, then
@@ -190,20 +192,24 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
     return fn
 
 
-def emit_tape_dual(module: ir.Module) -> ir.Function:
-    """Define ``tape_dual`` (see the module docstring) in ``module``."""
+def emit_tape_dual(module: ir.Module, partials: bool = True) -> ir.Function:
+    """Define ``tape_dual`` (see the module docstring) in ``module``; with ``partials=False``, ``tape_point``:
+    the same value rules without the partials (F alone at eight points into ``result``), for sampling."""
     fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE),
-                                                              _P(DOUBLE)]), name="implc.tape.dual")
+                                                              _P(DOUBLE)]),
+                     name="implc.tape.dual" if partials else "implc.tape.point")
     fn.linkage = "internal"
     header, program, length, output, slots, points, result = fn.args
     b = ir.IRBuilder(fn.append_basic_block("entry"))
     vb = VectorBuilder(b, LANES, outline_elementary=True)
     vslots, vpoints = b.bitcast(dual_slots(b, header, slots), _P(V8)), b.bitcast(points, _P(V8))
     zero, one = vb.splat(0.0), vb.splat(1.0)
+    width = 4 if partials else 1  # vectors used per slot (of four: the value, then its partials)
 
-    def load(slot):
+    def load(slot):  # the slots as tape_prefill lays them out: four vectors each, the constants' value first
         base = b.mul(slot, ir.Constant(I64, 4))
-        return [b.load(b.gep(vslots, [b.add(base, ir.Constant(I64, k))], inbounds=True), align=8) for k in range(4)]
+        return [b.load(b.gep(vslots, [b.add(base, ir.Constant(I64, k))], inbounds=True), align=8)
+                for k in range(width)]
 
     def store(slot, dual):
         base = b.mul(slot, ir.Constant(I64, 4))
@@ -215,7 +221,7 @@ def emit_tape_dual(module: ir.Module) -> ir.Function:
         return [value] + [vb.mul(scale, d) for d in x[1:]]
 
     _variables(b, header, lambda a, slot: store(slot, [b.load(b.gep(vpoints, [ir.Constant(I64, a)]), align=8)]
-                                                 + [one if k == a else zero for k in range(3)]))
+                                                 + [one if k == a else zero for k in range(width - 1)]))
 
     def unary(rule):
         def emit(i, out, a, c, d):

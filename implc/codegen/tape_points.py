@@ -7,8 +7,8 @@ time, ``tape_interval`` encloses F over their boxes recording the Min/Max choice
 group's program is then ``tape_simplify``'d by those choices (the full program where none was decided), and
 runs at the group's rows, by ``mode``:
 
-- 0: F at the points, the middle of ``tape_interval``'s enclosure over the point itself (1.7× cheaper than
-  the dual numbers; an undefined F comes out NaN) into ``out_value``;
+- 0: F at the points by ``tape_point`` (the dual numbers' value rules without the partials; NaN where F is
+  not finite) into ``out_value``;
 - 1: F and its gradient by ``tape_dual`` into ``out_value`` and ``out_grad`` (three per row);
 - 2: the rows are boxes (``pts`` their lo corners, ``pts_hi`` their hi), and ``tape_box_gradient`` encloses
   F and its partials over each into ``out_grad`` (eight per row: F's lo, hi, then each partial's).
@@ -23,7 +23,6 @@ from llvmlite import ir
 
 from .. import abi
 from .control import I32, I64, Local, const, define, for_range, if_, load_at, local_array, store_at
-from .interval_rules import whole_line_if_undefined
 from .kernels import load_xyz, store_lanes, store_xyz
 from .tape_eval import LANES, V8
 from .vector import DOUBLE, VectorBuilder
@@ -32,7 +31,7 @@ _P = ir.PointerType
 
 
 def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Function, simplify: ir.Function,
-                      dual: ir.Function, box_gradient: ir.Function):
+                      point: ir.Function, dual: ir.Function, box_gradient: ir.Function):
     """Define ``implc_tape_grouped`` (see the module docstring) in ``module``."""
     fn, b = define(module, abi.TAPE_GROUPED)
     (header, slots, choices, need, marks, remap, work, lo, hi, starts, groups, pts, pts_hi, out_value, out_grad,
@@ -40,7 +39,6 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
     program = b.inttoptr(load_at(b, header, abi.PROGRAM_INSTRUCTIONS), _P(I32))
     length = load_at(b, header, abi.PROGRAM_LENGTH)
     output = load_at(b, header, abi.PROGRAM_OUTPUT)
-    point_choices = b.gep(choices, [b.mul(length, const(I64, LANES))])  # the points' own, not the groups'
     box = local_array(b, DOUBLE, 6 * LANES, "box")
     result = local_array(b, DOUBLE, 8 * LANES, "result")
     simplified_output = local_array(b, I64, 1, "simplified_output")
@@ -86,12 +84,11 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                         b.store(axis, b.gep(vbox, [const(I64, 3 + a)]), align=8)
                     switch = b.switch(b.trunc(mode, I32), b.append_basic_block("mode.value"))
                     done = b.append_basic_block("mode.done")
-                    b.position_at_end(switch.default)  # 0: F, the middle of its enclosure at the point
-                    b.call(interval, [header, *program_now, point_choices, box, result])
-                    f_lo, f_hi = whole_line_if_undefined(vb, b.load(vresult, align=8),
-                                                         b.load(b.gep(vresult, [const(I64, 1)]), align=8))
-                    half = vb.splat(0.5)
-                    store_lanes(b, out_value, block, b.fadd(b.fmul(f_lo, half), b.fmul(f_hi, half)), LANES)
+                    b.position_at_end(switch.default)  # 0: F (NaN where it is not finite)
+                    b.call(point, [header, *program_now, box, result])
+                    f = b.load(vresult, align=8)
+                    finite = vb.cmp("<", vb.fabs(f), vb.splat(float("inf")))
+                    store_lanes(b, out_value, block, vb.select(finite, f, vb.splat(float("nan"))), LANES)
                     b.branch(done)
                     gradient = b.append_basic_block("mode.gradient")  # 1: F and its gradient
                     switch.add_case(const(I32, 1), gradient)
