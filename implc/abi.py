@@ -122,6 +122,8 @@ kernels: a process that only runs the tape engine never compiles it."""
 TAPE_INTERVAL = _entry("implc_tape_interval", "program:i64* slots:f64* choices:i8* "
                                               "lo:f64* hi:f64* out_lo:f64* out_hi:f64* n:i64")
 TAPE_GRADIENT = _entry("implc_tape_gradient", "program:i64* slots:f64* pts:f64* out_value:f64* out_grad:f64* n:i64")
+TAPE_POINT = _entry("implc_tape_point", "program:i64* slots:f64* pts:f64* out_value:f64* n:i64")
+"""F at points: the dual numbers' value rules without the partials (``implc_tape_gradient``'s values)."""
 TAPE_SUBDIVIDE = _entry("implc_tape_subdivide",
                         "program:i64* prune:i64 refine:i64 geom:f64* state:i64* frames:i32* tapes:i32* choices:i8* "
                         "slots:f64* need:i32* marks:i8* remap:i32* out:i32* out_normals:f32* out_flags:i8* "
@@ -134,8 +136,8 @@ TAPE_GROUPED = _entry("implc_tape_grouped",
                       "starts:i64* groups:i64 pts:f64* pts_hi:f64* out_value:f64* out_grad:f64* mode:i64")
 """F (mode 0), F and its gradient (1) at points, or enclosures of F and its partials over boxes (2), the
 rows grouped by box, each group's program simplified over its box (:mod:`implc.codegen.tape_points`);
-``choices``: 16 bytes per instruction, ``need`` zeros, ``work`` room for one program."""
-TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_SUBDIVIDE, TAPE_BOX_GRADIENT, TAPE_GROUPED)
+``choices``: 8 bytes per instruction, ``need`` zeros, ``work`` room for one program."""
+TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_POINT, TAPE_SUBDIVIDE, TAPE_BOX_GRADIENT, TAPE_GROUPED)
 
 # -- layouts shared by native code and Python ------------------------------------------------------
 MAX_DEPTH = 21

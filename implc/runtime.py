@@ -25,7 +25,7 @@ bear voxelized at 512³ and 256³, colonnade meshed, within the noise)."""
 
 
 class TapeEngine:
-    """The tape-engine module's entry points for one rounding mode: ``interval``, ``gradient``,
+    """The tape-engine module's entry points for one rounding mode: ``interval``, ``gradient``, ``point``,
     ``subdivide``, ``box_gradient`` and ``grouped`` (signatures in :mod:`implc.abi`; programs from
     :mod:`implc.tape_program`)."""
 
@@ -36,6 +36,7 @@ class TapeEngine:
                                    opt_level=TAPE_ENGINE_OPT)
         self.interval = self.native.bind(abi.TAPE_INTERVAL)
         self.gradient = self.native.bind(abi.TAPE_GRADIENT)
+        self.point = self.native.bind(abi.TAPE_POINT)
         self.subdivide = self.native.bind(abi.TAPE_SUBDIVIDE)
         self.box_gradient = self.native.bind(abi.TAPE_BOX_GRADIENT)
         self.grouped = self.native.bind(abi.TAPE_GROUPED)

@@ -332,9 +332,8 @@ class Surface:
         >>> ball.eval([[0, 0, 0], [1, 1, 1]])
         array([-1.,  2.])
         """
-        if self.engine == "tape":
-            return self._value_and_gradient(points)[0]
-        (values,) = self._run(self.kernel(abi.POINT), [_rows("points", points)], [()])
+        kernel = self._tape_kernel(self.tape_engine.point) if self.engine == "tape" else self.kernel(abi.POINT)
+        (values,) = self._run(kernel, [_rows("points", points)], [()])
         return values
 
     def gradient(self, points: ArrayLike) -> np.ndarray:
@@ -418,7 +417,7 @@ class Surface:
 
         def batch(at, count):  # its own scratch: batches run at once on several cores
             slots = slot_scratch(program.slot_count)
-            choices = np.empty(2 * length * 8, dtype=np.uint8)  # the groups' choices, then the points'
+            choices = np.empty(length * 8, dtype=np.uint8)  # the groups' choices
             need = np.zeros(program.slot_count, dtype=np.int32)  # each call's stamps start from one
             marks = np.empty(length, dtype=np.uint8)
             remap = np.empty(program.slot_count, dtype=np.int32)

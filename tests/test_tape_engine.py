@@ -407,6 +407,7 @@ def test_points_grouped_by_box_give_f_and_its_gradient(expr, seed):
     # (there, where Min/Max operands tie, each program's choice of one side is a valid generalized gradient)
     whole_values, whole_gradients = surface.value_and_gradient(points)
     np.testing.assert_array_equal(f_values, whole_values)
+    np.testing.assert_array_equal(whole, whole_values)  # eval's point rules: the dual numbers' values
     np.testing.assert_array_equal(gradients[50:], whole_gradients[50:])
     defined = np.isfinite(truth)
     defined[:50] = False  # the points rounded onto the groups' faces tie operands and touch selects' jumps

@@ -48,7 +48,8 @@ def build_tape_engine(directed: bool) -> str:
     box_gradient = emit_tape_box_gradient(module, directed)
     tighten = emit_tape_tighten(module, interval, box_gradient, directed)
     emit_tape_subdivide(module, prefill, interval, simplify, normals, tighten)
-    emit_tape_grouped(module, prefill, interval, simplify, emit_tape_dual(module, partials=False), dual, box_gradient)
+    point = emit_tape_dual(module, partials=False)
+    emit_tape_grouped(module, prefill, interval, simplify, point, dual, box_gradient)
     null_remap = ir.Constant(_P(ir.IntType(32)), None)
 
     @contextmanager
@@ -85,6 +86,12 @@ def build_tape_engine(directed: bool) -> str:
         store_lanes(b, out_value, block, b.load(vresult, align=8), LANES)
         store_xyz(b, out_grad, block, [b.load(b.gep(vresult, [ir.Constant(I64, 1 + a)]), align=8) for a in range(3)],
                   LANES)
+
+    with over_blocks(abi.TAPE_POINT, 3 * LANES, LANES) as (b, args, block, (points, result), program):
+        header, slots, pts, out_value, n = args
+        _soa(b, pts, block, points)
+        b.call(point, [header, *program, slots, points, result])
+        store_lanes(b, out_value, block, b.load(b.bitcast(result, _P(V8)), align=8), LANES)
 
     with over_blocks(abi.TAPE_BOX_GRADIENT, 6 * LANES, 8 * LANES) as (b, args, block, (box, result), program):
         header, slots, lo, hi, out, n = args
