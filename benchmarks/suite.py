@@ -23,7 +23,7 @@ import numpy as np
 
 import implc
 from implc import scene
-from implc.subdivide import default_workers
+from implc.surface import default_workers
 
 PAPER_SCENES = ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4")
 PAPER_TABLE1 = {  # seconds on the SGI Challenge, 1..7 slaves (Stolte & Kaufman, Table 1)

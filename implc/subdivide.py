@@ -16,7 +16,6 @@ joined before the exception reaches the caller.
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -89,13 +88,6 @@ class SubdivisionStats:
         second = f", {dropped} of {tested} leaves dropped at a second look" if tested else ""
         return (f"{self.interval_evaluations} interval evaluations{second}, {self.tasks} tasks at level "
                 f"{self.task_level}, {self.workers} workers, yield {self.parallel_yield:.0%}")
-
-
-def default_workers() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - non-Linux
-        return os.cpu_count() or 1
 
 
 def geometry(bounds, depth: int) -> np.ndarray:

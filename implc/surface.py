@@ -49,7 +49,7 @@ def in_parallel(jobs: list[Callable[[], None]]) -> None:
     """Run independent native calls (each releases the GIL) on the process's cores, at most one thread
     per core; the first error (or Ctrl-C) cancels the jobs not started and is raised once those running
     finish."""
-    workers = min(len(jobs), _cores())
+    workers = min(len(jobs), default_workers())
     if workers <= 1:
         for job in jobs:
             job()
@@ -66,7 +66,8 @@ def in_parallel(jobs: list[Callable[[], None]]) -> None:
             raise
 
 
-def _cores() -> int:
+def default_workers() -> int:
+    """The cores this process may run on (its CPU affinity): the default count of worker threads."""
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # pragma: no cover - non-Linux

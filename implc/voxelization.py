@@ -21,8 +21,8 @@ from .contour import contour
 from .storage import bytes_per_voxel, make_backend
 from .storage.grid import dense_bytes
 from .storage.octree import Octree, OctreeAssembly, OctreeBuilder
-from .subdivide import Subdivider, SubdivisionStats, default_workers
-from .surface import Surface
+from .subdivide import Subdivider, SubdivisionStats
+from .surface import Surface, default_workers
 from .triangle_mesh import Mesh
 
 MIN_DEPTH, MAX_DEPTH = 1, 21

@@ -60,8 +60,8 @@ from .cluster import (
 )
 from .morton import morton_codes
 from .recipe import SurfaceRecipe, build, recipe_of, software
-from .subdivide import SubdivisionStats, default_workers
-from .surface import usable_bounds
+from .subdivide import SubdivisionStats
+from .surface import default_workers, usable_bounds
 from .untrusted import printable
 from .voxelization import (
     Voxels,
