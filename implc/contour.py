@@ -268,11 +268,16 @@ class _Grid:
 
     def values(self, points: np.ndarray) -> np.ndarray:
         """F at points (:meth:`implc.Surface.eval`); on the tape engine, for a long program, each point's
-        program simplified over its group of cells (:meth:`implc.Surface.eval_grouped`)."""
+        program simplified over its group of cells (:meth:`implc.Surface.eval_grouped`), and NaN where F is
+        not finite (outside, as where its interval engine finds F may be undefined)."""
         points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
         if self.grouped:
-            return self.surface.eval_grouped(points, self.groups(points), self.group_boxes)[0]
-        return self.surface.eval(points)
+            values = self.surface.eval_grouped(points, self.groups(points), self.group_boxes)[0]
+        else:
+            values = self.surface.eval(points)
+        if self.surface.engine == "tape":
+            values[~np.isfinite(values)] = np.nan
+        return values
 
     def gradients(self, points: np.ndarray) -> np.ndarray:
         """F's analytic gradient at points, as :meth:`values` groups them."""

@@ -357,9 +357,8 @@ class Surface:
         ``groups[i]`` (int64 labels; ``boxes(labels)`` gives the (lo, hi) corners, (M, 3) each, of the
         sorted distinct labels asked for): on the tape engine each group's points run the program
         simplified over its box (``implc_tape_grouped``), far shorter than the whole on Min/Max models; the
-        compiled kernels ignore the groups. F is the point kernel's value, or on the tape engine the value
-        rules of its dual numbers without the partials (NaN where F is not finite) unless the gradient is
-        asked for too."""
+        compiled kernels ignore the groups. F is :meth:`eval`'s value (on the tape engine, over the simplified
+        program: the same value)."""
         points = _rows("points", points)
         if self.engine != "tape":
             if gradient:

@@ -7,8 +7,8 @@ time, ``tape_interval`` encloses F over their boxes recording the Min/Max choice
 group's program is then ``tape_simplify``'d by those choices (the full program where none was decided), and
 runs at the group's rows, by ``mode``:
 
-- 0: F at the points by ``tape_point`` (the dual numbers' value rules without the partials; NaN where F is
-  not finite) into ``out_value``;
+- 0: F at the points by ``tape_point`` (the dual numbers' value rules without the partials) into
+  ``out_value``;
 - 1: F and its gradient by ``tape_dual`` into ``out_value`` and ``out_grad`` (three per row);
 - 2: the rows are boxes (``pts`` their lo corners, ``pts_hi`` their hi), and ``tape_box_gradient`` encloses
   F and its partials over each into ``out_grad`` (eight per row: F's lo, hi, then each partial's).
@@ -25,7 +25,7 @@ from .. import abi
 from .control import I32, I64, Local, const, define, for_range, if_, load_at, local_array, store_at
 from .kernels import load_xyz, store_lanes, store_xyz
 from .tape_eval import LANES, V8
-from .vector import DOUBLE, VectorBuilder
+from .vector import DOUBLE
 
 _P = ir.PointerType
 
@@ -47,7 +47,6 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
     run_output = Local(b, I64, None, "run_output")
     stamp = Local(b, I32, 0, "stamp")
     vbox, vresult = b.bitcast(box, _P(V8)), b.bitcast(result, _P(V8))
-    vb = VectorBuilder(b, LANES)
     last = b.sub(groups, const(I64, 1))
     b.call(prefill, [header, slots, remap])
 
@@ -84,11 +83,9 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                         b.store(axis, b.gep(vbox, [const(I64, 3 + a)]), align=8)
                     switch = b.switch(b.trunc(mode, I32), b.append_basic_block("mode.value"))
                     done = b.append_basic_block("mode.done")
-                    b.position_at_end(switch.default)  # 0: F (NaN where it is not finite)
+                    b.position_at_end(switch.default)  # 0: F
                     b.call(point, [header, *program_now, box, result])
-                    f = b.load(vresult, align=8)
-                    finite = vb.cmp("<", vb.fabs(f), vb.splat(float("inf")))
-                    store_lanes(b, out_value, block, vb.select(finite, f, vb.splat(float("nan"))), LANES)
+                    store_lanes(b, out_value, block, b.load(vresult, align=8), LANES)
                     b.branch(done)
                     gradient = b.append_basic_block("mode.gradient")  # 1: F and its gradient
                     switch.add_case(const(I32, 1), gradient)
