@@ -87,12 +87,12 @@ class Runtime:
     def tighten(self):
         return self._walk_entry(abi.TIGHTEN)
 
-    def tape_engine(self, directed: bool) -> TapeEngine:
+    def tape_engine(self, directed: bool, built: TapeEngine | None = None) -> TapeEngine:
         """The tape engine for one rounding mode, compiled on first use (from the disk cache after the
-        first time)."""
+        first time); ``built``: one already compiled, kept unless the runtime has its own."""
         with self._lock:
             if directed not in self._tape_engines:
-                self._tape_engines[directed] = TapeEngine(directed)
+                self._tape_engines[directed] = built or TapeEngine(directed)
             return self._tape_engines[directed]
 
     @classmethod
@@ -108,9 +108,7 @@ class Runtime:
         with ThreadPoolExecutor(1) as pool:
             pending = pool.submit(cls.shared)
             engine = TapeEngine(directed)
-            runtime = pending.result()
-        with cls._lock:
-            return runtime._tape_engines.setdefault(directed, engine)
+            return pending.result().tape_engine(directed, engine)
 
     @classmethod
     def shared(cls) -> Runtime:
