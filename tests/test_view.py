@@ -312,9 +312,20 @@ def _pixels(page):
     return image
 
 
+def _drawn(image):
+    """The pixels of an (H, W, 3) image that are not background."""
+    return np.abs(np.asarray(image, dtype=int) - BACKGROUND).sum(axis=2) > 12
+
+
 def _mask(page):
-    """The pixels that are not background."""
-    return np.abs(_pixels(page) - BACKGROUND).sum(axis=2) > 12
+    """The pixels of the page's canvas that are not background."""
+    return _drawn(_pixels(page))
+
+
+def _iou(shown, png):
+    """Intersection over union of the ``shown`` pixels and those the PNG renderer drew in ``png``."""
+    expected = _drawn(png)
+    return (shown & expected).sum() / (shown | expected).sum()
 
 
 def test_the_page_shows_the_surface_where_the_png_renderer_does(browser, server, flower):
@@ -327,9 +338,7 @@ def test_the_page_shows_the_surface_where_the_png_renderer_does(browser, server,
     assert "depth 8" in overlay and f"{len(voxels):,}" in overlay and "points drawn" in overlay and "frame" in overlay
     shown = _mask(page)
     az, el = load_scene("paper_sin4_sin8").view or (35.0, 25.0)
-    png = render_voxels(voxels, size=512, view=View(az, el, perspective=True))
-    expected = np.abs(png.astype(int) - BACKGROUND).sum(axis=2) > 12
-    iou = (shown & expected).sum() / (shown | expected).sum()
+    iou = _iou(shown, render_voxels(voxels, size=512, view=View(az, el, perspective=True)))
     assert iou >= 0.9, iou
     assert errors == []
     page.close()
@@ -390,10 +399,8 @@ def test_a_cut_away_of_a_solid_matches_the_png_renderers(browser):
         cut = _pixels(page)
         assert errors == []
         page.close()
-    shown = np.abs(cut - BACKGROUND).sum(axis=2) > 12
-    png = render_voxels(voxels, size=512, view=View(*sc.view, perspective=True), cut=(2, 0.1))
-    expected = np.abs(png.astype(int) - BACKGROUND).sum(axis=2) > 12
-    assert (shown & expected).sum() / (shown | expected).sum() >= 0.9
+    shown = _drawn(cut)
+    assert _iou(shown, render_voxels(voxels, size=512, view=View(*sc.view, perspective=True), cut=(2, 0.1))) >= 0.9
     changed = np.abs(cut - whole).sum(axis=2) > 24  # the top removed, the flat section in its place
     assert changed.sum() > 0.3 * shown.sum()
 
@@ -494,10 +501,8 @@ def test_a_mesh_shows_where_the_png_renderer_shows_its_voxels_and_is_cut_away(br
         cut = _pixels(page)
         assert errors == []
         page.close()
-    shown = np.abs(whole - BACKGROUND).sum(axis=2) > 12
-    png = render_voxels(voxels, size=512, view=View(*sc.view, perspective=True))
-    expected = np.abs(png.astype(int) - BACKGROUND).sum(axis=2) > 12
-    assert (shown & expected).sum() / (shown | expected).sum() >= 0.9
+    shown = _drawn(whole)
+    assert _iou(shown, render_voxels(voxels, size=512, view=View(*sc.view, perspective=True))) >= 0.9
     assert np.unique(whole[shown].sum(axis=1)).size > 50  # shaded by its normals, not one flat colour
     changed = np.abs(cut - whole).sum(axis=2) > 24  # the upper half gone
     assert changed.sum() > 0.2 * shown.sum()
