@@ -144,6 +144,15 @@ def _tightness(args) -> str:
     return "natural" if args.command == "mesh" or getattr(args, "mesh", False) else "default"
 
 
+def _refuse_surface_options(args, kind: str, shown: str, *more):
+    """One line naming the options given that only a surface takes, where ``args.scene`` is a ``kind`` file
+    (``more``: further (flag, value) pairs that do not apply to it)."""
+    given = [flag for flag, value in (("--expr", args.expr), ("--depth", args.depth), ("--bounds", args.bounds),
+                                      ("--workers", args.workers), *more) if value is not None]
+    if given:
+        raise UsageError(f"{', '.join(given)} cannot apply to a {kind} file ({args.scene}): it is {shown} as saved")
+
+
 def _check_surface_options(args):
     _check_range(args.depth, "--depth", 1, 21)
     if args.workers is not None and args.workers < 1:
@@ -238,10 +247,7 @@ def cmd_render(args) -> int:
     view_angles = _numbers(args.view, 2, "--view", "azimuth,elevation") if args.view else None
     style = Style(color=_color(args.color)) if args.color else Style()
     if args.scene and Path(args.scene).suffix.lower() in (".npz", ".ply", ".npy", ".zarr"):
-        given = [flag for flag, value in (("--expr", args.expr), ("--depth", args.depth), ("--bounds", args.bounds),
-                                          ("--workers", args.workers)) if value is not None]
-        if given:
-            raise UsageError(f"{', '.join(given)} cannot apply to a voxel file ({args.scene}): it is rendered as saved")
+        _refuse_surface_options(args, "voxel", "rendered")
         voxels = voxel_files.load(args.scene)
         default_view = None
     else:
@@ -279,16 +285,10 @@ def cmd_view(args) -> int:
         _check_folder_writable(Path(args.export), "a static viewer")
     suffix = Path(args.scene).suffix.lower() if args.scene else ""
     if suffix in (".npz", ".zarr"):
-        given = [flag for flag, value in (("--expr", args.expr), ("--depth", args.depth), ("--bounds", args.bounds),
-                                          ("--workers", args.workers)) if value is not None]
-        if given:
-            raise UsageError(f"{', '.join(given)} cannot apply to a voxel file ({args.scene}): it is shown as saved")
+        _refuse_surface_options(args, "voxel", "shown")
         voxels, name, view = voxel_files.load(args.scene), Path(args.scene).stem, None
     elif suffix in (".ply", ".stl", ".obj", ".glb", ".3mf") and is_mesh_file(args.scene):
-        given = [flag for flag, value in (("--expr", args.expr), ("--depth", args.depth), ("--bounds", args.bounds),
-                                          ("--workers", args.workers), ("--budget", args.budget)) if value is not None]
-        if given:
-            raise UsageError(f"{', '.join(given)} cannot apply to a mesh file ({args.scene}): it is shown as saved")
+        _refuse_surface_options(args, "mesh", "shown", ("--budget", args.budget))
         try:
             mesh = load_mesh(args.scene)
         except MeshFileError as error:

@@ -144,3 +144,21 @@ def test_tightness_option_spells_the_presets_and_changes_the_leaves(tmp_path):
     assert counts["natural"] == len(implc.voxelize(s, 6, **implc.NATURAL))
     assert counts["default"] == len(implc.voxelize(s, 6))
     assert counts["natural"] > counts["default"] >= counts["tightest"]
+
+
+def test_surface_options_given_with_a_file_are_refused_in_one_line(tmp_path, capsys):
+    """--expr, --depth, --bounds, --workers (and for a mesh --budget) make no sense for a file shown or
+    rendered as saved: one line naming them, exit status 2, for voxel and mesh files alike."""
+    ball = implc.compile(implc.x**2 + implc.y**2 + implc.z**2 - 0.5)
+    voxel_files.save(implc.voxelize(ball, 4), tmp_path / "b.npz")
+    implc.mesh(ball, 4).save(tmp_path / "b.stl")
+    cases = [(["render", str(tmp_path / "b.npz"), "--depth", "5", "-o", str(tmp_path / "x.png")],
+              f"--depth cannot apply to a voxel file ({tmp_path / 'b.npz'}): it is rendered as saved"),
+             (["view", str(tmp_path / "b.npz"), "--workers", "2", "--no-browser"],
+              f"--workers cannot apply to a voxel file ({tmp_path / 'b.npz'}): it is shown as saved"),
+             (["view", str(tmp_path / "b.stl"), "--depth", "3", "--budget", "5000", "--no-browser"],
+              f"--depth, --budget cannot apply to a mesh file ({tmp_path / 'b.stl'}): it is shown as saved")]
+    for argv, line in cases:
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"implc: error: {line}"], err
