@@ -26,12 +26,14 @@ V8 = ir.VectorType(DOUBLE, LANES)
 I8 = ir.IntType(8)
 
 
-def emit_split(b: ir.IRBuilder, leaf, cells, prove):
+def emit_split(b: ir.IRBuilder, leaf, cells, prove, descend=None):
     """Emit the split of one leaf; returns an i1: every box at the last level proven (so the whole leaf).
 
     ``leaf``: its cell, three double values; ``cells``: a (3, 8) array of doubles the eight boxes' cells
-    are written to, axis by axis, before each ``prove(factor)``, which returns the boxes proven (i8 mask,
-    bit c: box c), ``factor`` (a double value) being their size over the leaves'."""
+    are written to, axis by axis, before each ``prove(factor, level)``, which returns the boxes proven (i8
+    mask, bit c: box c), ``factor`` (a double value) being their size over the leaves' and ``level`` (an
+    i64, 1 to :data:`LEVELS_BELOW`) how far below the leaf they lie. ``descend(level, c)``, where given,
+    runs before the boxes below box ``c`` (an i32) of ``level`` are proven."""
     assert LEVELS_BELOW >= 1
     module = b.module
     cttz = bit_intrinsic(module, "cttz")
@@ -47,7 +49,7 @@ def emit_split(b: ir.IRBuilder, leaf, cells, prove):
             b.store(b.fadd(b.fmul(parent, broadcast(b, const(DOUBLE, 2.0), LANES)), bits),
                     b.gep(vcells, [const(I64, a)]), align=8)
         factor = b.fdiv(const(DOUBLE, 1.0), b.uitofp(b.shl(const(I64, 1), level), DOUBLE))  # exact: 2^-level
-        return b.zext(b.xor(prove(factor), const(I8, 0xFF)), I32)
+        return b.zext(b.xor(prove(factor, level), const(I8, 0xFF)), I32)
 
     for a in range(3):
         store_at(b, leaf[a], base, 3 + a)
@@ -67,6 +69,8 @@ def emit_split(b: ir.IRBuilder, leaf, cells, prove):
                 c = b.call(cttz, [remaining, ir.Constant(ir.IntType(1), 1)])
                 store_at(b, b.and_(remaining, b.sub(remaining, const(I32, 1))), open_, k)
                 child = b.add(k, const(I64, 1))
+                if descend is not None:
+                    descend(k, c)
                 for a in range(3):
                     bit = b.uitofp(b.and_(b.lshr(c, const(I32, a)), const(I32, 1)), DOUBLE)
                     parent = load_at(b, base, b.add(b.mul(k, const(I64, 3)), const(I64, a)))

@@ -12,16 +12,18 @@ at a time (:func:`emit_tape_tighten`'s ``prove``):
   sign) and ``tape_interval`` encloses F there. Sound where F is continuous on the box: never used where
   F's enclosure is undefined (NaN) or a partial's is NaN or infinite (a pole, a possible jump).
 
-A leaf the test leaves open is split (:mod:`implc.codegen.leaf_split`), each box below it tested by its
-plain enclosure first. Boxes are the subdivider's at the finer levels (origin + i·h, padded outward).
-"""
+A leaf the test leaves open with one or two axes free is proven over the face (edge) its partials give in
+pieces (:func:`emit_tape_tighten`'s ``prove_face``); one still open is split
+(:mod:`implc.codegen.leaf_split`), each box below it tested first over the face its parent's partials'
+signs give (they hold over the box, which lies in the parent's), with its own partials only where that
+fails. Boxes are the subdivider's at the finer levels (origin + i·h, padded outward)."""
 
 from __future__ import annotations
 
 from llvmlite import ir
 
 from .control import I32, I64, Local, const, for_range, if_, load_at, local_array, store_at
-from .leaf_split import emit_split, for_flagged_batches, load_batch
+from .leaf_split import LEVELS_BELOW, emit_split, for_flagged_batches, load_batch
 from .tape_eval import LANES, V8
 from .tighten import INSIDE, OUTSIDE
 from .vector import DOUBLE, VectorBuilder, broadcast
@@ -58,10 +60,44 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
     leaf_h = [load_at(b, geom, b.add(b.mul(depth, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
     zero, one, inf = vb.splat(0.0), vb.splat(1.0), vb.splat(float("inf"))
 
-    def prove(factor, natural_first=False):
+    held = local_array(b, DOUBLE, 6 * LANES, "held")  # the partials' signs the boxes inherit (1.0 or 0.0)
+    # the signs each level's boxes showed, per lane: the first test's (the leaves') at 0, then the split's
+    signs = local_array(b, DOUBLE, (LEVELS_BELOW + 1) * 6 * LANES, "signs")
+    vheld, vsigns = b.bitcast(held, _P(V8)), b.bitcast(signs, _P(V8))
+
+    def hold(level, lane):
+        """``held`` from the signs box ``lane`` (an i64) of ``level`` (an i64) showed, for the boxes below it."""
+        for k in range(6):
+            index = b.add(b.mul(b.add(b.mul(level, const(I64, 6)), const(I64, k)), const(I64, LANES)), lane)
+            b.store(broadcast(b, load_at(b, signs, index), LANES), b.gep(vheld, [const(I64, k)]), align=8)
+
+    def held_signs():
+        """The partials' signs in ``held``: (rising, falling), three i1 vectors each."""
+        return ([vb.cmp(">", b.load(b.gep(vheld, [const(I64, a)]), align=8), zero) for a in range(3)],
+                [vb.cmp(">", b.load(b.gep(vheld, [const(I64, 3 + a)]), align=8), zero) for a in range(3)])
+
+    def enclose_reduced(side_above, rising, falling):
+        """``tape_interval`` over the face (edge, corner) of each lane's box where F is least (above) or
+        greatest (below) along the axes where it rises or falls (three i1 vectors each); returns (lo, hi)."""
+        for a in range(3):
+            to_lo = b.select(side_above, rising[a], falling[a])  # F least on the lo face where it rises
+            to_hi = b.and_(b.not_(to_lo), b.select(side_above, falling[a], rising[a]))
+            lo = b.load(b.gep(vbox, [const(I64, a)]), align=8)
+            hi = b.load(b.gep(vbox, [const(I64, 3 + a)]), align=8)
+            b.store(b.select(to_hi, hi, lo), b.gep(vreduced, [const(I64, a)]), align=8)
+            b.store(b.select(to_lo, lo, hi), b.gep(vreduced, [const(I64, 3 + a)]), align=8)
+        b.call(interval, [header, program, length, output, slots, choices, reduced, result])
+        vresult = b.bitcast(result, _P(V8))
+        return b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
+
+    def prove(factor, level=None):
         """The lanes (i8 mask) whose box (cells at ``cells``, of the leaves' size times ``factor``) is
         proven on its side: by its enclosure, or by the enclosure over the face or corner its monotone axes
-        give (``natural_first``: the plain enclosure first, and the rest only if it leaves a box open)."""
+        give. ``level`` (an i64, 1 or more): how far below one leaf the boxes lie (None: the leaves' own): those
+        are tested first over the face their parent's signs (``held``) give (the box itself where they give
+        none), and only where that leaves a box open with their own partials too. The signs are kept in
+        ``signs`` at ``level`` (0 for the leaves) for the boxes below."""
+        first = level is None
         vcells = b.bitcast(cells, _P(V8))
         for a in range(3):
             h = broadcast(b, b.fmul(leaf_h[a], factor), LANES)
@@ -71,35 +107,32 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
                     align=8)
         side = b.load(b.bitcast(sides, _P(V8)), align=8)
         above = vb.cmp(">", side, zero)
-        vresult = b.bitcast(result, _P(V8))
 
         def on_side(lo, hi):
             return b.select(above, vb.cmp(">", lo, zero), vb.cmp("<", hi, zero))
 
         verdict = Local(b, I8, const(I8, 0), "verdict")
-        if natural_first:
-            b.call(interval, [header, program, length, output, slots, choices, box, result])
-            verdict.set(b.bitcast(on_side(b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)),
-                                  I8))
+        if not first:
+            verdict.set(b.bitcast(on_side(*enclose_reduced(above, *held_signs())), I8))
         with if_(b, b.icmp_unsigned("!=", verdict.get(), const(I8, 0xFF))):
             b.call(box_gradient, [header, program, length, output, slots, box, gradient])
             f_lo, f_hi = (b.load(b.gep(vgradient, [const(I64, k)]), align=8) for k in range(2))
             defined = b.not_(b.or_(vb.isnan(f_lo), vb.isnan(f_hi)))
             proven = on_side(f_lo, f_hi)
+            rising, falling = [], []
             for a in range(3):
                 d_lo, d_hi = (b.load(b.gep(vgradient, [const(I64, 2 + 2 * a + k)]), align=8) for k in range(2))
-                rising = b.and_(vb.cmp(">=", d_lo, zero), vb.cmp("<", d_hi, inf))
-                falling = b.and_(vb.cmp("<=", d_hi, zero), vb.cmp(">", d_lo, vb.neg(inf)))
-                # F is least on the lo face where it rises along a, greatest there where it falls
-                to_lo = b.and_(defined, b.select(above, rising, falling))
-                to_hi = b.and_(defined, b.and_(b.not_(to_lo), b.select(above, falling, rising)))
-                lo = b.load(b.gep(vbox, [const(I64, a)]), align=8)
-                hi = b.load(b.gep(vbox, [const(I64, 3 + a)]), align=8)
-                b.store(b.select(to_hi, hi, lo), b.gep(vreduced, [const(I64, a)]), align=8)
-                b.store(b.select(to_lo, lo, hi), b.gep(vreduced, [const(I64, 3 + a)]), align=8)
-            b.call(interval, [header, program, length, output, slots, choices, reduced, result])
-            r_lo, r_hi = b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
-            proven = b.or_(proven, b.and_(defined, on_side(r_lo, r_hi)))
+                rising.append(b.and_(defined, b.and_(vb.cmp(">=", d_lo, zero), vb.cmp("<", d_hi, inf))))
+                falling.append(b.and_(defined, b.and_(vb.cmp("<=", d_hi, zero), vb.cmp(">", d_lo, vb.neg(inf)))))
+            if not first:  # a sign the parent's partial keeps, the box's keeps too (its box lies in the parent's)
+                inherited_rising, inherited_falling = held_signs()
+                rising = [b.or_(r, i) for r, i in zip(rising, inherited_rising)]
+                falling = [b.or_(f, i) for f, i in zip(falling, inherited_falling)]
+            row = b.mul(const(I64, 0) if first else level, const(I64, 6))
+            for a in range(3):
+                for k, mask in ((a, rising[a]), (3 + a, falling[a])):
+                    b.store(b.select(mask, one, zero), b.gep(vsigns, [b.add(row, const(I64, k))]), align=8)
+            proven = b.or_(proven, b.and_(defined, on_side(*enclose_reduced(above, rising, falling))))
             verdict.set(b.or_(verdict.get(), b.bitcast(proven, I8)))
         return verdict.get()
 
@@ -107,14 +140,75 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
         store_at(b, b.select(b.fcmp_ordered(">", side, const(DOUBLE, 0.0)), const(I8, OUTSIDE), const(I8, INSIDE)),
                  flags, index)
 
-    def split(index, side):
-        """The voxel ``index`` split below (:func:`~implc.codegen.leaf_split.emit_split`): marked if every box
-        is proven."""
+    lane_index = ir.Constant(V8, [float(j) for j in range(LANES)])
+    quarter_low, quarter_high = (ir.Constant(V8, [float(j & 3) for j in range(LANES)]),
+                                 ir.Constant(V8, [float(j >> 2) for j in range(LANES)]))
+
+    def prove_face(leaf):
+        """The face (edge) of the leaf at ``leaf`` (three double cells) where its partials' signs (``held``)
+        put F's least (greatest) value, proven on the side in pieces: an edge in eight, a face in 4 x 4
+        (two enclosures). Where F is monotone along an axis over the leaf, F on the leaf's side of the
+        surface at every point of that face puts the whole leaf there; unlike the leaf's split, no piece is
+        spent inside the leaf. Returns an i1: proven (never where the signs leave one axis or none free)."""
+        side = b.load(b.bitcast(sides, _P(V8)), align=8)
+        above = vb.cmp(">", side, zero)
+        rising, falling = held_signs()
+        to_lo = [b.select(above, rising[a], falling[a]) for a in range(3)]
+        to_hi = [b.and_(b.not_(to_lo[a]), b.select(above, falling[a], rising[a])) for a in range(3)]
+        free = [b.not_(b.or_(lo, hi)) for lo, hi in zip(to_lo, to_hi)]
+        count = b.add(b.add(b.zext(free[0], ir.VectorType(I32, LANES)), b.zext(free[1], ir.VectorType(I32, LANES))),
+                      b.zext(free[2], ir.VectorType(I32, LANES)))
+        edge = b.icmp_unsigned("==", count, ir.Constant(ir.VectorType(I32, LANES), [1] * LANES))
+        face = b.icmp_unsigned("==", count, ir.Constant(ir.VectorType(I32, LANES), [2] * LANES))
+        proven = Local(b, ir.IntType(1), ir.Constant(ir.IntType(1), 0), "face.proven")
+        with if_(b, b.extract_element(b.or_(edge, face), const(I32, 0))):
+            proven.set(ir.Constant(ir.IntType(1), 1))
+            for half in range(2):  # an edge needs the first enclosure only
+                with if_(b, b.and_(proven.get(), b.or_(const(ir.IntType(1), half == 0),
+                                                       b.extract_element(face, const(I32, 0))))):
+                    seen = ir.Constant(ir.VectorType(ir.IntType(1), LANES), [0] * LANES)  # a free axis before
+                    for a in range(3):
+                        # pieces along axis a: 8 on an edge, 4 by 4 on a face, the whole leaf on a bound axis
+                        pieces = b.select(edge, vb.splat(8.0), vb.splat(4.0))
+                        piece = b.select(edge, lane_index,
+                                         b.select(seen, b.fadd(quarter_high, vb.splat(2.0 * half)), quarter_low))
+                        pieces = b.select(free[a], pieces, one)
+                        piece = b.select(free[a], piece, zero)
+                        seen = b.or_(seen, free[a])
+                        h = broadcast(b, leaf_h[a], LANES)
+                        cell = broadcast(b, leaf[a], LANES)
+                        low = b.fsub(b.fadd(origin[a], b.fmul(cell, h)), pad[a])
+                        high = b.fadd(b.fadd(origin[a], b.fmul(b.fadd(cell, one), h)), pad[a])
+                        width = b.fsub(high, low)
+                        # the pieces share their ends (same expression), the first starts at low, the last ends at high
+                        start = b.select(vb.cmp("==", piece, zero), low,
+                                         b.fadd(low, b.fmul(width, b.fdiv(piece, pieces))))
+                        after = b.fadd(piece, one)
+                        end = b.select(vb.cmp("==", after, pieces), high,
+                                       b.fadd(low, b.fmul(width, b.fdiv(after, pieces))))
+                        b.store(b.select(to_hi[a], high, start), b.gep(vreduced, [const(I64, a)]), align=8)
+                        b.store(b.select(to_lo[a], low, end), b.gep(vreduced, [const(I64, 3 + a)]), align=8)
+                    b.call(interval, [header, program, length, output, slots, choices, reduced, result])
+                    vresult = b.bitcast(result, _P(V8))
+                    lo, hi = b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
+                    on = b.select(above, vb.cmp(">", lo, zero), vb.cmp("<", hi, zero))
+                    proven.set(b.and_(proven.get(), b.icmp_unsigned("==", b.bitcast(on, I8), const(I8, 0xFF))))
+        return proven.get()
+
+    def split(index, side, lane):
+        """The voxel ``index`` (in ``lane`` of the first test) proven over the face its partials give
+        (:func:`prove_face`), else split below (:func:`~implc.codegen.leaf_split.emit_split`): marked if
+        every piece or box is proven."""
         b.store(broadcast(b, side, LANES), b.bitcast(sides, _P(V8)), align=8)
+        hold(const(I64, 0), lane)
         leaf = [b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE)
                 for a in range(3)]
-        with if_(b, emit_split(b, leaf, cells, lambda factor: prove(factor, natural_first=True))):
-            mark(index, side)
+        with b.if_else(prove_face(leaf)) as (face, box):
+            with face:
+                mark(index, side)
+            with box:
+                with if_(b, emit_split(b, leaf, cells, prove, lambda level, c: hold(level, b.zext(c, I64)))):
+                    mark(index, side)
 
     def test_pending(count):
         """The first test over ``count`` flagged voxels' own boxes (unused lanes repeat the first); the
@@ -129,7 +223,7 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
                 with yes:
                     mark(index, side)
                 with no:
-                    split(index, side)
+                    split(index, side, j)
 
     for_flagged_batches(b, flags, n, slots_of, test_pending)
     b.ret_void()

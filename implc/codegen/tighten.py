@@ -111,7 +111,7 @@ def emit_tighten(module: ir.Module):
                     leaf = [b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE)
                             for a in range(3)]
                     with if_(b, b.icmp_unsigned("==", across(leaf, sign), const(I8, 0))):
-                        with if_(b, emit_split(b, leaf, cells, lambda factor: prove(factor, sign))):
+                        with if_(b, emit_split(b, leaf, cells, lambda factor, _level: prove(factor, sign))):
                             mark(index, above)
         union.set(const(I64, 0))
 
