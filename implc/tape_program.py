@@ -19,7 +19,10 @@ and MPR do. This module owns the encoding both sides agree on:
   count.
 
 Opcodes are numbered by arity, unary first, so that native code tells from two comparisons how many
-operands an instruction reads.
+operands an instruction reads. ``mul_const`` and ``div_const`` are a product and a quotient whose second
+operand is a constant slot whose certified interval excludes 0 (a scale, a division by a constant): their
+rules skip what that operand's sign and zero partials already decide (one product per bound, none of
+the product rule's partials of the constant), with the same enclosures as ``mul`` and ``div``.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from . import abi
 from .ir import Tape
 
 UNARY = ("neg", "abs", "sqrt", "exp", "log", "sin", "cos", "square", "cube", "fourth")
-BINARY = ("add", "add_nonneg", "sub", "mul", "div", "min", "max")
+BINARY = ("add", "add_nonneg", "sub", "mul", "div", "mul_const", "div_const", "min", "max")
 TERNARY = ("select_lt", "select_le")
 OPCODES = {name: code for code, name in enumerate(UNARY + BINARY + TERNARY)}
 """Opcode of each instruction kind."""
@@ -124,16 +127,24 @@ def encode(tape: Tape) -> TapeProgram:
         return slot
 
     slot_of: list[int] = []
+    signed: set[int] = set()  # the constants' slots whose interval excludes 0
+
     for op, args, attr in sub.nodes:
         s = [slot_of[a] for a in args]
         if op == "var":
             slot = variables[attr] = new_slot()
         elif op == "const":
             slot = constant(*attr)
+            if attr[1] > 0 or attr[2] < 0:
+                signed.add(slot)
         elif op == "add":
             slot = emit("add_nonneg" if attr else "add", *s)
         elif op == "scale":  # c is exact: the product's rounding is the mul rule's
-            slot = emit("mul", constant(attr, attr, attr), s[0])
+            slot = emit("mul_const", s[0], constant(attr, attr, attr)) if attr else emit("mul", constant(0, 0, 0), s[0])
+        elif op == "mul" and (s[0] in signed or s[1] in signed):
+            slot = emit("mul_const", *(s if s[1] in signed else s[::-1]))
+        elif op == "div" and s[1] in signed:
+            slot = emit("div_const", *s)
         elif op == "powi":
             slot = emit(_POWERS[attr], *s)
         else:

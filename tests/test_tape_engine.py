@@ -190,10 +190,12 @@ BOX_GRADIENT_CASES = {  # together every opcode (checked below)
     "smooth": sympy.exp(x * y) / (2 + cos(z)) - sympy.log(3 + sin(x + y)) + (y - x)**3 - (z + x)**4,
     "selects": Piecewise((x**2 - y, z < x), (y - z, True)) + Piecewise((z, x <= y), (-x, True)),
     # a .vm tape keeps its sub instructions; its truth is the same function written in SymPy
+    # (with a division by a negative constant and a product with one that is not a double: div_const, mul_const)
     "vm": parse_vm("_0 var-x\n_1 var-y\n_2 var-z\n_3 const 0.25\n_4 sub _0 _1\n_5 mul _4 _2\n_6 sub _5 _3\n"
-                   "_7 square _0\n_8 sub _7 _2\n_9 min _6 _8\n"),
+                   "_7 square _0\n_8 sub _7 _2\n_9 min _6 _8\n_a const -3\n_b div _9 _a\n_c const -0.7\n"
+                   "_d mul _c _b\n"),
 }
-BOX_GRADIENT_TRUTHS = {"vm": Min((x - y) * z - Rational(1, 4), x**2 - z)}
+BOX_GRADIENT_TRUTHS = {"vm": Min((x - y) * z - Rational(1, 4), x**2 - z) / -3 * Rational(-7, 10)}
 
 
 def box_gradient(surface, lo, hi):

@@ -91,6 +91,32 @@ class IntervalEmitter:
         p = [v.mul(*p) for p in pairs]
         return v.widen_down(self.min4(p), R.ARITH), v.widen_up(self.max4(p), R.ARITH)
 
+    def i_mul_const(self, a, attr):
+        """a * c for c an interval that excludes 0 (``mul_const``): the product rule's extreme corners,
+        chosen by the signs, one product per bound (the same bounds as :meth:`i_mul`)."""
+        v = self.v
+        (alo, ahi), (clo, chi) = a
+        zero = v.splat(0.0)
+        positive = v.cmp(">", clo, zero)
+        x_lo, x_hi = v.select(positive, alo, ahi), v.select(positive, ahi, alo)
+        lo_c = v.select(v.cmp(">=", x_lo, zero), clo, chi)
+        hi_c = v.select(v.cmp(">=", x_hi, zero), chi, clo)
+        if v.directed:
+            return v.mul_down(x_lo, lo_c), v.mul_up(x_hi, hi_c)
+        return v.widen_down(v.mul(x_lo, lo_c), R.ARITH), v.widen_up(v.mul(x_hi, hi_c), R.ARITH)
+
+    def i_div_const(self, a, attr):
+        """a / c for c an interval that excludes 0 (``div_const``): one quotient per bound, chosen by the
+        signs (the same bounds as :meth:`i_div`)."""
+        v = self.v
+        (alo, ahi), (clo, chi) = a
+        zero = v.splat(0.0)
+        positive = v.cmp(">", clo, zero)
+        x_lo, x_hi = v.select(positive, alo, ahi), v.select(positive, ahi, alo)
+        lo = v.div(x_lo, v.select(v.cmp(">=", x_lo, zero), chi, clo))
+        hi = v.div(x_hi, v.select(v.cmp(">=", x_hi, zero), clo, chi))
+        return v.widen_down(lo, R.ARITH), v.widen_up(hi, R.ARITH)
+
     def i_div(self, a, attr):
         v = self.v
         (alo, ahi), (blo, bhi) = a

@@ -180,7 +180,8 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
              "log": unary(em.i_log), "sin": unary(em.i_sin), "cos": unary(em.i_cos),
              "square": unary(em.i_powi, 2), "cube": unary(em.i_powi, 3), "fourth": unary(em.i_powi, 4),
              "add": binary(em.i_add, False), "add_nonneg": binary(em.i_add, True), "sub": binary(em.i_sub),
-             "mul": binary(em.i_mul), "div": binary(em.i_div), "min": choice("min"), "max": choice("max"),
+             "mul": binary(em.i_mul), "div": binary(em.i_div), "mul_const": binary(em.i_mul_const),
+             "div_const": binary(em.i_div_const), "min": choice("min"), "max": choice("max"),
              "select_lt": choice("select_lt"), "select_le": choice("select_le")}
     assert set(cases) == set(OPCODES), "every opcode has an interval case"
     _instruction_loop(b, program, length, cases)
@@ -284,7 +285,10 @@ def emit_tape_dual(module: ir.Module, partials: bool = True) -> ir.Function:
              "add": binary(lambda x, y: [vb.add(p, q) for p, q in zip(x, y)]),
              "add_nonneg": binary(lambda x, y: [vb.add(p, q) for p, q in zip(x, y)]),
              "sub": binary(lambda x, y: [vb.sub(p, q) for p, q in zip(x, y)]),
-             "mul": binary(mul), "div": binary(div), "min": binary(pick("min")), "max": binary(pick("max")),
+             "mul": binary(mul), "div": binary(div),
+             "mul_const": binary(lambda x, c: [vb.mul(p, c[0]) for p in x]),  # c's partials are 0
+             "div_const": binary(lambda x, c: [vb.div(p, c[0]) for p in x]),
+             "min": binary(pick("min")), "max": binary(pick("max")),
              "select_lt": select("select_lt"), "select_le": select("select_le")}
     assert set(cases) == set(OPCODES), "every opcode has a dual-number case"
     _instruction_loop(b, program, length, cases)
@@ -405,7 +409,10 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
              "square": unary(power(2)), "cube": unary(power(3)), "fourth": unary(power(4)),
              "add": binary(add(False)), "add_nonneg": binary(add(True)),
              "sub": binary(lambda x, y: [em.i_sub([p, q], None) for p, q in zip(x, y)]),
-             "mul": binary(mul), "div": binary(div), "min": binary(pick("min")), "max": binary(pick("max")),
+             "mul": binary(mul), "div": binary(div),
+             "mul_const": binary(lambda x, c: [em.i_mul_const([p, c[0]], None) for p in x]),  # c's partials: 0
+             "div_const": binary(lambda x, c: [em.i_div_const([p, c[0]], None) for p in x]),
+             "min": binary(pick("min")), "max": binary(pick("max")),
              "select_lt": select("select_lt"), "select_le": select("select_le")}
     assert set(cases) == set(OPCODES), "every opcode has an interval-gradient case"
     _instruction_loop(b, program, length, cases)
