@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 
+from llvmlite import ir
+
 from .. import rounding as R
 from . import elementary
 from .point import powi
@@ -31,6 +33,22 @@ class IntervalEmitter:
         v = self.v
         lo_arg, hi_arg = (a[0], a[1]) if increasing else (a[1], a[0])
         return v.widen_down(f(lo_arg), c), v.widen_up(f(hi_arg), c)
+
+    def paired(self, function, lo, hi):
+        """``function`` (an elementary function of :mod:`implc.codegen.elementary`) at ``lo`` and at ``hi``:
+        where the elementary functions are outlined, in one call of twice the width (two independent
+        chains that the CPU interleaves; the same operations lane by lane, so the same values)."""
+        v = self.v
+        if not v.outline_elementary:
+            return function(v, lo), function(v, hi)
+        width = v.width
+
+        def lanes(indices):
+            return ir.Constant(ir.VectorType(ir.IntType(32), len(indices)), list(indices))
+        wide = VectorBuilder(v.b, 2 * width, outline_elementary=True)
+        both = function(wide, v.b.shuffle_vector(lo, hi, lanes(range(2 * width))))
+        return (v.b.shuffle_vector(both, both, lanes(range(width))),
+                v.b.shuffle_vector(both, both, lanes(range(width, 2 * width))))
 
     def libm(self, name):
         return lambda arg: self.v.libm(name, arg)
@@ -94,11 +112,20 @@ class IntervalEmitter:
     def i_mul_const(self, a, attr):
         """a * c for c an interval that excludes 0 (``mul_const``): the product rule's extreme corners,
         chosen by the signs, one product per bound (the same bounds as :meth:`i_mul`)."""
+        clo = a[1][0]
+        return self.mul_signed(a[0], a[1], self.v.cmp(">", clo, self.v.splat(0.0)))
+
+    def mul_signed(self, a, c, nonnegative):
+        """a * c where c's interval lies on one side of 0 (``nonnegative``: an i1 vector or True, c >= 0;
+        else c <= 0): one product per bound, the extreme corners chosen by the signs (:meth:`i_mul`'s
+        bounds: NaN where an operand is NaN or a product is 0 · ∞)."""
         v = self.v
-        (alo, ahi), (clo, chi) = a
+        (alo, ahi), (clo, chi) = a, c
         zero = v.splat(0.0)
-        positive = v.cmp(">", clo, zero)
-        x_lo, x_hi = v.select(positive, alo, ahi), v.select(positive, ahi, alo)
+        if nonnegative is True:
+            x_lo, x_hi = alo, ahi
+        else:
+            x_lo, x_hi = v.select(nonnegative, alo, ahi), v.select(nonnegative, ahi, alo)
         lo_c = v.select(v.cmp(">=", x_lo, zero), clo, chi)
         hi_c = v.select(v.cmp(">=", x_hi, zero), chi, clo)
         if v.directed:
@@ -186,11 +213,14 @@ class IntervalEmitter:
         return self.nan_where(self.lt0(a[0][0]), (v.maximum(lo, v.splat(0.0)), hi))
 
     def i_exp(self, a, attr):  # in vector registers (the C library beyond the normal doubles)
-        lo, hi = self.monotone(lambda v: elementary.exp(self.v, v), a[0], R.EXP_ERROR)
-        return self.v.maximum(lo, self.v.splat(0.0)), hi
+        v = self.v
+        lo, hi = self.paired(elementary.exp, *a[0])
+        return v.maximum(v.widen_down(lo, R.EXP_ERROR), v.splat(0.0)), v.widen_up(hi, R.EXP_ERROR)
 
     def i_log(self, a, attr):
-        return self.nan_where(self.lt0(a[0][0]), self.monotone(lambda v: elementary.log(self.v, v), a[0], R.LOG_ERROR))
+        v = self.v
+        lo, hi = self.paired(elementary.log, *a[0])
+        return self.nan_where(self.lt0(a[0][0]), (v.widen_down(lo, R.LOG_ERROR), v.widen_up(hi, R.LOG_ERROR)))
 
     def contains_peak(self, lo, hi, offset, period=2 * math.pi):
         v = self.v

@@ -350,6 +350,10 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
             return chain(em.i_powi([x[0]], n), em.i_scale([below], float(n)), x)
         return rule
 
+    def exp(x):
+        e = em.i_exp([x[0]], None)  # >= 0: one product per bound of each partial
+        return [e] + [em.mul_signed(d, e, True) for d in x[1:]]
+
     def sqrt(x):
         s = em.i_sqrt([x[0]], None)
         return [s] + [em.i_div([d, em.i_scale([s], 2.0)], None) for d in x[1:]]
@@ -402,7 +406,7 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
 
     cases = {"neg": unary(lambda x: [em.i_neg([p], None) for p in x]), "abs": unary(abs_),
              "sqrt": unary(sqrt),
-             "exp": unary(lambda x: (lambda e: chain(e, e, x))(em.i_exp([x[0]], None))),
+             "exp": unary(exp),
              "log": unary(lambda x: [em.i_log([x[0]], None)] + [em.i_div([d, x[0]], None) for d in x[1:]]),
              "sin": unary(lambda x: chain(em.i_sin([x[0]], None), em.i_cos([x[0]], None), x)),
              "cos": unary(lambda x: chain(em.i_cos([x[0]], None), em.i_neg([em.i_sin([x[0]], None)], None), x)),
