@@ -128,7 +128,7 @@ class _TaskResult:
         return self.inside.ctypes.data + 4 * abi.INSIDE_WORDS * self.inside_count, room
 
     def _allocate(self, size):
-        self.flags = big_arrays.empty(size, np.uint8)  # the normals' flags for tightening (written after growth)
+        self.flags = big_arrays.empty(size, np.uint8)  # the normals' flags for tightening, then its marks
         self.coords = big_arrays.empty((size, 3), np.uint32)
         self.masks = big_arrays.empty(size, np.int64)  # each voxel's live-term mask
         self.normals = big_arrays.empty((size, 3), np.float32)
@@ -139,11 +139,10 @@ class _TaskResult:
     def make_room(self, free):
         """At least ``free`` unused rows past ``count`` (doubling, keeping the rows written so far)."""
         if self.count + free > len(self.coords):
-            coords, masks, normals = self.coords[: self.count], self.masks[: self.count], self.normals[: self.count]
+            kept = [(name, getattr(self, name)[: self.count]) for name in ("coords", "masks", "normals", "flags")]
             self._allocate(max(self.count + free, 2 * len(self.coords)))
-            self.coords[: self.count] = coords
-            self.masks[: self.count] = masks
-            self.normals[: self.count] = normals
+            for name, rows in kept:  # flags too: the tape engine writes them, and its marks, during the walk
+                getattr(self, name)[: self.count] = rows
         return len(self.coords) - self.count
 
 

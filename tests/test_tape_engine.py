@@ -16,6 +16,7 @@ from sympy import Abs, Max, Min, Piecewise, Rational, cos, sin, sqrt
 import implc
 from implc import CompileError, x, y, z
 from implc import subdivide as subdivide_module
+from implc.codegen.tighten import OUTSIDE
 from implc.lower import lower
 from implc.surface import choose_engine
 from implc.tape_program import OPCODES, encode, slot_scratch
@@ -121,6 +122,25 @@ def test_a_task_resumes_when_its_output_is_full(monkeypatch):
     np.testing.assert_array_equal(chunked.coords, expected.coords)
     np.testing.assert_array_equal(chunked.normals, expected.normals)
     assert chunked.stats.kept_per_level == expected.stats.kept_per_level
+
+
+def test_a_task_whose_buffers_grow_keeps_its_second_look(monkeypatch):
+    """The engine writes each voxel's flag, and its second look's mark, during the walk: a task whose
+    buffers grow in the middle of it keeps them (fresh buffers hold the drop mark here, as recycled memory
+    may), so its voxels are those of a task that never grew, none of them dropped unproven."""
+    s = implc.compile(smooth_blend(), engine="tape")
+    expected = implc.voxelize(s, 7, storage="coords", workers=1)
+    monkeypatch.setattr(subdivide_module, "OUTPUT_CHUNK", 16)
+    monkeypatch.setattr(subdivide_module, "TASK_RESERVE", 0)  # every task starts with 16 rows and grows
+
+    def stale(shape, dtype):
+        array = np.empty(shape, dtype)
+        array.view(np.uint8)[...] = OUTSIDE
+        return array
+    monkeypatch.setattr(subdivide_module.big_arrays, "empty", stale)
+    grown = implc.voxelize(s, 7, storage="coords", workers=1)
+    np.testing.assert_array_equal(grown.coords, expected.coords)
+    assert grown.stats.tightened == expected.stats.tightened
 
 
 def test_worker_counts_agree():
