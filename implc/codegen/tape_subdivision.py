@@ -12,7 +12,8 @@ two levels above the leaves (valid for every voxel below that octant, and barely
 parents'), through the normals block of :mod:`implc.codegen.normals`, before the voxels leave the call.
 Where ``out_flags`` is not NULL each voxel gets its flag for tightening, and the flagged ones their second
 look (:mod:`implc.codegen.tape_tighten`, with the program three levels above the leaves, so that its batches
-of eight fill), which marks those it proves empty for :mod:`implc.codegen.tighten` to drop.
+of eight fill, or two levels above where that program is a fifth shorter), which marks those it proves
+empty for :mod:`implc.codegen.tighten` to drop.
 Where ``inside`` is not NULL (a solid), every child whose enclosure lies below 0 is written there too
 (:data:`implc.abi.INSIDE_WORDS` each). Resumable: when the output is full or the cancel flag is raised it
 returns with its frames and state intact (layouts in :mod:`implc.abi`)."""
@@ -107,10 +108,12 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
     inside_count = Local(b, I64, 0, "inside_count")
     normals_done = Local(b, I64, 0, "normals_done")  # voxels before this one have their normals
     tightened = Local(b, I64, 0, "tightened")  # voxels before this one had their second look
+    octant_start = Local(b, I64, 0, "octant_start")  # the first voxel of the octant at normals_level
     # normals come from the program two levels above the leaves (valid for all its voxels, eight at a time)
     normals_level = b.select(b.icmp_signed(">", b.sub(depth, const(I64, 2)), task_level), b.sub(depth, const(I64, 2)),
                              task_level)
-    # the second look runs over the program three levels above the leaves (its batches of eight fuller)
+    # the second look runs over the program three levels above the leaves (its batches of eight fuller),
+    # unless the one two levels above is much shorter (leave_normals_octant)
     tighten_level = b.select(b.icmp_signed(">", b.sub(depth, const(I64, 3)), task_level), b.sub(depth, const(I64, 3)),
                              task_level)
     ctpop, cttz = bit_intrinsic(module, "ctpop"), bit_intrinsic(module, "cttz")
@@ -210,16 +213,28 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
                              b.select(has_flags, b.gep(out_flags, [first]), out_flags)])
             normals_done.set(b.add(first, pending))
 
-    def flush_tighten():
-        """The second look at the voxels flagged since the last one (all below the octant at
-        ``tighten_level``: its program is valid for each)."""
+    def flush_tighten(upto, level):
+        """The second look at the voxels flagged since the last one, up to ``upto``, with the program of
+        ``level`` (all of them lie below its octant: its program is valid for each)."""
         first = tightened.get()
-        pending = b.sub(normals_done.get(), first)
+        pending = b.sub(upto, first)
         with if_(b, b.and_(has_flags, b.icmp_signed(">", pending, const(I64, 0)))):
-            b.call(tighten, [header, program_of(tighten_level), length_of(tighten_level), output_of(tighten_level),
+            b.call(tighten, [header, program_of(level), length_of(level), output_of(level),
                              slots, choices_of(b.add(depth, const(I64, 1))), geom, depth,
                              b.gep(out, [b.mul(first, const(I64, 3))]), b.gep(out_flags, [first]), pending])
-            tightened.set(normals_done.get())
+            tightened.set(upto)
+
+    def leave_normals_octant():
+        """Normals for the octant at ``normals_level`` just finished; its second look now, with its own
+        program, where that is a fifth shorter than the one at ``tighten_level`` or more (fuller batches do not
+        pay for that: Min/Max models such as Prospero), after the voxels of its siblings still waiting."""
+        flush_normals()
+        shorter = b.icmp_signed("<", b.mul(length_of(normals_level), const(I64, 5)),
+                                b.mul(length_of(tighten_level), const(I64, 4)))
+        with if_(b, shorter):
+            flush_tighten(octant_start.get(), tighten_level)
+            flush_tighten(normals_done.get(), normals_level)
+        octant_start.set(normals_done.get())
 
     def may_meet(lo, hi):
         """The lanes whose enclosure contains 0 or is undefined (NaN)."""
@@ -298,10 +313,10 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
                 with b.if_else(b.icmp_unsigned("==", remaining, const(I32, 0))) as (up, down):
                     with up:  # every child visited: back to the parent, or the task is done
                         with if_(b, b.icmp_signed("==", level, normals_level)):
-                            flush_normals()
+                            leave_normals_octant()
                         with if_(b, b.icmp_signed("==", level, tighten_level)):
                             flush_normals()
-                            flush_tighten()
+                            flush_tighten(normals_done.get(), tighten_level)
                         done = b.icmp_signed("==", level, task_level)
                         store_at(b, b.select(done, const(I64, 2), const(I64, 1)), state, abi.TAPE_PHASE)
                         store_at(b, b.select(done, level, b.sub(level, const(I64, 1))), state, abi.TAPE_LEVEL)
@@ -316,6 +331,6 @@ def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Fu
                         store_at(b, child, state, abi.TAPE_LEVEL)
                         store_at(b, const(I64, 1), state, abi.TAPE_PENDING)
     flush_normals()  # leaving (done, output full or cancelled): every voxel written has its normal
-    flush_tighten()
+    flush_tighten(normals_done.get(), tighten_level)
     store_at(b, inside_count.get(), state, abi.TAPE_INSIDE_COUNT)
     b.ret(count.get())
