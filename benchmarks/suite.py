@@ -281,9 +281,9 @@ def tightness(args, out):
                   f"| {r['tightest_cpu_s']:.3f} ({r['tightest_cpu_s'] / n:.2f}×) |")
     md += ["", "natural: voxelize(..., **implc.NATURAL) (mean_value_levels=0, refine_leaves=False), every leaf the "
            "natural enclosure keeps; default: refine_leaves='auto', the kept leaves the linear model at their centre "
-           "misses tested again with the monotonicity form (over the leaf, then its eighths and theirs); "
-           "tightest: voxelize(..., **implc.TIGHTEST) (mean_value_levels=1, refine_leaves='auto'). CPU seconds: "
-           "process time, medians, the modes interleaved."]
+           "misses tested again with the monotonicity form (over the leaf, then on the tape engine over its face in "
+           "pieces, then over its eighths and theirs); tightest: voxelize(..., **implc.TIGHTEST) "
+           "(mean_value_levels=1, refine_leaves='auto'). CPU seconds: process time, medians, the modes interleaved."]
     return md
 
 
