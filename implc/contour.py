@@ -41,6 +41,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .surface import Grouping
+
 EDGE_MARGIN = 1.0 / 256
 """How far inside its edge (as a fraction of the edge) a surface vertex is kept: no triangle degenerates."""
 ROOT_STEPS = 3
@@ -266,25 +268,32 @@ class _Grid:
             out[last] = np.broadcast_to(self.hi, out.shape)[last]
         return out
 
-    def values(self, points: np.ndarray) -> np.ndarray:
+    def values(self, points: np.ndarray, grouping: Grouping | None = None) -> np.ndarray:
         """F at points (:meth:`implc.Surface.eval`); on the tape engine, for a long program, each point's
-        program simplified over its group of cells (:meth:`implc.Surface.eval_grouped`), and NaN where F is
-        not finite (outside, as where its interval engine finds F may be undefined)."""
+        program simplified over its group of cells (:meth:`implc.Surface.eval_grouped`; ``grouping``: the
+        points' :meth:`grouping`, where several calls share it), and NaN where F is not finite (outside, as
+        where its interval engine finds F may be undefined)."""
         points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
         if self.grouped:
-            values = self.surface.eval_grouped(points, self.groups(points), self.group_boxes)[0]
+            values = self.surface.eval_grouped(points, grouping or self.grouping(points))[0]
         else:
             values = self.surface.eval(points)
         if self.surface.engine == "tape":
             values[~np.isfinite(values)] = np.nan
         return values
 
-    def gradients(self, points: np.ndarray) -> np.ndarray:
+    def gradients(self, points: np.ndarray, grouping: Grouping | None = None) -> np.ndarray:
         """F's analytic gradient at points, as :meth:`values` groups them."""
         points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
         if not self.grouped:
             return self.surface.gradient(points)
-        return self.surface.eval_grouped(points, self.groups(points), self.group_boxes, gradient=True)[1]
+        return self.surface.eval_grouped(points, grouping or self.grouping(points), gradient=True)[1]
+
+    def grouping(self, points: np.ndarray) -> Grouping | None:
+        """The points sorted by :meth:`groups` for the tape engine (None where :attr:`grouped` is not set):
+        it holds for any points each no further than a cell from the point it was made from, in every
+        axis (a surface vertex moving along its edge)."""
+        return Grouping(self.groups(points), self.group_boxes) if self.grouped else None
 
     def groups(self, points: np.ndarray) -> np.ndarray:
         """The group of :data:`GROUP_CELLS`³ cells each point lies in (by its coordinates: a point on a
@@ -292,8 +301,8 @@ class _Grid:
         m = self.groups_per_axis
         g = (points - self.lo) * (1.0 / (self.step * GROUP_CELLS))
         np.clip(g, 0, m - 1, out=g)  # and truncated below: the floor of what is not negative
-        g = g.astype(np.int64) @ np.array([m * m, m, 1], np.int64)
-        return g
+        g = g.astype(np.int64)
+        return (g[:, 0] * m + g[:, 1]) * m + g[:, 2]  # not an integer matmul: numpy has no fast one
 
     def group_boxes(self, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The boxes of groups: their cells and one more cell all round, within the bounds."""
@@ -812,49 +821,47 @@ def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points:
 
 def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points, witnesses: bool):
     """Positions of the vertices named by ``keys`` (unique): a point itself, or the root of F on
-    its edge, refined by regula falsi and kept inside the edge. Returns (positions, on_surface mask,
-    witnesses: (V, 2, 3) the edge's ends, the one where F < 0 first, a point named by itself twice; None
-    unless ``witnesses``)."""
+    its edge, refined by regula falsi and kept inside the edge. Returns (positions, unit normals (NaN at a
+    point named by itself, and where F's gradient is not usable), witnesses: (V, 2, 3) the edge's ends,
+    the one where F < 0 first, a point named by itself twice; None unless ``witnesses``)."""
     a, b, fa, fb = _endpoints(grid, keys, cell_points, face_points)
     on_edge = np.any(a != b, axis=1)
     positions = a.copy()
     ends = np.stack([a, b], 1) if witnesses else None
     if on_edge.all():
-        positions = _edge_roots(grid, keys, a, b, fa, fb)  # a and b: the inside end first
+        positions, normals = _edge_roots(grid, keys, a, b, fa, fb)  # a and b: the inside end first
     else:
         a, b, fa, fb = a[on_edge], b[on_edge], fa[on_edge], fb[on_edge]
-        positions[on_edge] = _edge_roots(grid, keys[on_edge], a, b, fa, fb)
+        normals = np.full_like(positions, np.nan)
+        positions[on_edge], normals[on_edge] = _edge_roots(grid, keys[on_edge], a, b, fa, fb)
     if ends is not None:
         ends[on_edge, 0], ends[on_edge, 1] = a, b
-    return positions, on_edge, ends
+    return positions, normals, ends
 
 
-def _edge_roots(grid: _Grid, keys, a, b, fa, fb) -> np.ndarray:
+def _edge_roots(grid: _Grid, keys, a, b, fa, fb) -> tuple[np.ndarray, np.ndarray]:
     """The surface vertex on each edge (a, b) with values (fa, fb) of opposite signs: regula falsi
     (Illinois, :data:`ROOT_STEPS` samples of F), kept :data:`EDGE_MARGIN` inside the edge and nudged by
-    the hash of its key (native: ``implc_edge_roots``). Swaps the ends in place so that F(a) < 0."""
+    the hash of its key (native: ``implc_edge_roots``), and the unit normal there. Swaps the ends in place
+    so that F(a) < 0. The points are grouped once for all the samples: each stays on its edge."""
     n = len(keys)
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     state, points = np.empty((5, n)), np.empty((n, 3))
     if not n:
-        return points
+        return points, points.copy()
     run = grid.runtime.edge_roots
     pointers = [keys.ctypes.data, a.ctypes.data, b.ctypes.data, fa.ctypes.data, fb.ctypes.data, state.ctypes.data]
     if run(0, n, *pointers, None, points.ctypes.data, EDGE_MARGIN, NUDGE):
         raise AssertionError("a surface vertex's edge does not change sign: the samples are not repeatable")
+    grouping = grid.grouping(points)
     for step in range(ROOT_STEPS):
-        f = np.ascontiguousarray(grid.values(points), dtype=np.float64)
+        f = np.ascontiguousarray(grid.values(points, grouping), dtype=np.float64)
         run(2 if step == ROOT_STEPS - 1 else 1, n, *pointers, f.ctypes.data, points.ctypes.data, EDGE_MARGIN, NUDGE)
-    return points
+    return points, _unit(grid.gradients(points, grouping))
 
 
-def _unit_normals(grid: _Grid, vertices, on_surface) -> np.ndarray:
-    """F's analytic gradient at the surface vertices, normalised (NaN where it is not usable)."""
-    normals = np.full_like(vertices, np.nan)
-    if on_surface.all():
-        normals = grid.gradients(vertices)
-    elif on_surface.any():
-        normals[on_surface] = grid.gradients(vertices[on_surface])
+def _unit(normals: np.ndarray) -> np.ndarray:
+    """Gradients normalised in place (NaN where they are not usable)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         normals /= np.linalg.norm(normals, axis=1)[:, None]
     normals[~np.isfinite(normals).all(1)] = np.nan
@@ -903,8 +910,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     owner = crossed[owner]  # rows of todo.cells
     caps = index.number(caps)
     t2 = time.perf_counter()
-    vertices, on_surface, ends = _vertices(grid, index.keys(), _NO_POINTS, _NO_POINTS, witnesses)
-    normals = _unit_normals(grid, vertices, on_surface)
+    vertices, normals, ends = _vertices(grid, index.keys(), _NO_POINTS, _NO_POINTS, witnesses)
     t3 = time.perf_counter()
     feature_rows = _feature_cells(runtime, todo.cells, kuhn, owner, normals) if features else []
     stats.feature_cells = len(feature_rows)
@@ -1104,6 +1110,6 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
     if boundary.any():
         mesh.caps = index.number(_cap_triangles(grid, face_points, is_feature)[0])
     keys = index.keys()[first_new:]
-    vertices, on_surface, ends = _vertices(grid, keys, cell_points, face_points, mesh.ends is not None)
-    mesh.add_vertices(vertices, _unit_normals(grid, vertices, on_surface), ends)
+    vertices, normals, ends = _vertices(grid, keys, cell_points, face_points, mesh.ends is not None)
+    mesh.add_vertices(vertices, normals, ends)
     return added

@@ -167,6 +167,40 @@ def _pruned_by_kernels(tape: Tape) -> set[int]:
     return set()
 
 
+class Grouping:
+    """Rows sorted by group and padded to whole blocks of eight, as ``implc_tape_grouped`` takes them: made
+    once from the rows' group labels (int64) and ``boxes`` (the (lo, hi) corners, (M, 3) each, of the sorted
+    distinct labels asked for), used for every call over rows with those groups (a vertex's regula falsi
+    steps and its normal)."""
+
+    def __init__(self, groups: np.ndarray, boxes: Callable[[np.ndarray], tuple]):
+        groups = np.asarray(groups)
+        n = self.rows = len(groups)
+        order = np.argsort(groups)  # any order within a group: each row's result is its own
+        ordered = groups[order]
+        first = np.flatnonzero(np.concatenate([[True], ordered[1:] != ordered[:-1]])) if n else np.zeros(0, np.int64)
+        counts = np.diff(np.append(first, n))
+        self.lo, self.hi = (np.ascontiguousarray(a, dtype=np.float64) for a in boxes(ordered[first]))
+        padded = (counts + 7) & ~7  # whole blocks of eight: a group's last row repeated
+        self.starts = np.zeros(len(first) + 1, np.int64)
+        np.cumsum(padded, out=self.starts[1:])
+        self.padded = int(self.starts[-1])
+        at_row = np.arange(n) + np.repeat(self.starts[:-1] - first, counts)  # each sorted row's place
+        source = np.repeat(first + counts - 1, padded)
+        source[at_row] = np.arange(n)
+        self.taken = order[source]  # the row in each padded place
+        self.place = np.empty(n, np.int64)  # each row's padded place
+        self.place[order] = at_row
+
+
+def _grouping(groups: np.ndarray | Grouping, boxes: Callable[[np.ndarray], tuple] | None) -> Grouping:
+    if isinstance(groups, Grouping):
+        return groups
+    if boxes is None:
+        raise ValueError("group labels need their boxes")
+    return Grouping(groups, boxes)
+
+
 class Surface:
     """A compiled implicit surface F(x, y, z) = 0 (F < 0 inside) over a bounding box.
 
@@ -351,23 +385,25 @@ class Surface:
         values, gradients = self._value_and_gradient(points)
         return values, gradients
 
-    def eval_grouped(self, points: np.ndarray, groups: np.ndarray, boxes: Callable[[np.ndarray], tuple],
+    def eval_grouped(self, points: np.ndarray, groups: np.ndarray | Grouping,
+                     boxes: Callable[[np.ndarray], tuple] | None = None,
                      gradient: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """(F, its gradient or None) at ``points`` ((N, 3)), point i lying in the box of group
         ``groups[i]`` (int64 labels; ``boxes(labels)`` gives the (lo, hi) corners, (M, 3) each, of the
-        sorted distinct labels asked for): on the tape engine each group's points run the program
-        simplified over its box (``implc_tape_grouped``), far shorter than the whole on Min/Max models; the
-        compiled kernels ignore the groups. F is :meth:`eval`'s value (on the tape engine, over the simplified
-        program: the same value)."""
+        sorted distinct labels asked for), or a :class:`Grouping` of the points made once for several calls:
+        on the tape engine each group's points run the program simplified over its box
+        (``implc_tape_grouped``), far shorter than the whole on Min/Max models; the compiled kernels ignore
+        the groups. F is :meth:`eval`'s value (on the tape engine, over the simplified program: the same
+        value)."""
         points = _rows("points", points)
         if self.engine != "tape":
             if gradient:
                 return self._value_and_gradient(points)
             return self.eval(points), None
-        values, grads = self._grouped(points, None, groups, boxes, 1 if gradient else 0)
+        values, grads = self._grouped(points, None, _grouping(groups, boxes), 1 if gradient else 0)
         return values, grads if gradient else None
 
-    def gradient_enclosures(self, lo: ArrayLike, hi: ArrayLike, groups: np.ndarray | None = None,
+    def gradient_enclosures(self, lo: ArrayLike, hi: ArrayLike, groups: np.ndarray | Grouping | None = None,
                             boxes: Callable[[np.ndarray], tuple] | None = None) -> np.ndarray:
         """Enclosures of F and of its three partials over each box [lo[i], hi[i]]: (N, 8), F's lo, hi,
         then each partial's lo, hi (NaN where a partial may be undefined or jump). Where a Min/Max may take
@@ -378,42 +414,29 @@ class Surface:
         if self.engine != "tape":
             (out,) = self._run(self.kernel(abi.BOX_GRADIENT), [lo, hi], [(8,)])
             return out
-        if groups is None or boxes is None:  # one group: the bounds
-            groups = np.zeros(len(lo), np.int64)
+        if groups is None or (boxes is None and not isinstance(groups, Grouping)):  # one group: the bounds
             bounds = np.array(self.bounds, dtype=np.float64)
+            groups = Grouping(np.zeros(len(lo), np.int64), lambda labels: (bounds[None, :, 0], bounds[None, :, 1]))
+        return self._grouped(lo, hi, _grouping(groups, boxes), 2)[1]
 
-            def boxes(labels):
-                return bounds[None, :, 0], bounds[None, :, 1]
-        return self._grouped(lo, hi, groups, boxes, 2)[1]
-
-    def _grouped(self, rows: np.ndarray, rows_hi: np.ndarray | None, groups, boxes, mode: int):
+    def _grouped(self, rows: np.ndarray, rows_hi: np.ndarray | None, plan: Grouping, mode: int):
         """``implc_tape_grouped`` over ``rows`` (points, or boxes' lo corners with ``rows_hi``) grouped by
-        ``groups``: (values, (N, 3) gradients or (N, 8) enclosures)."""
+        ``plan``: (values, (N, 3) gradients or (N, 8) enclosures)."""
         n = len(rows)
         width = 8 if mode == 2 else 3
-        values, grads = np.empty(n), np.empty((n, width))
+        if n != plan.rows:
+            raise ValueError(f"a grouping of {plan.rows} rows used for {n}")
         if not n:
-            return values, grads
-        order = np.argsort(groups, kind="stable")
-        ordered = np.asarray(groups)[order]
-        first = np.flatnonzero(np.concatenate([[True], ordered[1:] != ordered[:-1]]))
-        counts = np.diff(np.append(first, n))
-        lo, hi = (np.ascontiguousarray(a, dtype=np.float64) for a in boxes(ordered[first]))
-        padded = (counts + 7) & ~7  # whole blocks of eight: a group's last row repeated
-        starts = np.zeros(len(first) + 1, np.int64)
-        np.cumsum(padded, out=starts[1:])
-        at_row = np.arange(n) + np.repeat(starts[:-1] - first, counts)  # each sorted row's place
-        source = np.repeat(first + counts - 1, padded)
-        source[at_row] = np.arange(n)
-        taken = order[source]
-        padded_rows = np.ascontiguousarray(rows[taken])
-        padded_hi = padded_rows if rows_hi is None else np.ascontiguousarray(rows_hi[taken])
-        total = int(starts[-1])
+            return np.empty(0), np.empty((0, width))
+        padded_rows = np.take(rows, plan.taken, axis=0)  # several times faster than fancy indexing of (N, 3)
+        padded_hi = padded_rows if rows_hi is None else np.take(rows_hi, plan.taken, axis=0)
+        total = plan.padded
         out_value = np.empty(total)
         out_grad = np.empty((total if mode else 8, width))
         program = self.program
         assert program is not None  # the tape engine's surfaces have one
         length = max(len(program), 1)
+        lo, hi, starts = plan.lo, plan.hi, plan.starts
 
         def batch(at, count):  # its own scratch: batches run at once on several cores
             slots = slot_scratch(program.slot_count)
@@ -427,11 +450,11 @@ class Surface:
                 marks.ctypes.data, remap.ctypes.data, work.ctypes.data, lo[at:].ctypes.data, hi[at:].ctypes.data,
                 starts[at:].ctypes.data, count, padded_rows.ctypes.data, padded_hi.ctypes.data,
                 out_value.ctypes.data, out_grad.ctypes.data, mode)
-        step = max(1, len(first) * CHUNK // total)  # about CHUNK rows per call: Ctrl-C between calls
-        in_parallel([partial(batch, at, min(step, len(first) - at)) for at in range(0, len(first), step)])
-        values[order] = out_value[at_row]
-        if mode:
-            grads[order] = out_grad[at_row]
+        groups = len(lo)
+        step = max(1, groups * CHUNK // total)  # about CHUNK rows per call: Ctrl-C between calls
+        in_parallel([partial(batch, at, min(step, groups - at)) for at in range(0, groups, step)])
+        values = np.take(out_value, plan.place)
+        grads = np.take(out_grad, plan.place, axis=0) if mode else np.empty((n, width))
         return values, grads
 
     def interval(self, lo: ArrayLike, hi: ArrayLike, mean_value: bool = False,

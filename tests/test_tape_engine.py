@@ -18,7 +18,7 @@ from implc import CompileError, x, y, z
 from implc import subdivide as subdivide_module
 from implc.codegen.tighten import OUTSIDE
 from implc.lower import lower
-from implc.surface import choose_engine
+from implc.surface import Grouping, choose_engine
 from implc.tape_program import OPCODES, encode, slot_scratch
 from implc.vm import parse_vm
 
@@ -417,6 +417,12 @@ def test_points_grouped_by_box_give_f_and_its_gradient(expr, seed):
     assert none is None
     whole = surface.eval(points)  # the whole program's dual numbers' value, bit for bit
     np.testing.assert_array_equal(values, whole)
+    # one grouping made for several calls (a vertex's root steps): any points in the same boxes, bit for bit
+    plan = Grouping(labels, boxes)
+    centres = np.mean(boxes(labels), axis=0)
+    moved = points + rng.uniform(0, 1, (len(points), 1)) * (centres - points)  # towards the box's centre
+    np.testing.assert_array_equal(surface.eval_grouped(moved, plan)[0], surface.eval(moved))
+    np.testing.assert_array_equal(surface.eval_grouped(points, plan)[0], whole)
     f_values, gradients = surface.eval_grouped(points, labels, boxes, gradient=True)
     f = sympy.lambdify((x, y, z), expr, "numpy")
 
