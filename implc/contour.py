@@ -237,6 +237,7 @@ class _Grid:
         self._corners: _KeyIndex | None = None  # the corners sampled so far, and F there
         self._corner_values = np.zeros(0)
         self._faces: dict[tuple[int, int], np.ndarray] = {}  # (axis, side): F at the corners of that face of the bounds
+        self.outside_faces: set[tuple[int, int]] = set()  # faces of the bounds proven outside: not sampled
         self.n = 1 << depth
         self.k = self.n + 1  # corners per axis
         self.lo = np.array([float(lo) for lo, _ in bounds])
@@ -345,6 +346,28 @@ class _Grid:
         if (axis, side) not in self._faces:
             self._faces[axis, side] = self.values(self.corner_points(keys.reshape(-1))).reshape(keys.shape)
         return self._faces[axis, side]
+
+    def find_outside_faces(self, cells: np.ndarray):
+        """The faces of the bounds that none of the voxelizer's ``cells`` touches and where F > 0 at the
+        centre: F > 0 all over them, so they hold no cap and are not sampled (:attr:`outside_faces`). Every
+        cell not kept has an enclosure that excludes 0: F keeps one sign over the whole cell, and cells
+        that share a point share it, so F keeps one sign over a face no kept cell touches."""
+        for axis in range(3):
+            for side in (0, 1):
+                if np.any(cells[:, axis] == side * (self.n - 1)):
+                    continue
+                centre = (self.lo + self.hi) / 2
+                centre[axis] = (self.lo, self.hi)[side][axis]
+                if self.values(centre[None])[0] > 0:
+                    self.outside_faces.add((axis, side))
+
+    def touched(self, cells: np.ndarray) -> bool:
+        """Whether some of ``cells`` (added by the samples' signs) touch a face taken as outside: that face
+        is sampled after all (taken out of :attr:`outside_faces`), and its caps must be made again."""
+        touched = {(axis, side) for axis, side in self.outside_faces
+                   if np.any(cells[:, axis] == side * (self.n - 1))}
+        self.outside_faces -= touched
+        return bool(touched)
 
     def remember(self, keys: np.ndarray, values: np.ndarray):
         """Keep F's ``values`` sampled at the corners ``keys`` (those not sampled yet)."""
@@ -639,13 +662,16 @@ def _fan_triangles(grid: _Grid, cells, inside, feature, cell_points: _Points, fa
 
 def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
     """The bounds' faces where the sampled F is negative, as triangles of vertex keys (T, 3), and the
-    cells beside them whose face there has both signs (they must be contoured too)."""
+    cells beside them whose face there has both signs (they must be contoured too); the faces proven
+    outside (:meth:`_Grid.find_outside_faces`) are not sampled."""
     out, seeds = [], []
     n = grid.n
     u, v = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     for axis in range(3):
         b, c = _face_axes(axis)
         for side in (0, 1):
+            if (axis, side) in grid.outside_faces:
+                continue
             grid_of_cells = np.zeros((n, n, 3), np.int64)
             grid_of_cells[..., axis] = side * (n - 1)
             grid_of_cells[..., b], grid_of_cells[..., c] = u, v
@@ -900,9 +926,14 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
     stats.cells = len(cells)
     todo = _Cells(grid, cells)
+    grid.find_outside_faces(cells)
     caps, seeds = _cap_triangles(grid, _NO_POINTS, _never)
     t1 = time.perf_counter()
     stats.added_cells = todo.close(seeds)
+    while grid.touched(todo.cells):  # a cell the signs added reaches a face taken as outside: sampled after all
+        before = len(todo.cells)
+        caps, seeds = _cap_triangles(grid, _NO_POINTS, _never)
+        stats.added_cells += todo.close(seeds, start=before)
     crossed = np.flatnonzero(todo.crossed())
     stats.crossed_cells = len(crossed)
     index = _KeyIndex(runtime, 4 * len(crossed))
@@ -1093,6 +1124,10 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
     before = len(todo.cells)
     todo.add(grid.cell_unkey(fanned_keys))
     added = todo.close(np.zeros((0, 3), np.int64), start=before)
+    reached = False  # a face taken as outside that the fanned cells, or those the signs added, reach
+    while grid.touched(todo.cells[before:]):
+        reached = True
+        added += todo.close(_cap_triangles(grid, _NO_POINTS, _never)[1], start=len(todo.cells))
     fanned = np.zeros(len(todo.cells), bool)
     fanned[todo.index.number(fanned_keys, insert=False)] = True
     cell_points, face_points = _place_points(grid, feature_cells, grid.cell_unkey(fanned_keys), index,
@@ -1107,7 +1142,7 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
                                       cell_points, face_points, is_feature))
     mesh.more = [kuhn, fan]
     boundary = (feature_cells == 0) | (feature_cells == grid.n - 1)
-    if boundary.any():
+    if boundary.any() or reached:
         mesh.caps = index.number(_cap_triangles(grid, face_points, is_feature)[0])
     keys = index.keys()[first_new:]
     vertices, normals, ends = _vertices(grid, keys, cell_points, face_points, mesh.ends is not None)

@@ -319,6 +319,38 @@ def test_a_solid_filling_the_bounds_is_the_box():
     assert np.all(np.abs(mesh.vertices).max(1) == 1)
 
 
+def test_faces_of_the_bounds_proven_outside_are_not_sampled_unless_a_contoured_cell_reaches_them(monkeypatch):
+    """A face of the bounds that no kept cell touches, with F > 0 at its centre, is not sampled (F keeps
+    its sign over it); where the cells the samples' signs add reach such a face after all (here: contouring
+    from half the kept cells, the surface running on to the face), it is sampled then and capped: the same
+    closed mesh as from every kept cell."""
+    from implc import contour as contour_module
+    s = implc.compile(sympy.Rational(1, 10) - y + x**2 / 8, ((-1, 1),) * 3)  # the solid y > 0.1 + x²/8
+    depth = 4
+    voxels = implc.voxelize(s, depth)
+    sampled = []
+    original = contour_module._Grid.face_values
+
+    def face_values(grid, axis, side, keys):
+        sampled.append((axis, side))
+        return original(grid, axis, side, keys)
+
+    monkeypatch.setattr(contour_module._Grid, "face_values", face_values)
+    whole = voxels.mesh()
+    assert (1, 0) not in sampled and sorted(sampled) == [(0, 0), (0, 1), (1, 1), (2, 0), (2, 1)]
+    assert_closed_manifold(whole)
+    sampled.clear()
+    half = voxels.coords[voxels.coords[:, 0] < 1 << (depth - 1)]  # none on the face x = 1
+    mesh = contour_module.contour(s, half, depth)
+    assert (0, 1) in sampled and (1, 0) not in sampled
+    assert mesh.stats.added_cells > 0
+    assert_closed_manifold(mesh)
+    assert len(mesh.faces) == len(whole.faces)  # the same triangles, numbered in another order
+    assert np.array_equal(np.unique(mesh.vertices[mesh.faces].reshape(-1, 9), axis=0),
+                          np.unique(whole.vertices[whole.faces].reshape(-1, 9), axis=0))
+    assert mesh.volume == pytest.approx(whole.volume, rel=1e-12)
+
+
 def test_nothing_inside_gives_an_empty_mesh():
     mesh = implc.mesh(implc.compile(x**2 + y**2 + z**2 + 1), 4)
     assert len(mesh.faces) == 0 and len(mesh.vertices) == 0
