@@ -894,18 +894,30 @@ def _unit(normals: np.ndarray) -> np.ndarray:
     return normals
 
 
-def _fill_normals(normals, vertices, faces) -> np.ndarray:
-    """The triangles' area-weighted mean normal where the analytic one is not usable (a cap's corners, a
-    zero or undefined gradient)."""
-    bad = ~np.isfinite(normals).all(1)
-    if bad.any() and len(faces):
-        p = vertices[faces]
+def _fill_normals(grid: _Grid, normals, vertices, faces) -> np.ndarray:
+    """Normals where the analytic one is not usable: a vertex on one face of the bounds (a cap's corner,
+    whose triangles all lie in the face) gets that face's outward normal; one on an edge of the bounds, or
+    elsewhere where F's gradient is zero or undefined, its triangles' area-weighted mean normal."""
+    bad = np.flatnonzero(~np.isfinite(normals).all(1))
+    if not len(bad) or not len(faces):
+        return normals
+    p = np.take(vertices, bad, axis=0)
+    low, high = p == grid.lo, p == grid.hi
+    on = low | high
+    flat = on.sum(1) == 1  # on one face of the bounds only
+    normals[bad[flat]] = np.where(on[flat], np.where(high[flat], 1.0, -1.0), 0.0)
+    bad = bad[~flat]
+    if len(bad):
+        mask = np.zeros(len(vertices), bool)
+        mask[bad] = True
+        faces = faces[mask[faces].any(1)]  # only the triangles around those vertices
+        p = np.take(vertices, faces, axis=0)
         area = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        summed = np.zeros_like(vertices)
-        for k in range(3):
-            np.add.at(summed, faces[:, k], area)
+        corners = faces.reshape(-1)
+        summed = np.stack([np.bincount(corners, np.repeat(area[:, a], 3), minlength=len(vertices))
+                           for a in range(3)], 1)[bad]
         with np.errstate(invalid="ignore", divide="ignore"):
-            normals[bad] = summed[bad] / np.linalg.norm(summed[bad], axis=1)[:, None]
+            normals[bad] = summed / np.linalg.norm(summed, axis=1)[:, None]
     return normals
 
 
@@ -950,7 +962,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
         stats.added_cells += _with_features(grid, todo, feature_rows, index, mesh)
     vertices, normals, faces, ends = mesh.compacted()
     stats.cap_triangles = len(mesh.caps)
-    normals = _fill_normals(normals, vertices, faces)
+    normals = _fill_normals(grid, normals, vertices, faces)
     t4 = time.perf_counter()
     crossed_cells = todo.cells[todo.crossed()]
     unproven = crossed_cells[~_regular(grid, crossed_cells)]

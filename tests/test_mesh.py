@@ -317,6 +317,12 @@ def test_a_solid_filling_the_bounds_is_the_box():
     assert_closed_manifold(mesh)
     assert mesh.volume == pytest.approx(8.0, rel=1e-12)
     assert np.all(np.abs(mesh.vertices).max(1) == 1)
+    v, n = mesh.vertices, mesh.normals
+    on = np.abs(v) == 1
+    flat = on.sum(1) == 1  # inside a face: its outward normal; on an edge or a corner: between its faces'
+    assert np.array_equal(n[flat], np.where(on[flat], np.sign(v[flat]), 0.0))
+    assert np.all(np.einsum("ij,ij->i", n[~flat], np.where(on[~flat], np.sign(v[~flat]), 0.0)) > 1)
+    assert np.allclose(np.linalg.norm(n, axis=1), 1)
 
 
 def test_faces_of_the_bounds_proven_outside_are_not_sampled_unless_a_contoured_cell_reaches_them(monkeypatch):
