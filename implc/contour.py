@@ -16,7 +16,10 @@ a tetrahedralization of the voxel grid, cut by the bounds' faces where the solid
   surface vertex lies on a tetrahedron edge whose ends have opposite signs, at the root that regula
   falsi finds there, kept a little inside the edge.
 - **the caps**: each face of the bounds, triangulated as the tetrahedra's faces there, contributes the
-  part where the sampled F is negative, so the mesh is closed where the solid meets the bounds.
+  part where the sampled F is negative, so the mesh is closed where the solid meets the bounds. Squares
+  inside throughout are merged into aligned blocks (:func:`_cap_blocks`), each a fan from its centre
+  corner whose sides are split at every corner the triangles beyond them use (:func:`_block_fans`): a
+  box's face at 256³ costs about 9,000 triangles instead of 131,072.
 
 What follows by construction, for any placement of the surface vertices strictly inside their edges:
 every edge of the mesh lies in exactly two triangles, consistently oriented (outward: from the negative
@@ -691,6 +694,19 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
                 inside[:, local[k]] = signs[cells[:, b] + du, cells[:, c] + dv]
             seeds.append(cells[_both_signs(inside[:, local])])
             split4 = is_feature(cells)
+            whole = inside[:, local].all(1) & ~split4  # squares inside throughout, with no face point
+            blocks, in_block = _cap_blocks(whole.reshape(n, n))
+            if blocks:  # the corners the triangles beside the blocks use: the other squares' and the blocks'
+                used = np.zeros((n + 1, n + 1), bool)
+                emitting = ~in_block & (signs[:-1, :-1] | signs[1:, :-1] | signs[:-1, 1:] | signs[1:, 1:])
+                for du, dv in SQUARE:
+                    used[du:n + du, dv:n + dv] |= emitting
+                for size, lowest in blocks:
+                    for du, dv in SQUARE:
+                        used[lowest[:, 0] + du * size, lowest[:, 1] + dv * size] = True
+                out.extend(_block_fans(blocks, used, keys, _reversed_face(axis, side)))
+                rest = np.flatnonzero(~in_block.reshape(-1))
+                cells, inside, split4 = cells[rest], inside[rest], split4[rest]
             for sel, shape, flags, selves, edges in _face_triangles(grid, cells, axis, side, split4, face_points,
                                                                     inside):
                 case = flags[:, 0] | flags[:, 1].astype(np.int64) << 1 | flags[:, 2].astype(np.int64) << 2
@@ -702,6 +718,56 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
                         out.append(np.stack([selves[pick, i] if i == j else edges[pick, i] for i, j in triple], 1))
     triangles = np.concatenate(out) if out else np.zeros((0, 3), np.int64)
     return triangles, (np.concatenate(seeds) if seeds else np.zeros((0, 3), np.int64))
+
+
+def _cap_blocks(whole: np.ndarray) -> tuple[list[tuple[int, np.ndarray]], np.ndarray]:
+    """The squares of a face of the bounds (``whole``, (n, n): inside throughout, no face point) merged into
+    aligned blocks of 2^k × 2^k squares (k >= 1), largest first, none touching the face's border (there the
+    neighbouring face's cap meets this one square by square): [(size, (m, 2) lowest corners)] and which
+    squares the blocks cover (n, n)."""
+    n = len(whole)
+    mergeable = whole.copy()
+    mergeable[[0, -1], :] = mergeable[:, [0, -1]] = False
+    covered = np.zeros_like(mergeable)
+    levels = [mergeable]
+    while len(levels[-1]) >= 2:  # level k: which aligned 2^k blocks are mergeable throughout
+        m = levels[-1]
+        half = len(m) // 2
+        levels.append(m.reshape(half, 2, half, 2).all((1, 3)))
+    blocks = []
+    for k in range(len(levels) - 1, 0, -1):
+        size = 1 << k
+        free = ~covered.reshape(n // size, size, n // size, size).any((1, 3))
+        take = levels[k] & free
+        if take.any():
+            blocks.append((size, np.argwhere(take) * size))
+            covered |= np.repeat(np.repeat(take, size, 0), size, 1)
+    return blocks, covered
+
+
+def _block_fans(blocks, used: np.ndarray, keys: np.ndarray, flip: bool):
+    """Each block of :func:`_cap_blocks` as a fan from its centre corner over its boundary: its corners and
+    every corner along its sides that ``used`` marks ((n + 1)², a corner of a square or block beside it),
+    so that each side meets the triangles beyond it edge for edge. Counter-clockwise in the face's axes
+    (:data:`SQUARE`), reversed where ``flip``; vertices are the corners' own keys (``keys``: the face's
+    corner keys, (n + 1)²)."""
+    for size, lowest in blocks:
+        steps = np.arange(size)
+        # the boundary in SQUARE order: along the first axis, up the second, back, down: (4·size, 2) offsets
+        ring = np.concatenate([np.stack([steps, 0 * steps], 1), np.stack([size + 0 * steps, steps], 1),
+                               np.stack([size - steps, size + 0 * steps], 1), np.stack([0 * steps, size - steps], 1)])
+        points = lowest[:, None, :] + ring[None]  # (m, 4·size, 2)
+        on = used[points[..., 0], points[..., 1]]
+        on[:, ::size] = True  # the block's own corners
+        flat = np.flatnonzero(on)  # in order, block by block; each block's first point is its corner
+        width = 4 * size
+        following = np.append(flat[1:], -1)
+        last = following // width != flat // width  # the block's last point: back to its first
+        following = np.where(last, flat // width * width, following)
+        p, q = points.reshape(-1, 2)[flat], points.reshape(-1, 2)[following]
+        centre = (lowest + size // 2)[flat // width]
+        centre, p, q = (_grid_edge_key(keys[uv[:, 0], uv[:, 1]], 0) for uv in (centre, p, q))
+        yield np.stack([centre, q, p] if flip else [centre, p, q], 1)
 
 
 # -- features ----------------------------------------------------------------------------------------
