@@ -10,7 +10,9 @@ side by side, corners spread over the table. (Folding the key's low bits with th
 neighbouring cells' keys together, 30% faster on csg_part at 512³, but made probe chains so long on
 colonnade that the index took 6.9 of its 19 s.) Keys are numbered in the order they are first
 seen, so a run over the same cells in the same order numbers them alike, and growing the table
-(inserting its keys again, in number order) keeps every number.
+(inserting its keys again, in number order) keeps every number. The loops over many keys or cells prefetch
+the slots of the keys a few rows ahead (:func:`_prefetch`): a big index misses the cache on nearly every
+lookup, and independent misses overlap.
 """
 
 from __future__ import annotations
@@ -37,12 +39,43 @@ GOLDEN = 0x9E3779B97F4A7C15
 """2^64/φ: Fibonacci hashing of a key's corner (its bits above the low six)."""
 
 
+PREFETCH_AHEAD = 16
+"""How many keys ahead the loops over many keys prefetch the index's slots: a big index misses the cache on
+nearly every lookup, and the misses of independent keys overlap."""
+
+
+def _first_slot(b: ir.IRBuilder, bits, key):
+    """The slot where ``key``'s probe starts (see the module docstring)."""
+    mask = b.sub(b.shl(const(I64, 1), bits), const(I64, 1))
+    spread = b.lshr(b.mul(b.ashr(key, const(I64, 6)), const(I64, GOLDEN - (1 << 64))), b.sub(const(I64, 64), bits))
+    return b.and_(b.add(spread, b.and_(key, const(I64, 63))), mask)
+
+
+def _prefetch(b: ir.IRBuilder, table, bits, key):
+    """Ask the cache for the slot where ``key``'s probe starts (a hint: nothing is read)."""
+    module = b.module
+    name = "llvm.prefetch.p0i8"
+    fn = module.globals.get(name)
+    if fn is None:
+        i8p, i32 = ir.IntType(8).as_pointer(), ir.IntType(32)
+        fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]), name=name)
+    ptr = b.bitcast(at(b, table, b.mul(_first_slot(b, bits, key), const(I64, 2))), ir.IntType(8).as_pointer())
+    i32 = ir.IntType(32)
+    b.call(fn, [ptr, ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+
+
+def _prefetch_ahead(b: ir.IRBuilder, i, n, keys_of, distance=PREFETCH_AHEAD):
+    """Where row ``i + distance`` exists, ``keys_of(row)`` for it (it emits the prefetches)."""
+    ahead = b.add(i, const(I64, distance))
+    with if_(b, b.icmp_signed("<", ahead, n)):
+        keys_of(ahead)
+
+
 def _number(b: ir.IRBuilder, table, bits, key, insert, count: Local, uniques):
     """The number of ``key`` in the index (inserted with the next number when absent and ``insert`` is
     non-zero; −1 when absent otherwise)."""
     mask = b.sub(b.shl(const(I64, 1), bits), const(I64, 1))
-    spread = b.lshr(b.mul(b.ashr(key, const(I64, 6)), const(I64, GOLDEN - (1 << 64))), b.sub(const(I64, 64), bits))
-    slot = Local(b, I64, b.and_(b.add(spread, b.and_(key, const(I64, 63))), mask), "slot")
+    slot = Local(b, I64, _first_slot(b, bits, key), "slot")
     result = Local(b, I64, -1, "number")
     with while_true(b) as loop:
         s = slot.get()
@@ -71,6 +104,7 @@ def emit_hash_index(module: ir.Module):
     table, bits, keys, n, insert, numbers, uniques, state = fn.args
     count = Local(b, I64, load_at(b, state, 0), "count")
     with for_range(b, n) as i:
+        _prefetch_ahead(b, i, n, lambda j: _prefetch(b, table, bits, load_at(b, keys, j)))
         store_at(b, _number(b, table, bits, load_at(b, keys, i), insert, count, uniques), numbers, i)
     store_at(b, count.get(), state, 0)
     b.ret(count.get())
@@ -94,7 +128,17 @@ def emit_kuhn_triangles(module: ir.Module):
     done = Local(b, I64, n, "done")
     one = const(I64, 1)
     insert = const(I64, 1)
+    def prefetch(cell):
+        """The index's slots of the 19 edges of ``cell``, a few cells ahead."""
+        base = load_at(b, lowest, cell)
+        with for_range(b, const(I64, 19)) as e:
+            corner = load_at(b, tables, b.add(const(I64, 24 + 96 + 576), e))
+            code = load_at(b, tables, b.add(const(I64, 24 + 96 + 576 + 19), e))
+            key = b.mul(b.add(b.mul(b.add(base, load_at(b, offsets, corner)), const(I64, 8)), code), const(I64, 8))
+            _prefetch(b, table, bits, key)
+
     with for_range(b, n) as c:
+        _prefetch_ahead(b, c, n, prefetch, PREFETCH_AHEAD // 4)  # 19 keys a cell
         full = b.icmp_signed(">=", count.get(), limit)
         with if_(b, b.and_(full, b.icmp_signed("==", done.get(), n))):
             done.set(c)  # the first cell not done; the rest are skipped
@@ -228,7 +272,20 @@ def emit_edge_ends(module: ir.Module):
         store_at(b, b.select(found, load_at(b, values, safe), nan), out_f, index)
         return ijk
 
+    def ends(index):
+        """The corner keys at the two ends of vertex key ``index``'s edge."""
+        payload = b.ashr(load_at(b, keys, index), three)
+        start, code = b.ashr(payload, three), b.and_(payload, seven)
+        step = b.add(b.add(b.mul(b.and_(code, one), b.mul(k, k)), b.mul(b.and_(b.lshr(code, one), one), k)),
+                     b.and_(b.lshr(code, const(I64, 2)), one))
+        return start, b.add(start, step), code
+
+    def prefetch(index):
+        for key in ends(index)[:2]:
+            _prefetch(b, table, bits, key)
+
     with for_range(b, n) as i:
+        _prefetch_ahead(b, i, n, prefetch)
         payload = b.ashr(load_at(b, keys, i), three)
         start = b.ashr(payload, three)
         code = b.and_(payload, seven)
