@@ -729,11 +729,11 @@ def _cap_blocks(whole: np.ndarray) -> tuple[list[tuple[int, np.ndarray]], np.nda
     mergeable = whole.copy()
     mergeable[[0, -1], :] = mergeable[:, [0, -1]] = False
     covered = np.zeros_like(mergeable)
-    levels = [mergeable]
+    levels: list[np.ndarray] = [mergeable]
     while len(levels[-1]) >= 2:  # level k: which aligned 2^k blocks are mergeable throughout
         m = levels[-1]
         half = len(m) // 2
-        levels.append(m.reshape(half, 2, half, 2).all((1, 3)))
+        levels.append(np.asarray(m.reshape(half, 2, half, 2).all((1, 3))))
     blocks = []
     for k in range(len(levels) - 1, 0, -1):
         size = 1 << k
