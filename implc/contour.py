@@ -663,18 +663,19 @@ def _fan_triangles(grid: _Grid, cells, inside, feature, cell_points: _Points, fa
     return np.concatenate(out) if out else np.zeros((0, 3), np.int64)
 
 
-def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
-    """The bounds' faces where the sampled F is negative, as triangles of vertex keys (T, 3), and the
-    cells beside them whose face there has both signs (they must be contoured too); the faces proven
-    outside (:meth:`_Grid.find_outside_faces`) are not sampled."""
-    out, seeds = [], []
+def _cap_triangles(grid: _Grid, face_points: _Points, is_feature, faces=None):
+    """The bounds' faces where the sampled F is negative, as triangles of vertex keys ({(axis, side): (T, 3)}),
+    and the cells beside them whose face there has both signs (they must be contoured too); ``faces``: only
+    those (default: all six); the faces proven outside (:meth:`_Grid.find_outside_faces`) are not sampled."""
+    caps, seeds = {}, []
     n = grid.n
     u, v = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     for axis in range(3):
         b, c = _face_axes(axis)
         for side in (0, 1):
-            if (axis, side) in grid.outside_faces:
+            if (axis, side) in grid.outside_faces or (faces is not None and (axis, side) not in faces):
                 continue
+            out: list[np.ndarray] = []
             grid_of_cells = np.zeros((n, n, 3), np.int64)
             grid_of_cells[..., axis] = side * (n - 1)
             grid_of_cells[..., b], grid_of_cells[..., c] = u, v
@@ -716,8 +717,8 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature):
                         continue
                     for triple in CAP_POLYGONS[polygon_case]:
                         out.append(np.stack([selves[pick, i] if i == j else edges[pick, i] for i, j in triple], 1))
-    triangles = np.concatenate(out) if out else np.zeros((0, 3), np.int64)
-    return triangles, (np.concatenate(seeds) if seeds else np.zeros((0, 3), np.int64))
+            caps[axis, side] = np.concatenate(out) if out else np.zeros((0, 3), np.int64)
+    return caps, (np.concatenate(seeds) if seeds else np.zeros((0, 3), np.int64))
 
 
 def _cap_blocks(whole: np.ndarray) -> tuple[list[tuple[int, np.ndarray]], np.ndarray]:
@@ -1020,7 +1021,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     index = _KeyIndex(runtime, 4 * len(crossed))
     kuhn, owner = index.kuhn_triangles(grid, todo.cells[crossed], todo.inside[crossed])
     owner = crossed[owner]  # rows of todo.cells
-    caps = index.number(caps)
+    caps = {face: index.number(triangles) for face, triangles in caps.items()}
     t2 = time.perf_counter()
     vertices, normals, ends = _vertices(grid, index.keys(), _NO_POINTS, _NO_POINTS, witnesses)
     t3 = time.perf_counter()
@@ -1030,7 +1031,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     if len(feature_rows):
         stats.added_cells += _with_features(grid, todo, feature_rows, index, mesh)
     vertices, normals, faces, ends = mesh.compacted()
-    stats.cap_triangles = len(mesh.caps)
+    stats.cap_triangles = sum(map(len, mesh.caps.values()))
     normals = _fill_normals(grid, normals, vertices, faces)
     t4 = time.perf_counter()
     crossed_cells = todo.cells[todo.crossed()]
@@ -1130,7 +1131,7 @@ class _Pieces:
     """The mesh as it is assembled, in blocks joined once at the end (fresh memory is what a big mesh costs
     most): the vertices (numbered by the vertex index) with their normals and witnesses (or None), a block
     per pass; the first pass's triangles with the row of the cell each came from, which of them stay
-    (``keep``, after the feature pass), the triangles the feature pass added; the caps'."""
+    (``keep``, after the feature pass), the triangles the feature pass added; the caps', face by face."""
 
     def __init__(self, vertices, normals, ends, faces, owner, caps):
         self.vertices, self.normals, self.ends = vertices, normals, ends  # the first pass's
@@ -1145,10 +1146,11 @@ class _Pieces:
     def compacted(self):
         """(vertices, normals, faces, witnesses), each written once, with the vertices no triangle uses left
         out (those of the first pass's triangles that the feature pass replaced)."""
-        if self.keep is None and not len(self.caps):
+        caps = [block for block in self.caps.values() if len(block)]
+        if self.keep is None and not caps:
             return self.vertices, self.normals, self.faces, self.ends
         kept = len(self.faces) if self.keep is None else int(np.count_nonzero(self.keep))
-        faces = np.empty((kept + sum(map(len, self.more)) + len(self.caps), 3), np.int64)
+        faces = np.empty((kept + sum(map(len, self.more)) + sum(map(len, caps)), 3), np.int64)
         if self.keep is None:
             faces[:kept] = self.faces
         else:
@@ -1156,7 +1158,7 @@ class _Pieces:
             # and so is take with out= and the default mode (it checks every index before it writes)
             np.take(self.faces, np.flatnonzero(self.keep), axis=0, out=faces[:kept], mode="clip")
         at = kept
-        for block in [*self.more, self.caps]:
+        for block in [*self.more, *caps]:
             faces[at:at + len(block)] = block
             at += len(block)
         blocks = [(self.vertices, self.normals, self.ends), *self.added]
@@ -1224,9 +1226,12 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
     fan = index.number(_fan_triangles(grid, todo.cells[rows], todo.inside[rows], is_feature(todo.cells[rows]),
                                       cell_points, face_points, is_feature))
     mesh.more = [kuhn, fan]
-    boundary = (feature_cells == 0) | (feature_cells == grid.n - 1)
-    if boundary.any() or reached:
-        mesh.caps = index.number(_cap_triangles(grid, face_points, is_feature)[0])
+    # the caps again where a feature cell lies on a face of the bounds (its square fanned from a face point)
+    redo = {(axis, side) for axis in range(3) for side in (0, 1)
+            if np.any(feature_cells[:, axis] == side * (grid.n - 1))}
+    if redo or reached:
+        caps = _cap_triangles(grid, face_points, is_feature, None if reached else redo)[0]
+        mesh.caps.update({face: index.number(triangles) for face, triangles in caps.items()})
     keys = index.keys()[first_new:]
     vertices, normals, ends = _vertices(grid, keys, cell_points, face_points, mesh.ends is not None)
     mesh.add_vertices(vertices, normals, ends)
