@@ -303,10 +303,14 @@ class _Grid:
         """The group of :data:`GROUP_CELLS`³ cells each point lies in (by its coordinates: a point on a
         group's face may go to either side, and every group's box reaches a cell beyond its cells)."""
         m = self.groups_per_axis
-        g = (points - self.lo) * (1.0 / (self.step * GROUP_CELLS))
-        np.clip(g, 0, m - 1, out=g)  # and truncated below: the floor of what is not negative
-        g = g.astype(np.int64)
-        return (g[:, 0] * m + g[:, 1]) * m + g[:, 2]  # not an integer matmul: numpy has no fast one
+        scale = 1.0 / (self.step * GROUP_CELLS)
+        label = np.zeros(len(points), np.int64)
+        for a in range(3):  # axis by axis: (N, 3) temporaries cost several times more
+            g = (points[:, a] - self.lo[a]) * scale[a]
+            np.clip(g, 0, m - 1, out=g)  # and truncated below: the floor of what is not negative
+            label *= m
+            label += g.astype(np.int64)
+        return label
 
     def group_boxes(self, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The boxes of groups: their cells and one more cell all round, within the bounds."""
