@@ -448,7 +448,10 @@ class _Cells:
     def add(self, more: np.ndarray) -> int:
         """Append the cells of ``more`` not yet here (their corners sampled), in the order of their keys;
         returns how many."""
-        keys = self.grid.cell_key(more)
+        return self._add_keys(self.grid.cell_key(more))
+
+    def _add_keys(self, keys: np.ndarray) -> int:
+        """:meth:`add` for the cells' keys."""
         if self.index.count:  # most are here already (the neighbours close() proposes): only the others sorted
             keys = keys[self.index.number(keys, insert=False) < 0]
         before = self.index.count
@@ -468,18 +471,22 @@ class _Cells:
         a cell here (from row ``start`` on: the earlier ones are closed already), until none is missing;
         returns how many were added."""
         added = self.add(seeds)
+        n = self.grid.n
         while True:
             signs = self.signs[start:]
+            keys = self.grid.cell_key(self.cells[start:])
             candidates = []
             for axis in range(3):
+                stride = n ** (2 - axis)  # a cell key's step along the axis
+                coordinate = self.cells[start:, axis]
                 for side in (0, 1):
                     face = np.uint8(sum(1 << c for c in range(8) if (c >> axis) & 1 == side))
                     on_face = signs & face
-                    neighbours = self.cells[start:][(on_face != 0) & (on_face != face)]
-                    neighbours[:, axis] += 1 if side else -1
-                    candidates.append(neighbours[(neighbours[:, axis] >= 0) & (neighbours[:, axis] < self.grid.n)])
+                    beyond = coordinate < n - 1 if side else coordinate > 0  # the neighbour is in the grid
+                    rows = np.flatnonzero((on_face != 0) & (on_face != face) & beyond)
+                    candidates.append(keys[rows] + (stride if side else -stride))  # keys: no (N, 3) temporaries
             start = len(self.cells)
-            fresh = self.add(np.concatenate(candidates))
+            fresh = self._add_keys(np.concatenate(candidates))
             if not fresh:
                 return added
             added += fresh
