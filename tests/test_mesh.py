@@ -377,6 +377,17 @@ def test_caps_merge_inside_squares_into_fans_and_stay_closed(monkeypatch):
     assert merged.volume == pytest.approx(square_by_square.volume, rel=1e-13)
 
 
+def test_caps_merge_beside_the_fanned_squares_of_creases_crossing_the_bounds():
+    """A CSG column clipped by the bounds: its four creases cross the top and bottom faces, whose caps hold
+    squares fanned from face points (feature cells) next to merged blocks; every validator passes, and the
+    volume is the column's (1 × 0.6 × 2) within the voxels' bounds."""
+    expr = sympy.Max(sympy.Abs(x) - sympy.Rational(1, 2), sympy.Abs(y) - sympy.Rational(3, 10), z - 2)
+    surface = implc.compile(expr, ((-1, 1),) * 3)
+    mesh = check_mesh(surface, 6, numpy_f(expr))
+    assert mesh.stats.feature_cells > 0 and mesh.stats.cap_triangles > 0
+    assert mesh.volume == pytest.approx(1.2, abs=2e-3)
+
+
 def test_nothing_inside_gives_an_empty_mesh():
     mesh = implc.mesh(implc.compile(x**2 + y**2 + z**2 + 1), 4)
     assert len(mesh.faces) == 0 and len(mesh.vertices) == 0
