@@ -448,10 +448,10 @@ class _Cells:
     def add(self, more: np.ndarray) -> int:
         """Append the cells of ``more`` not yet here (their corners sampled), in the order of their keys;
         returns how many."""
-        return self._add_keys(self.grid.cell_key(more))
+        return self.add_keys(self.grid.cell_key(more))
 
-    def _add_keys(self, keys: np.ndarray) -> int:
-        """:meth:`add` for the cells' keys."""
+    def add_keys(self, keys: np.ndarray) -> int:
+        """:meth:`add` for the cells' keys (row r of :attr:`cells` has the index's key r)."""
         if self.index.count:  # most are here already (the neighbours close() proposes): only the others sorted
             keys = keys[self.index.number(keys, insert=False) < 0]
         before = self.index.count
@@ -474,7 +474,7 @@ class _Cells:
         n = self.grid.n
         while True:
             signs = self.signs[start:]
-            keys = self.grid.cell_key(self.cells[start:])
+            keys = self.index.keys()[start:]  # the rows' own keys
             candidates = []
             for axis in range(3):
                 stride = n ** (2 - axis)  # a cell key's step along the axis
@@ -486,7 +486,7 @@ class _Cells:
                     rows = np.flatnonzero((on_face != 0) & (on_face != face) & beyond)
                     candidates.append(keys[rows] + (stride if side else -stride))  # keys: no (N, 3) temporaries
             start = len(self.cells)
-            fresh = self._add_keys(np.concatenate(candidates))
+            fresh = self.add_keys(np.concatenate(candidates))
             if not fresh:
                 return added
             added += fresh
@@ -730,6 +730,18 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature, faces=None):
                         out.append(np.stack([selves[pick, i] if i == j else edges[pick, i] for i, j in triple], 1))
             caps[axis, side] = np.concatenate(out) if out else np.zeros((0, 3), np.int64)
     return caps, (np.concatenate(seeds) if seeds else np.zeros((0, 3), np.int64))
+
+
+def _close_over_reached_faces(grid: _Grid, todo: _Cells, start: int):
+    """Where the cells from row ``start`` on reach a face of the bounds taken as outside
+    (:meth:`_Grid.touched`), that face is sampled after all and the cells are closed under its caps' seeds,
+    until none is reached: (cells added, the caps made last, or None where no face was reached)."""
+    added, caps = 0, None
+    while grid.touched(todo.cells[start:]):
+        start = len(todo.cells)  # the cells checked so far reach no other face taken as outside
+        caps, seeds = _cap_triangles(grid, _NO_POINTS, _never)
+        added += todo.close(seeds, start=start)
+    return added, caps
 
 
 def _cap_blocks(whole: np.ndarray) -> tuple[list[tuple[int, np.ndarray]], np.ndarray]:
@@ -1023,10 +1035,9 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     caps, seeds = _cap_triangles(grid, _NO_POINTS, _never)
     t1 = time.perf_counter()
     stats.added_cells = todo.close(seeds)
-    while grid.touched(todo.cells):  # a cell the signs added reaches a face taken as outside: sampled after all
-        before = len(todo.cells)
-        caps, seeds = _cap_triangles(grid, _NO_POINTS, _never)
-        stats.added_cells += todo.close(seeds, start=before)
+    added, caps_again = _close_over_reached_faces(grid, todo, 0)
+    stats.added_cells += added
+    caps = caps if caps_again is None else caps_again
     crossed = np.flatnonzero(todo.crossed())
     stats.crossed_cells = len(crossed)
     index = _KeyIndex(runtime, 4 * len(crossed))
@@ -1218,12 +1229,11 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
             neighbours.append(c[(c[:, axis] >= 0) & (c[:, axis] < grid.n)])
     fanned_keys = np.unique(grid.cell_key(np.concatenate(neighbours)))
     before = len(todo.cells)
-    todo.add(grid.cell_unkey(fanned_keys))
+    todo.add_keys(fanned_keys)
     added = todo.close(np.zeros((0, 3), np.int64), start=before)
-    reached = False  # a face taken as outside that the fanned cells, or those the signs added, reach
-    while grid.touched(todo.cells[before:]):
-        reached = True
-        added += todo.close(_cap_triangles(grid, _NO_POINTS, _never)[1], start=len(todo.cells))
+    more, caps_again = _close_over_reached_faces(grid, todo, before)
+    added += more
+    reached = caps_again is not None  # a face taken as outside that the fanned cells, or those the signs added, reach
     fanned = np.zeros(len(todo.cells), bool)
     fanned[todo.index.number(fanned_keys, insert=False)] = True
     cell_points, face_points = _place_points(grid, feature_cells, grid.cell_unkey(fanned_keys), index,

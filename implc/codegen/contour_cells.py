@@ -56,12 +56,11 @@ def _prefetch(b: ir.IRBuilder, table, bits, key):
     module = b.module
     name = "llvm.prefetch.p0i8"
     fn = module.globals.get(name)
+    i8p, i32 = ir.IntType(8).as_pointer(), ir.IntType(32)
     if fn is None:
-        i8p, i32 = ir.IntType(8).as_pointer(), ir.IntType(32)
         fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]), name=name)
-    ptr = b.bitcast(at(b, table, b.mul(_first_slot(b, bits, key), const(I64, 2))), ir.IntType(8).as_pointer())
-    i32 = ir.IntType(32)
-    b.call(fn, [ptr, ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+    ptr = b.bitcast(at(b, table, b.mul(_first_slot(b, bits, key), const(I64, 2))), i8p)
+    b.call(fn, [ptr, ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])  # read, keep, data
 
 
 def _prefetch_ahead(b: ir.IRBuilder, i, n, keys_of, distance=PREFETCH_AHEAD):
@@ -222,7 +221,7 @@ def emit_bent_cells(module: ir.Module):
 
 def _corner_point(b: ir.IRBuilder, geometry, k, cells, key, out, index):
     """Writes the world coordinates of corner ``key`` to out[3 index ...] (see :func:`emit_edge_ends` for
-    ``geometry``); returns its indices (i, j, k)."""
+    ``geometry``)."""
     ijk = [b.sdiv(key, b.mul(k, k)), b.srem(b.sdiv(key, k), k), b.srem(key, k)]
     for axis, i in enumerate(ijk):
         lo = load_at(b, geometry, 2 + axis)
@@ -231,7 +230,6 @@ def _corner_point(b: ir.IRBuilder, geometry, k, cells, key, out, index):
         inner = b.fadd(lo, b.fmul(b.sitofp(i, ir.DoubleType()), step))
         store_at(b, b.select(b.icmp_signed("==", i, cells), hi, inner), out, b.add(b.mul(index, const(I64, 3)),
                                                                                   const(I64, axis)))
-    return ijk
 
 
 def emit_corner_points(module: ir.Module):
@@ -263,35 +261,32 @@ def emit_edge_ends(module: ir.Module):
     seven, one, three = const(I64, 7), const(I64, 1), const(I64, 3)
 
     def corner(index, key, out_xyz, out_f):
-        ijk = _corner_point(b, geometry, k, cells, key, out_xyz, index)
+        _corner_point(b, geometry, k, cells, key, out_xyz, index)
         number = _number(b, table, bits, key, const(I64, 0), count, table)  # never inserts: no uniques written
         found = b.icmp_signed(">=", number, const(I64, 0))
         with if_(b, b.not_(found)):
             missing.set(b.add(missing.get(), one))
         safe = b.select(found, number, const(I64, 0))
         store_at(b, b.select(found, load_at(b, values, safe), nan), out_f, index)
-        return ijk
 
     def ends(index):
-        """The corner keys at the two ends of vertex key ``index``'s edge."""
+        """The corner keys at the two ends of vertex key ``index``'s edge (the code's bit a: one step
+        along axis a)."""
         payload = b.ashr(load_at(b, keys, index), three)
         start, code = b.ashr(payload, three), b.and_(payload, seven)
         step = b.add(b.add(b.mul(b.and_(code, one), b.mul(k, k)), b.mul(b.and_(b.lshr(code, one), one), k)),
                      b.and_(b.lshr(code, const(I64, 2)), one))
-        return start, b.add(start, step), code
+        return start, b.add(start, step)
 
     def prefetch(index):
-        for key in ends(index)[:2]:
+        for key in ends(index):
             _prefetch(b, table, bits, key)
 
     with for_range(b, n) as i:
         _prefetch_ahead(b, i, n, prefetch)
-        payload = b.ashr(load_at(b, keys, i), three)
-        start = b.ashr(payload, three)
-        code = b.and_(payload, seven)
-        ijk = corner(i, start, out_a, out_fa)
-        end = [b.add(ijk[axis], b.and_(b.lshr(code, const(I64, axis)), one)) for axis in range(3)]
-        corner(i, b.add(b.mul(b.add(b.mul(end[0], k), end[1]), k), end[2]), out_b, out_fb)
+        start, end = ends(i)
+        corner(i, start, out_a, out_fa)
+        corner(i, end, out_b, out_fb)
     b.ret(missing.get())
 
 
