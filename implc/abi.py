@@ -111,6 +111,12 @@ EDGE_ROOTS = _entry("implc_edge_roots", "phase:i64 n:i64 keys:i64* a:f64* b:f64*
 CORNER_POINTS = _entry("implc_corner_points", "keys:i64* n:i64 geometry:f64* points:f64*")
 RUNTIME_ENTRIES = (DROP_MARKED, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS, SPLAT,
                    HASH_INDEX, KUHN_TRIANGLES, BENT_CELLS, EDGE_ENDS, EDGE_ROOTS, CORNER_POINTS)
+FLAT_COLLAPSE = _entry("implc_flat_collapse", "faces:i64* vertices:f64* region:i64* planes:f64* inner:i8* movable:i8* "
+                                              "head:i64* next:i64* dead:i8* order:i64* count:i64 passes:i64 "
+                                              "min_sine:f64 stats:i64*", "i64")
+MESH_SIMPLIFY_ENTRIES = (FLAT_COLLAPSE,)
+"""... and the simplification of meshes' flat regions (:mod:`implc.codegen.flat_collapse`), a module of its
+own built on first use by ``simplify``."""
 KERNEL_WALK_ENTRIES = (SUBDIVIDE, NORMALS, TIGHTEN)
 """... and the compiled kernels' walk (subdivision, normals, second look), a module of its own
 (:func:`implc.codegen.runtime_module.build_kernel_walk`), built on first use by a surface with compiled

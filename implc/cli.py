@@ -366,6 +366,18 @@ def _color(text):
     return tuple(rgb)
 
 
+def _simplify_tolerance(text):
+    """--simplify's tolerance (None where not given); a usage error unless a positive finite number."""
+    if text is None:
+        return None
+    from .mesh_simplify import check_tolerance
+    try:
+        return check_tolerance(float(text))
+    except ValueError:
+        raise UsageError(f"--simplify takes a positive tolerance in the bounds' units, got "
+                         f"{shorten(text, quoted=True)}") from None
+
+
 def cmd_mesh(args) -> int:
     from .contour import MAX_DEPTH
     from .triangle_mesh import MESH_SUFFIXES
@@ -373,15 +385,18 @@ def cmd_mesh(args) -> int:
     _check_writable(out, MESH_SUFFIXES)
     _check_surface_options(args)
     _check_range(args.depth, "--depth", 1, MAX_DEPTH)
+    tolerance = _simplify_tolerance(args.simplify)
     name, surface, sc = _surface_from_args(args)
     depth = args.depth if args.depth is not None else (sc.depth if sc else 8)
     voxels, seconds = _voxelize(surface, depth, args.workers, args.quiet, tightness=args.tightness)
     t0 = time.perf_counter()
-    mesh = voxels.mesh()
+    mesh = voxels.mesh(simplify=tolerance)
     mesh.save(out)
     if not args.quiet:
-        print(f"{name}: {len(mesh.faces)} triangles, {len(mesh.vertices)} vertices at {1 << depth}³, volume "
-              f"{mesh.volume:.6g} (voxelized in {seconds:.2f} s, meshed in {time.perf_counter() - t0:.2f} s) -> {out}")
+        simplified = "" if tolerance is None else f" (simplified from {mesh.stats.simplified.triangles_before})"
+        print(f"{name}: {len(mesh.faces)} triangles{simplified}, {len(mesh.vertices)} vertices at {1 << depth}³, "
+              f"volume {mesh.volume:.6g} (voxelized in {seconds:.2f} s, meshed in {time.perf_counter() - t0:.2f} s) "
+              f"-> {out}")
     return 0
 
 
@@ -525,6 +540,9 @@ def _parser():
                                     "triangle mesh of {F < 0} within the bounds (.stl, .obj, .ply, .glb, .3mf)")
     surface_args(m)
     m.add_argument("-o", "--output", required=True, help="output: .stl, .obj, .ply, .glb or .3mf")
+    m.add_argument("--simplify", metavar="TOLERANCE",
+                   help="merge the flat parts' triangles, moving no point by more than TOLERANCE (in the bounds' "
+                        "units; e.g. a thousandth of a cell): the mesh stays closed, manifold and on the surface")
     m.set_defaults(run=cmd_mesh)
 
     w = sub.add_parser("view", help="view a scene, formula, .vm model, .npz or .zarr in the browser (levels of "

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .mesh_simplify import SimplifyStats
 from .surface import Grouping
 
 EDGE_MARGIN = 1.0 / 256
@@ -102,12 +103,15 @@ class MeshStats:
     triangles: int = 0
     vertices: int = 0
     seconds: dict = field(default_factory=dict)
+    simplified: SimplifyStats | None = None  # where the flat parts were simplified (Mesh.simplified)
 
     def summary(self) -> str:
         total = self.seconds.get("total", 0.0)
-        return (f"{self.triangles} triangles, {self.vertices} vertices from {self.crossed_cells} crossed cells "
-                f"of {self.cells} kept ({self.feature_cells} feature cells, {self.added_cells} added by the "
-                f"signs, {self.cap_triangles} cap triangles; {self.regular_cells} proven regular, "
+        simplified = "" if self.simplified is None else (
+            f" (simplified from {self.simplified.triangles_before} in {self.simplified.seconds:.3f} s)")
+        return (f"{self.triangles} triangles{simplified}, {self.vertices} vertices from {self.crossed_cells} "
+                f"crossed cells of {self.cells} kept ({self.feature_cells} feature cells, {self.added_cells} "
+                f"added by the signs, {self.cap_triangles} cap triangles; {self.regular_cells} proven regular, "
                 f"{self.unproven_cells} unproven), {total:.3f} s")
 
 

@@ -14,7 +14,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 
 from . import abi
-from .codegen.runtime_module import build_kernel_walk, build_runtime
+from .codegen.runtime_module import build_kernel_walk, build_mesh_simplify, build_runtime
 from .codegen.tape_engine_module import build_tape_engine
 from .jit import NativeModule
 
@@ -45,9 +45,9 @@ class TapeEngine:
 class Runtime:
     """The runtime module's entry points: ``drop_marked``, ``octree_insert``, ``octree_traverse``,
     ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``, ``kuhn_triangles``,
-    ``bent_cells``, ``edge_ends``, ``edge_roots`` and ``corner_points``; and the compiled kernels' walk,
-    ``subdivide``, ``normals`` and ``tighten``, from a module of its own compiled on first use (signatures
-    in :mod:`implc.abi`)."""
+    ``bent_cells``, ``edge_ends``, ``edge_roots`` and ``corner_points``; the compiled kernels' walk,
+    ``subdivide``, ``normals`` and ``tighten``, from a module of its own compiled on first use, and
+    likewise ``flat_collapse`` (meshes' simplification; signatures in :mod:`implc.abi`)."""
 
     _shared: Runtime | None = None
     _lock = threading.Lock()
@@ -55,6 +55,7 @@ class Runtime:
     def __init__(self):
         self.native = NativeModule(build_runtime, source_key="implc-runtime")
         self._walk: NativeModule | None = None  # the compiled kernels' walk, built on first use
+        self._simplify: NativeModule | None = None  # the meshes' simplification, built on first use
         self.drop_marked = self.native.bind(abi.DROP_MARKED)
         self.octree_insert = self.native.bind(abi.OCTREE_INSERT)
         self.octree_traverse = self.native.bind(abi.OCTREE_TRAVERSE)
@@ -74,6 +75,13 @@ class Runtime:
             if self._walk is None:
                 self._walk = NativeModule(build_kernel_walk, source_key="implc-kernel-walk")
         return self._walk.bind(entry)
+
+    @functools.cached_property
+    def flat_collapse(self):
+        with self._lock:
+            if self._simplify is None:
+                self._simplify = NativeModule(build_mesh_simplify, source_key="implc-mesh-simplify")
+        return self._simplify.bind(abi.FLAT_COLLAPSE)
 
     @functools.cached_property
     def subdivide(self):

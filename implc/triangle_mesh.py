@@ -85,6 +85,27 @@ class Mesh:
                 "degenerate": int(np.sum(repeated | ~(area2 > 0))),
                 "split_vertices": _split_vertices(f, len(self.vertices)), "volume": self.volume}
 
+    def simplified(self, tolerance: float) -> Mesh:
+        """This mesh with its flat parts' inner vertices collapsed away (:mod:`implc.mesh_simplify`): the
+        same closed, oriented 2-manifold, every vertex one of this mesh's (with its normal and witnesses),
+        no point moved by more than ``tolerance`` (in the bounds' units). Needs the normals at the
+        vertices (a mesh from contouring has them)."""
+        import copy
+
+        from .mesh_simplify import check_tolerance, simplify_flat
+        tolerance = check_tolerance(tolerance)
+        if self.normals is None:
+            raise ValueError("simplify needs the normals at the vertices (a mesh from implc.mesh has them)")
+        kept, faces, stats = simplify_flat(self.vertices, self.faces, self.normals, tolerance)
+        mesh_stats: Any = stats
+        if hasattr(self.stats, "simplified"):  # a contouring's: the counts now, and what the simplifying did
+            mesh_stats = copy.copy(self.stats)
+            mesh_stats.triangles, mesh_stats.vertices, mesh_stats.simplified = len(faces), len(kept), stats
+        result = Mesh(self.vertices[kept], faces, self.normals[kept], stats=mesh_stats, bounds=self.bounds)
+        result.witnesses = None if self.witnesses is None else self.witnesses[kept]
+        result.unproven_cells = self.unproven_cells
+        return result
+
     def show(self, *, height: int = 480, name: str = "", view: tuple[float, float] | None = None,
              max_bytes: int | None = None) -> Any:
         """The interactive viewer for a notebook (Jupyter displays what this returns): the page and the

@@ -18,6 +18,7 @@ import numpy as np
 from . import big_arrays
 from .contour import MAX_DEPTH as MESH_MAX_DEPTH
 from .contour import contour
+from .mesh_simplify import check_tolerance
 from .storage import bytes_per_voxel, make_backend
 from .storage.grid import dense_bytes
 from .storage.octree import Octree, OctreeAssembly, OctreeBuilder
@@ -149,20 +150,26 @@ class Voxels:
         """A notebook shows voxels as the viewer (with up to 4 MiB of levels of detail)."""
         return self.show(max_bytes=4 << 20)._repr_html_()
 
-    def mesh(self, surface: Surface | None = None, *, features: bool = True, witnesses: bool = False) -> Mesh:
+    def mesh(self, surface: Surface | None = None, *, features: bool = True, witnesses: bool = False,
+             simplify: float | None = None) -> Mesh:
         """The boundary of {F < 0} within the bounds as a closed, oriented, intersection-free triangle mesh,
         contoured over these voxels' cells (:func:`implc.contour.contour`; docs/soundness.md says what holds
         by construction). ``surface``: the surface these voxels came from, needed only for voxels read from
         a file. ``features``: fan the cells a crease or corner crosses from their QEF points (sharp CSG
         edges; False: every cell split the same way, creases chamfered). ``witnesses``: keep each vertex's
-        edge ends (``Mesh.witnesses``: two points of its cell where F has opposite signs)."""
+        edge ends (``Mesh.witnesses``: two points of its cell where F has opposite signs). ``simplify``: a
+        tolerance (in the bounds' units) to merge the flat parts' triangles within (:meth:`Mesh.simplified`).
+        """
+        if simplify is not None:
+            check_tolerance(simplify)  # refused before the contouring, not after it
         surface = self.surface if surface is None else surface
         if not isinstance(surface, Surface):
             raise ValueError("these voxels do not know their surface (read from a file?): pass it, "
                              "voxels.mesh(implc.compile(...))")
         if tuple(map(tuple, surface.bounds)) != tuple(map(tuple, self.bounds)):
             raise ValueError(f"the surface's bounds {surface.bounds} are not these voxels' {self.bounds}")
-        return contour(surface, self.coords, self.depth, self.bounds, features=features, witnesses=witnesses)
+        mesh = contour(surface, self.coords, self.depth, self.bounds, features=features, witnesses=witnesses)
+        return mesh if simplify is None else mesh.simplified(simplify)
 
     def inside_voxels(self) -> int:
         """How many voxels the inside octants cover."""
@@ -415,10 +422,10 @@ def _voxelize_on_cluster(surface, depth, cluster, *, progress, solid, say, optio
 
 
 def mesh(surface: Surface, depth: int = 8, *, workers: int | None = None, progress: bool = False,
-         features: bool = True, witnesses: bool = False, **options: Any) -> Mesh:
+         features: bool = True, witnesses: bool = False, simplify: float | None = None, **options: Any) -> Mesh:
     """The boundary of the solid {F < 0} within ``surface``'s bounds as a closed, oriented,
     intersection-free triangle mesh on the 2^depth grid: :func:`voxelize` finds the cells the surface may
-    meet, then :meth:`Voxels.mesh` contours them (``features``, ``witnesses``: see there).
+    meet, then :meth:`Voxels.mesh` contours them (``features``, ``witnesses``, ``simplify``: see there).
 
     The voxelization runs in the natural mode (:data:`NATURAL`) unless ``options`` (its tightness options)
     say otherwise: the mesh does not depend on them. A tighter voxelization keeps fewer cells, but it drops
@@ -434,8 +441,10 @@ def mesh(surface: Surface, depth: int = 8, *, workers: int | None = None, progre
     """
     if _check_depth(depth) > MESH_MAX_DEPTH:  # refused before the voxelization, not after it
         raise ValueError(f"meshes are made at depth 1 to {MESH_MAX_DEPTH}, not {depth}")
+    if simplify is not None:
+        check_tolerance(simplify)
     voxels = voxelize(surface, depth, workers=workers, progress=progress, **{**NATURAL, **options})
-    return voxels.mesh(features=features, witnesses=witnesses)
+    return voxels.mesh(features=features, witnesses=witnesses, simplify=simplify)
 
 
 @contextlib.contextmanager

@@ -4,8 +4,10 @@ The runtime module: the tape engine's end of the second look (dropping the leave
 :func:`.tighten.emit_drop_marked`), the octree (:mod:`.octree_index`), splatting (:mod:`.splat`) and the
 contouring's cells (:mod:`.contour_cells`). The kernel-walk module: the compiled kernels' subdivision
 (:mod:`.subdivision`), normals (:mod:`.normals`) and second look (:mod:`.tighten`), which the tape
-engine does not use (it has its own). :class:`implc.runtime.Runtime` compiles each once per process, the
-walk on first use: a cold start on a tape-engine model compiles a fifth of the IR it used to.
+engine does not use (it has its own). The mesh-simplification module: the collapse of flat regions'
+interior vertices (:mod:`.flat_collapse`). :class:`implc.runtime.Runtime` compiles each once per process,
+the walk and the simplification on first use: a cold start on a tape-engine model compiles a fifth of the
+IR it used to.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from .contour_cells import (
     emit_hash_index,
     emit_kuhn_triangles,
 )
+from .flat_collapse import emit_flat_collapse
 from .normals import emit_normals
 from .octree_index import (
     emit_octree_insert,
@@ -38,6 +41,13 @@ def build_kernel_walk() -> str:
     emit_subdivide(module)
     emit_normals(module)
     emit_tighten(module)
+    return str(module)
+
+
+def build_mesh_simplify() -> str:
+    """The LLVM IR text of the mesh-simplification module."""
+    module = ir.Module(name="implc_mesh_simplify")
+    emit_flat_collapse(module)
     return str(module)
 
 
