@@ -31,7 +31,7 @@ import numpy as np
 
 NORMAL_STEP = 1e-9
 """How closely the vertices of one flat region agree on their unit normal, per component."""
-MIN_SINE = 1e-9
+MIN_SINE = 1e-3
 """A face is kept turning one way in projection where the sine of its angle at the pivot exceeds this."""
 MAX_PASSES = 64
 """Passes over the movable vertices at most (they stop sooner, when one removes nothing)."""
