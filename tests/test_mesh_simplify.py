@@ -67,7 +67,7 @@ def farthest(points, mesh, reach):
     return worst
 
 
-@pytest.mark.parametrize("cells", [1e-3, 0.3])
+@pytest.mark.parametrize("cells", [1e-3, pytest.param(0.3, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.slow) if name in SLOW else name
                                   for name in sorted(CASES)])
 def test_simplified_meshes_keep_every_promise_and_stay_within_the_tolerance(name, cells):
