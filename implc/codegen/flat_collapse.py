@@ -2,8 +2,10 @@
 
 The mesh is closed and oriented: ``faces`` (three int64 vertex numbers each, counter-clockwise seen from
 outside), each face's corners linked per vertex (``head[v]``: v's first corner, ``next[c]``: the next
-corner of the same vertex, −1 at the end; a corner c is face c / 3, place c % 3). Each pass visits the
-vertices of ``order`` still ``movable`` and, for each:
+corner of the same vertex, −1 at the end; a corner c is face c / 3, place c % 3). First, each vertex
+of ``order`` (those in a region, ``region[v]``) is marked ``inner`` (and ``movable``, both zeroed by the
+caller) where its fan is interior to its region as below, with every neighbour in the region. Then each
+pass visits the vertices still ``movable`` and, for each:
 
 - gathers its fan (the far edges (a, b) of its live faces, at most :data:`MAX_FAN`; more: left for now);
 - checks it interior to its region r: every neighbour ``inner`` (in r, with every face around it in r,
