@@ -493,7 +493,7 @@ def test_a_voxel_point_cloud_ply_is_still_described_as_voxels(tmp_path, capsys):
 @pytest.mark.slow
 def test_tetgen_tetrahedralizes_the_meshes(tmp_path):
     """tetgen (as an FEA user would run it, in a subprocess: it can crash on bad input) accepts the meshes
-    and fills them with tetrahedra, checking for self-intersections as it goes (its -d mode); csg_part
+    and fills them with tetrahedra (its -p mode, the defaults here, stops on facets that intersect); csg_part
     simplified too (its flat faces' long thin triangles)."""
     pytest.importorskip("tetgen")
     for name, simplify in (("csg_part", None), ("paper_blobs", None), ("csg_part", 1e-3 * 2 / 64)):
