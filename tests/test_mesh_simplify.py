@@ -105,6 +105,7 @@ def test_a_surface_without_flat_parts_is_left_as_it_is():
     assert np.array_equal(mesh.faces, full.faces) and np.array_equal(mesh.vertices, full.vertices)
 
 
+@pytest.mark.slow
 def test_a_box_keeps_an_eighth_of_its_triangles_at_256():
     """libfive #595's complaint: a box inside the bounds at 256³, its six faces merged (the creases and the
     band of cells beside them keep their triangles), within a hundredth of a cell; the same mesh each time."""
