@@ -542,7 +542,8 @@ def _parser():
     m.add_argument("-o", "--output", required=True, help="output: .stl, .obj, .ply, .glb or .3mf")
     m.add_argument("--simplify", metavar="TOLERANCE",
                    help="merge the flat parts' triangles, moving no point by more than TOLERANCE (in the bounds' "
-                        "units; e.g. a thousandth of a cell): the mesh stays closed, manifold and on the surface")
+                        "units; a hundredth of a cell is plenty for CSG faces): the mesh stays closed, manifold and on "
+                        "the surface")
     m.set_defaults(run=cmd_mesh)
 
     w = sub.add_parser("view", help="view a scene, formula, .vm model, .npz or .zarr in the browser (levels of "
