@@ -157,7 +157,7 @@ def simplify_flat(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     dead = np.zeros(len(faces), np.uint8)
     if len(order):
         head, following = _corner_lists(faces, n)
-        passes = np.zeros(2, np.int64)
+        passes = np.zeros(1, np.int64)
         runtime.flat_collapse(faces.ctypes.data, vertices.ctypes.data, region.ctypes.data, planes.ctypes.data,
                               inner.ctypes.data, movable.ctypes.data, head.ctypes.data, following.ctypes.data,
                               dead.ctypes.data, order.ctypes.data, len(order), MAX_PASSES, MIN_SINE, passes.ctypes.data)

@@ -46,13 +46,13 @@ SLOW = {"box_minus_ball", "csg_part"}  # the biggest meshes: in the slow set
 
 
 def samples_on(mesh, count, rng):
-    """Points on the mesh's triangles: every vertex, and random points inside ``count`` triangles."""
+    """Random points inside ``count`` of the mesh's triangles (its vertices are the full mesh's own)."""
     tri = mesh.vertices[mesh.faces[rng.choice(len(mesh.faces), min(count, len(mesh.faces)), replace=False)]]
     u, v = rng.random((2, len(tri)))
     flip = u + v > 1
     u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
     inside = tri[:, 0] + u[:, None] * (tri[:, 1] - tri[:, 0]) + v[:, None] * (tri[:, 2] - tri[:, 0])
-    return np.concatenate([mesh.vertices, inside])
+    return inside
 
 
 def farthest(points, mesh, reach):
@@ -95,7 +95,7 @@ def test_simplified_meshes_keep_every_promise_and_stay_within_the_tolerance(name
     dropped = np.setdiff1d(np.arange(len(full.vertices)), index)
     far = full.vertices[rng.choice(dropped, min(300, len(dropped)), replace=False)]
     assert farthest(far, mesh, 2 * cell) <= tolerance * (1 + 1e-6)
-    assert farthest(samples_on(mesh, 300, rng)[-300:], full, 2 * cell) <= tolerance * (1 + 1e-6)
+    assert farthest(samples_on(mesh, 300, rng), full, 2 * cell) <= tolerance * (1 + 1e-6)
 
 
 def test_a_surface_without_flat_parts_is_left_as_it_is():

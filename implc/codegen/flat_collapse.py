@@ -19,8 +19,8 @@ pass visits the vertices still ``movable`` and, for each:
   neighbour of the vertex but u's two in the fan is a neighbour of u already (the link condition);
 - collapses into it: faces through u die (``dead``), the others take u and join u's corner list.
 
-Passes repeat until one removes nothing or ``passes`` ran. Returns the vertices removed; ``stats``: passes
-run, vertices found not interior.
+Passes repeat until one removes nothing or ``passes`` ran. Returns the vertices removed; ``stats[0]``: the
+passes run.
 """
 
 from __future__ import annotations
@@ -133,10 +133,10 @@ def emit_flat_collapse(module: ir.Module):
         return ([load_at(b, planes, b.add(b.mul(r, const(I64, 6)), const(I64, k))) for k in range(3)],
                 [load_at(b, planes, b.add(b.mul(r, const(I64, 6)), const(I64, 3 + k))) for k in range(3)])
 
-    def fan_interior(v, n, neighbour_ok):
-        """Whether v's gathered fan (n faces) turns one way on v's region's plane, once around v, with
-        ``neighbour_ok(a)`` (an i1) for every neighbour a."""
-        normal, tangent = plane_of(v)
+    def fan_interior(v, n, plane, neighbour_ok):
+        """Whether v's gathered fan (n faces) turns one way on its region's ``plane`` (:func:`plane_of`),
+        once around v, with ``neighbour_ok(a)`` (an i1) for every neighbour a."""
+        normal, tangent = plane
         pv = point(v)
         interior = Local(b, I1, const(I1, 1), "interior")
         crossings = Local(b, I64, 0, "crossings")
@@ -197,12 +197,11 @@ def emit_flat_collapse(module: ir.Module):
         n = gather_fan(v)
         with if_(b, b.and_(b.icmp_signed(">=", n, const(I64, 3)), b.icmp_signed("<=", n, const(I64, MAX_FAN)))):
             r = load_at(b, region, v)
-            inside = fan_interior(v, n, lambda a: b.icmp_signed("==", load_at(b, region, a), r))
+            inside = fan_interior(v, n, plane_of(v), lambda a: b.icmp_signed("==", load_at(b, region, a), r))
             store_at(b, b.zext(inside, I8), inner, v)
             store_at(b, b.zext(inside, I8), movable, v)
 
     removed_total = Local(b, I64, 0, "removed_total")
-    not_interior = Local(b, I64, 0, "not_interior")
     done_passes = Local(b, I64, 0, "passes")
     with while_true(b) as pass_loop:
         pass_loop.break_if(b.icmp_signed(">=", done_passes.get(), passes))
@@ -212,18 +211,17 @@ def emit_flat_collapse(module: ir.Module):
             with if_(b, b.icmp_unsigned("!=", load_at(b, movable, v), const(I8, 0))):
                 n = gather_fan(v)
                 with if_(b, b.and_(b.icmp_signed(">=", n, const(I64, 4)), b.icmp_signed("<=", n, const(I64, MAX_FAN)))):
-                    normal, _ = plane_of(v)
-                    is_interior = fan_interior(v, n, lambda a: b.icmp_unsigned("!=", load_at(b, inner, a),
-                                                                               const(I8, 0)))
+                    plane = plane_of(v)
+                    is_interior = fan_interior(v, n, plane, lambda a: b.icmp_unsigned("!=", load_at(b, inner, a),
+                                                                                      const(I8, 0)))
                     with b.if_else(is_interior) as (yes, no):
                         with no:
                             store_at(b, const(I8, 0), movable, v)
-                            not_interior.set(b.add(not_interior.get(), const(I64, 1)))
                         with yes:
                             best = Local(b, I64, -1, "best")
                             with for_range(b, n) as j:
                                 with if_(b, b.icmp_signed("<", best.get(), const(I64, 0))):  # the first valid
-                                    try_target(j, n, normal, best)
+                                    try_target(j, n, plane[0], best)
                             with if_(b, b.icmp_signed(">=", best.get(), const(I64, 0))):
                                 u = load_at(b, fan_a, best.get())
 
@@ -248,5 +246,4 @@ def emit_flat_collapse(module: ir.Module):
         removed_total.set(b.add(removed_total.get(), removed.get()))
         pass_loop.break_if(b.icmp_signed("==", removed.get(), const(I64, 0)))
     store_at(b, done_passes.get(), stats, 0)
-    store_at(b, not_interior.get(), stats, 1)
     b.ret(removed_total.get())
