@@ -106,8 +106,9 @@ BENT_CELLS = _entry("implc_bent_cells", "faces:i64* owner:i64* n:i64 normals:f64
                                         "bent:i8*")
 EDGE_ENDS = _entry("implc_edge_ends", "keys:i64* n:i64 geometry:f64* table:i64* bits:i64 values:f64* a:f64* b:f64* "
                                       "fa:f64* fb:f64*", "i64")
-EDGE_ROOTS = _entry("implc_edge_roots", "phase:i64 n:i64 keys:i64* a:f64* b:f64* fa:f64* fb:f64* state:f64* f:f64* "
-                                        "points:f64* margin:f64 nudge:f64", "i64")
+EDGE_ROOTS = _entry("implc_edge_roots", "phase:i64 n:i64 rows:i64* keys:i64* a:f64* b:f64* fa:f64* fb:f64* state:f64* "
+                                        "f:f64* g:f64* guesses:f64* vertices:f64* normals:f64* margin:f64 "
+                                        "nudge:f64 tolerance:f64", "i64")
 CORNER_POINTS = _entry("implc_corner_points", "keys:i64* n:i64 geometry:f64* points:f64*")
 RUNTIME_ENTRIES = (DROP_MARKED, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS, SPLAT,
                    HASH_INDEX, KUHN_TRIANGLES, BENT_CELLS, EDGE_ENDS, EDGE_ROOTS, CORNER_POINTS)

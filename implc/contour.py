@@ -13,8 +13,9 @@ a tetrahedralization of the voxel grid, cut by the bounds' faces where the solid
   is a valid tetrahedralization of the grid: points stay strictly inside their cells and faces.
 - **marching tetrahedra** over it: each tetrahedron whose vertices' signs differ holds one triangle or
   one quadrilateral (two triangles, split along the diagonal that keeps them on their sides). Each
-  surface vertex lies on a tetrahedron edge whose ends have opposite signs, at the root that regula
-  falsi finds there, kept a little inside the edge.
+  surface vertex lies on a tetrahedron edge whose ends have opposite signs, at the root that Newton's
+  method along the edge finds there (inside a bracket), kept a little inside the edge; its normal is F's
+  gradient where F was last sampled, at most :data:`ROOT_TOLERANCE` of the edge from the vertex.
 - **the caps**: each face of the bounds, triangulated as the tetrahedra's faces there, contributes the
   part where the sampled F is negative, so the mesh is closed where the solid meets the bounds. Squares
   inside throughout are merged into aligned blocks (:func:`_cap_blocks`), each a fan from its centre
@@ -50,7 +51,12 @@ from .surface import Grouping
 EDGE_MARGIN = 1.0 / 256
 """How far inside its edge (as a fraction of the edge) a surface vertex is kept: no triangle degenerates."""
 ROOT_STEPS = 3
-"""Regula falsi steps (Illinois) refining each surface vertex along its edge."""
+"""The most samples of F (with its gradient) that refine a surface vertex along its edge."""
+ROOT_TOLERANCE = 1e-3
+"""A surface vertex is done where Newton's step along its edge moves less than this fraction of the edge:
+the vertex takes that step (Newton converges quadratically: where F is smooth along the edge, its distance
+to F = 0 is of the order of the step squared), its normal is the gradient where F was sampled, at most
+this fraction of the edge away."""
 NUDGE = 1e-7
 """Each surface vertex moves along its edge by up to this fraction of the edge, by a hash of its key: the
 construction holds for any place inside the edge, and the nudge breaks the exact coplanarity that a
@@ -292,10 +298,19 @@ class _Grid:
 
     def gradients(self, points: np.ndarray, grouping: Grouping | None = None) -> np.ndarray:
         """F's analytic gradient at points, as :meth:`values` groups them."""
+        return self.values_and_gradients(points, grouping)[1]
+
+    def values_and_gradients(self, points: np.ndarray, grouping: Grouping | None = None):
+        """(F, its analytic gradient) at points in one pass, as :meth:`values` groups them (F NaN where it
+        is not finite on the tape engine, as there)."""
         points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
         if not self.grouped:
-            return self.surface.gradient(points)
-        return self.surface.eval_grouped(points, grouping or self.grouping(points), gradient=True)[1]
+            values, gradients = self.surface.value_and_gradient(points)
+        else:
+            values, gradients = self.surface.eval_grouped(points, grouping or self.grouping(points), gradient=True)
+        if self.surface.engine == "tape":
+            values[~np.isfinite(values)] = np.nan
+        return values, gradients
 
     def grouping(self, points: np.ndarray) -> Grouping | None:
         """The points sorted by :meth:`groups` for the tape engine (None where :attr:`grouped` is not set):
@@ -942,10 +957,10 @@ def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points:
 
 
 def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points, witnesses: bool):
-    """Positions of the vertices named by ``keys`` (unique): a point itself, or the root of F on
-    its edge, refined by regula falsi and kept inside the edge. Returns (positions, unit normals (NaN at a
-    point named by itself, and where F's gradient is not usable), witnesses: (V, 2, 3) the edge's ends,
-    the one where F < 0 first, a point named by itself twice; None unless ``witnesses``)."""
+    """Positions of the vertices named by ``keys`` (unique): a point itself, or the root of F on its edge
+    (:func:`_edge_roots`). Returns (positions, unit normals (NaN at a point named by itself, and where F's
+    gradient is not usable), witnesses: (V, 2, 3) the edge's ends, the one where F < 0 first, a point named
+    by itself twice; None unless ``witnesses``)."""
     a, b, fa, fb = _endpoints(grid, keys, cell_points, face_points)
     on_edge = np.flatnonzero(np.any(a != b, axis=1))
     ends = np.stack([a, b], 1) if witnesses else None
@@ -963,24 +978,47 @@ def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: 
 
 
 def _edge_roots(grid: _Grid, keys, a, b, fa, fb) -> tuple[np.ndarray, np.ndarray]:
-    """The surface vertex on each edge (a, b) with values (fa, fb) of opposite signs: regula falsi
-    (Illinois, :data:`ROOT_STEPS` samples of F), kept :data:`EDGE_MARGIN` inside the edge and nudged by
-    the hash of its key (native: ``implc_edge_roots``), and the unit normal there. Swaps the ends in place
-    so that F(a) < 0. The points are grouped once for all the samples: each stays on its edge."""
+    """The surface vertex on each edge (a, b) with values (fa, fb) of opposite signs, and a unit normal:
+    Newton's method along the edge from the secant through its ends, inside a bracket (regula falsi where
+    a Newton step would leave it), F and its gradient sampled together. An edge is done where Newton's step
+    moves less than :data:`ROOT_TOLERANCE` of the edge: its vertex is the Newton point, its normal F's
+    gradient at the point sampled, that step away. After :data:`ROOT_STEPS` samples an edge still open
+    takes the secant through its bracket, and the gradient there. Every point is kept :data:`EDGE_MARGIN`
+    inside the edge and nudged by the hash of its key (native: ``implc_edge_roots``). Swaps the ends in
+    place so that F(a) < 0. The points are grouped once (each stays on its edge): the edges still open at
+    each step are a subset of that grouping."""
     n = len(keys)
     keys = np.ascontiguousarray(keys, dtype=np.int64)
-    state, points = np.empty((5, n)), np.empty((n, 3))
+    vertices = np.empty((n, 3))
     if not n:
-        return points, points.copy()
+        return vertices, vertices.copy()
+    rows, state = np.empty(n, np.int64), np.empty((n, 5))
     run = grid.runtime.edge_roots
-    pointers = [keys.ctypes.data, a.ctypes.data, b.ctypes.data, fa.ctypes.data, fb.ctypes.data, state.ctypes.data]
-    if run(0, n, *pointers, None, points.ctypes.data, EDGE_MARGIN, NUDGE):
+    ends = [keys.ctypes.data, a.ctypes.data, b.ctypes.data, fa.ctypes.data, fb.ctypes.data, state.ctypes.data]
+    tail = [EDGE_MARGIN, NUDGE, ROOT_TOLERANCE]
+    if run(0, n, rows.ctypes.data, *ends, None, None, None, vertices.ctypes.data, None, *tail):
         raise AssertionError("a surface vertex's edge does not change sign: the samples are not repeatable")
-    grouping = grid.grouping(points)
+    # the first samples are taken at the vertices' rows and their gradients are the normals' rows (an edge
+    # done at once has its normal in place); the others' next guesses are packed into ``guesses``
+    whole = grid.grouping(vertices)
+    f, normals = grid.values_and_gradients(vertices, whole)
+    normals = np.ascontiguousarray(normals, dtype=np.float64)
+    g, guesses = normals, np.empty((n, 3))  # pages of guesses never written cost nothing
+    grouping, open_ = whole, n
     for step in range(ROOT_STEPS):
-        f = np.ascontiguousarray(grid.values(points, grouping), dtype=np.float64)
-        run(2 if step == ROOT_STEPS - 1 else 1, n, *pointers, f.ctypes.data, points.ctypes.data, EDGE_MARGIN, NUDGE)
-    return points, _unit(grid.gradients(points, grouping))
+        if step:
+            f, g = grid.values_and_gradients(guesses[:open_], grouping)
+        f, g = np.ascontiguousarray(f, dtype=np.float64), np.ascontiguousarray(g, dtype=np.float64)
+        open_ = run(1, open_, rows.ctypes.data, *ends, f.ctypes.data, g.ctypes.data, guesses.ctypes.data,
+                     vertices.ctypes.data, normals.ctypes.data, *tail)
+        if not open_:
+            break
+        grouping = whole.subset(rows[:open_]) if whole is not None else None
+    if open_:
+        run(2, open_, rows.ctypes.data, *ends, None, None, guesses.ctypes.data, vertices.ctypes.data,
+            normals.ctypes.data, *tail)
+        normals[rows[:open_]] = grid.gradients(guesses[:open_], grouping)
+    return vertices, _unit(normals)
 
 
 def _unit(normals: np.ndarray) -> np.ndarray:

@@ -170,14 +170,17 @@ def _pruned_by_kernels(tape: Tape) -> set[int]:
 class Grouping:
     """Rows sorted by group and padded to whole blocks of eight, as ``implc_tape_grouped`` takes them: made
     once from the rows' group labels (int64) and ``boxes`` (the (lo, hi) corners, (M, 3) each, of the sorted
-    distinct labels asked for), used for every call over rows with those groups (a vertex's regula falsi
-    steps and its normal)."""
+    distinct labels asked for), used for every call over rows with those groups (a vertex's root steps
+    and its normal; :meth:`subset` for the rows still open after a step)."""
 
     def __init__(self, groups: np.ndarray, boxes: Callable[[np.ndarray], tuple]):
         groups = np.asarray(groups)
-        n = self.rows = len(groups)
         order = np.argsort(groups)  # any order within a group: each row's result is its own
-        ordered = groups[order]
+        self._arrange(order, groups[order], boxes)
+
+    def _arrange(self, order: np.ndarray, ordered: np.ndarray, boxes: Callable[[np.ndarray], tuple]):
+        """The padded places of the rows ``order`` (sorted by group), whose labels are ``ordered``."""
+        n = self.rows = len(order)
         first = np.flatnonzero(np.concatenate([[True], ordered[1:] != ordered[:-1]])) if n else np.zeros(0, np.int64)
         counts = np.diff(np.append(first, n))
         self.lo, self.hi = (np.ascontiguousarray(a, dtype=np.float64) for a in boxes(ordered[first]))
@@ -191,6 +194,18 @@ class Grouping:
         self.taken = order[source]  # the row in each padded place
         self.place = np.empty(n, np.int64)  # each row's padded place
         self.place[order] = at_row
+        self._order, self._ordered, self._boxes = order, ordered, boxes
+
+    def subset(self, rows: np.ndarray) -> Grouping:
+        """The grouping of ``rows`` (increasing row numbers of this one's), as row 0, 1, … in that order:
+        the same groups, without sorting again."""
+        keep = np.zeros(self.rows, bool)
+        keep[rows] = True
+        renumber = np.cumsum(keep) - 1
+        sorted_kept = keep[self._order]
+        sub = Grouping.__new__(Grouping)
+        sub._arrange(renumber[self._order[sorted_kept]], self._ordered[sorted_kept], self._boxes)
+        return sub
 
 
 def _grouping(groups: np.ndarray | Grouping, boxes: Callable[[np.ndarray], tuple] | None) -> Grouping:

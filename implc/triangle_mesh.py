@@ -26,7 +26,8 @@ class MeshFileError(ValueError):
 class Mesh:
     """A triangle mesh in world coordinates: ``vertices`` (V, 3) float64, ``faces`` (F, 3) int64 vertex
     indices, counter-clockwise seen from outside, ``normals`` (V, 3) float64 unit normals at the vertices
-    (F's analytic gradient where the vertex lies on F = 0), ``stats`` (how it was made) and ``bounds``;
+    (from contouring: F's analytic gradient at the last point sampled on the vertex's edge, within 10⁻³ of
+    the edge of the vertex; docs/soundness.md), ``stats`` (how it was made) and ``bounds``;
     from contouring, ``unproven_cells`` ((k, 3) grid indices: the crossed cells not proven regular, see
     :class:`implc.contour.MeshStats`)."""
 

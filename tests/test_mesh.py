@@ -244,6 +244,50 @@ def test_creases_and_corners_of_csg_are_sharp():
     assert chamfered.max() > 0.3
 
 
+def edge_parameters(mesh):
+    """For the vertices found on an edge (witnesses apart): their rows, the edge's length and the vertex's
+    place t along it (0 at the inside end)."""
+    a, b = mesh.witnesses[:, 0], mesh.witnesses[:, 1]
+    rows = np.flatnonzero(np.any(a != b, axis=1))
+    a, b, v = a[rows], b[rows], mesh.vertices[rows]
+    length = np.linalg.norm(b - a, axis=1)
+    return rows, length, np.einsum("ij,ij->i", v - a, b - a) / length**2
+
+
+@pytest.mark.parametrize("depth", [5, 7])
+def test_vertices_lie_on_a_ball_and_their_normals_are_its_normals_near_them(depth):
+    """A ball's distance and normal in closed form: every vertex on an edge lies on the sphere but for its
+    nudge (NUDGE of the edge) and a ten-millionth of the edge more (Newton's last step, quadratic), or, where
+    the root lies within EDGE_MARGIN of an edge's end, at that margin; its normal is the sphere's normal at
+    a point at most ROOT_TOLERANCE of the edge away (within that distance over r, in radians)."""
+    from implc.contour import EDGE_MARGIN, NUDGE, ROOT_TOLERANCE
+    r = np.sqrt(0.5)
+    mesh = implc.voxelize(implc.compile(x**2 + y**2 + z**2 - sympy.Rational(1, 2)), depth).mesh(witnesses=True)
+    rows, length, t = edge_parameters(mesh)
+    v, n = mesh.vertices[rows], mesh.normals[rows]
+    distance = np.abs(np.linalg.norm(v, axis=1) - r)
+    at_margin = (t < EDGE_MARGIN + 2 * NUDGE) | (t > 1 - EDGE_MARGIN - 2 * NUDGE)
+    assert at_margin.mean() < 0.01
+    assert np.all(distance[~at_margin] <= (NUDGE + 1e-7) * length[~at_margin])
+    assert np.all(distance[at_margin] <= (EDGE_MARGIN + NUDGE) * length[at_margin])
+    angle = np.arccos(np.clip(np.einsum("ij,ij->i", n, v / np.linalg.norm(v, axis=1)[:, None]), -1, 1))
+    assert np.all(angle <= ROOT_TOLERANCE * length / r)
+
+
+def test_a_face_on_a_grid_plane_keeps_its_vertices_at_the_edges_margin():
+    """A box whose face x = 1/2 lies on a plane of the grid (F = 0 at those corners, taken as outside): every
+    vertex of that face lies at the margin of its edge next to the plane, however the root search went."""
+    from implc.contour import EDGE_MARGIN, NUDGE
+    box = sympy.Max(sympy.Abs(x) - sympy.Rational(1, 2), sympy.Abs(y) - sympy.Rational(2, 5),
+                    sympy.Abs(z) - sympy.Rational(3, 10))
+    mesh = implc.voxelize(implc.compile(box), 6).mesh(witnesses=True)
+    rows, length, _ = edge_parameters(mesh)
+    face = np.abs(mesh.normals[rows, 0]) == 1
+    assert face.sum() > 1000
+    gap = np.abs(np.abs(mesh.vertices[rows[face], 0]) - 0.5)
+    assert np.all(gap <= (EDGE_MARGIN + NUDGE) * length[face])
+
+
 # -- the native pieces ------------------------------------------------------------------------------------
 def test_the_key_index_numbers_keys_in_first_seen_order_as_it_grows():
     from implc.contour import _KeyIndex

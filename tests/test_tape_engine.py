@@ -423,6 +423,11 @@ def test_points_grouped_by_box_give_f_and_its_gradient(expr, seed):
     moved = points + rng.uniform(0, 1, (len(points), 1)) * (centres - points)  # towards the box's centre
     np.testing.assert_array_equal(surface.eval_grouped(moved, plan)[0], surface.eval(moved))
     np.testing.assert_array_equal(surface.eval_grouped(points, plan)[0], whole)
+    # a subset of its rows (the edges still open after a root step) grouped without sorting again
+    rows = np.flatnonzero(rng.uniform(size=len(points)) < 0.4)
+    subset = plan.subset(rows)
+    assert subset.rows == len(rows)
+    np.testing.assert_array_equal(surface.eval_grouped(moved[rows], subset)[0], surface.eval(moved[rows]))
     f_values, gradients = surface.eval_grouped(points, labels, boxes, gradient=True)
     f = sympy.lambdify((x, y, z), expr, "numpy")
 

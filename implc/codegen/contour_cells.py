@@ -291,82 +291,131 @@ def emit_edge_ends(module: ir.Module):
 
 
 def emit_edge_roots(module: ir.Module):
-    """``implc_edge_roots(phase, n, keys, a, b, fa, fb, state, f, points, margin, nudge)``: regula falsi
-    (Illinois) for the root of F on n edges from a to b (three doubles per end), one phase per call, F
-    sampled by the caller at ``points`` between calls. ``state``: five rows of n doubles (the bracket's
-    t and F at its inside and outside ends, the last guess).
+    """``implc_edge_roots(phase, n, rows, keys, a, b, fa, fb, state, f, g, guesses, vertices, normals, margin,
+    nudge, tolerance)``: the root of F on edges from a to b (three doubles per end) by Newton's method along
+    the edge, kept inside a bracket (regula falsi, Illinois, where a Newton step would leave it), one phase
+    per call, F and its gradient sampled by the caller between calls. ``state``: five doubles
+    per edge (the bracket's t and F at its inside and outside ends, the last guess). Every guess t is kept
+    in [margin, 1 − margin] and moved by up to ``nudge`` by the Fibonacci hash of the edge's key (a guess
+    outside its bracket, or not finite, is the bracket's middle).
 
-    - phase 0: puts each edge's inside end (F < 0) first, swapping a with b and fa with fb in place,
-      opens the bracket [0, 1] and writes the first guesses to ``points``; returns how many edges do not
-      change sign (F < 0 at neither end or at both, NaN counting as outside);
-    - phase 1: reads F at the guesses in ``f``, narrows the brackets and writes the next guesses;
-    - phase 2: as phase 1, then the root t (the secant through the bracket, its middle where that is not
-      finite), kept in [margin, 1 − margin] and moved by up to ``nudge`` by the Fibonacci hash of the
-      edge's key: ``points`` receives the vertices. Returns 0 after phases 1 and 2.
-
-    A guess outside its bracket (or not finite) is the bracket's middle."""
+    - phase 0 (``n``: all the edges): puts each edge's inside end (F < 0) first, swapping a with b and fa
+      with fb in place, opens the bracket [0, 1], writes the first guesses (the secant through the ends)
+      to ``vertices`` and the edges' numbers 0 … n − 1 to ``rows``; returns how many edges do not change sign
+      (F < 0 at neither end or at both, NaN counting as outside);
+    - phase 1 (``n``: the edges still open, row j of ``rows``, ``f`` and ``g`` for edge ``rows[j]``):
+      narrows each bracket by the sign of F at its guess. An edge is done where F is 0 there or its next
+      guess (Newton's: F over its derivative ∇F·(b − a)) lies in the bracket within ``tolerance`` (a
+      fraction of the edge) of the guess: its vertex is that Newton point (the guess where F is 0), its
+      normal the gradient at the guess (``vertices`` and ``normals``, rows by edge number). The others'
+      numbers and next guesses are packed to the front of ``rows`` and ``guesses``; returns how many;
+    - phase 2 (``n``: the edges still open): each one's vertex is the secant through its bracket, written
+      to ``vertices`` and, packed, to ``guesses`` (for the caller's gradients); returns 0."""
     fn, b = define(module, abi.EDGE_ROOTS)
-    phase, n, keys, a, bb, fa, fb, state, f, points, margin, nudge = fn.args
+    phase, n, rows, keys, a, bb, fa, fb, state, f, g, guesses, vertices, normals, margin, nudge, tolerance = fn.args
     double = ir.DoubleType()
     zero, one_d, half = const(double, 0.0), const(double, 1.0), const(double, 0.5)
-    three = const(I64, 3)
-    bad = Local(b, I64, 0, "bad")
+    three, five = const(I64, 3), const(I64, 5)
+    counted = Local(b, I64, 0, "counted")  # phase 0: edges without a sign change; phase 1: edges still open
+    top = b.fsub(one_d, margin)
 
-    def row(r, i):
-        return at(b, state, b.add(b.mul(const(I64, r), n), i))
+    def field(i, k):
+        return at(b, state, b.add(b.mul(i, five), const(I64, k)))
 
     def secant(t_in, t_out, f_in, f_out):
         return b.fsub(t_in, b.fdiv(b.fmul(f_in, b.fsub(t_out, t_in)), b.fsub(f_out, f_in)))
+
+    def within(t, lo, hi):
+        """lo <= t <= hi (false for NaN): an end is a fine guess, kept off it by the margin."""
+        return b.and_(b.fcmp_ordered(">=", t, lo), b.fcmp_ordered("<=", t, hi))
 
     def clip(t, lo, hi):
         t = b.select(b.fcmp_ordered(">", t, lo), t, lo)
         return b.select(b.fcmp_ordered("<", t, hi), t, hi)
 
-    def write_point(i, t):
-        for axis in range(3):
-            k = b.add(b.mul(i, three), const(I64, axis))
-            p, q = load_at(b, a, k), load_at(b, bb, k)
-            store_at(b, b.fadd(p, b.fmul(t, b.fsub(q, p))), points, k)
+    def placed(i, t):
+        """t kept in [margin, 1 − margin] and nudged by edge i's hash."""
+        hashed = b.lshr(b.mul(load_at(b, keys, i), const(I64, GOLDEN - (1 << 64))), const(I64, 11))
+        unit = b.fsub(b.fmul(b.uitofp(hashed, double), const(double, 2.0 ** -52)), one_d)
+        return clip(b.fadd(clip(t, margin, top), b.fmul(nudge, unit)), margin, top)
 
-    with for_range(b, n) as i:
-        with if_(b, b.icmp_signed("==", phase, const(I64, 0))):
-            with if_(b, b.not_(b.fcmp_ordered("<", load_at(b, fa, i), zero))):
-                for ptr_a, ptr_b, count in ((a, bb, 3), (fa, fb, 1)):
-                    for axis in range(count):
-                        k = b.add(b.mul(i, const(I64, count)), const(I64, axis)) if count > 1 else i
-                        p, q = load_at(b, ptr_a, k), load_at(b, ptr_b, k)
-                        store_at(b, q, ptr_a, k)
-                        store_at(b, p, ptr_b, k)
-            crosses = b.and_(b.fcmp_ordered("<", load_at(b, fa, i), zero),
-                             b.not_(b.fcmp_ordered("<", load_at(b, fb, i), zero)))
-            with if_(b, b.not_(crosses)):
-                bad.set(b.add(bad.get(), const(I64, 1)))
-            b.store(zero, row(0, i))
-            b.store(one_d, row(1, i))
-            b.store(load_at(b, fa, i), row(2, i))
-            b.store(load_at(b, fb, i), row(3, i))
-        with if_(b, b.icmp_signed("!=", phase, const(I64, 0))):
-            value, guess = load_at(b, f, i), b.load(row(4, i))
-            neg = b.fcmp_ordered("<", value, zero)  # false for NaN: outside
-            t_in, t_out, f_in, f_out = (b.load(row(r, i)) for r in range(4))
-            b.store(b.select(neg, guess, t_in), row(0, i))
-            b.store(b.select(neg, t_out, guess), row(1, i))
-            b.store(b.select(neg, value, b.fmul(f_in, half)), row(2, i))  # Illinois: halve the end that stays
-            b.store(b.select(neg, b.fmul(f_out, half), value), row(3, i))
-        t_in, t_out, f_in, f_out = (b.load(row(r, i)) for r in range(4))
-        middle = b.fmul(b.fadd(t_in, t_out), half)
-        with if_(b, b.icmp_signed("!=", phase, const(I64, 2))):
-            guess = secant(t_in, t_out, f_in, f_out)
-            inner = b.and_(b.fcmp_ordered(">", guess, t_in), b.fcmp_ordered("<", guess, t_out))
-            guess = b.select(inner, guess, middle)
-            b.store(guess, row(4, i))
-            write_point(i, guess)
-        with if_(b, b.icmp_signed("==", phase, const(I64, 2))):
-            t = secant(t_in, t_out, f_in, f_out)
-            inner = b.and_(b.fcmp_ordered(">=", t, t_in), b.fcmp_ordered("<=", t, t_out))
-            top = b.fsub(one_d, margin)
-            t = clip(b.select(inner, t, middle), margin, top)
-            hashed = b.lshr(b.mul(load_at(b, keys, i), const(I64, GOLDEN - (1 << 64))), const(I64, 11))
-            unit = b.fsub(b.fmul(b.uitofp(hashed, double), const(double, 2.0 ** -52)), one_d)
-            write_point(i, clip(b.fadd(t, b.fmul(nudge, unit)), margin, top))
-    b.ret(bad.get())
+    def slot(ptr, j, axis):
+        return at(b, ptr, b.add(b.mul(j, three), const(I64, axis)))
+
+    def write_point(i, t, targets):
+        """Edge i's point at t into each (array, row) of ``targets``."""
+        for axis in range(3):
+            p, q = b.load(slot(a, i, axis)), b.load(slot(bb, i, axis))
+            value = b.fadd(p, b.fmul(t, b.fsub(q, p)))
+            for target, j in targets:
+                b.store(value, slot(target, j, axis))
+
+    def guess(i, t_in, t_out, f_in, f_out, newton):
+        """The next guess: ``newton`` where it lies in the bracket, else the secant, else the middle; placed."""
+        s = secant(t_in, t_out, f_in, f_out)
+        s = b.select(within(s, t_in, t_out), s, b.fmul(b.fadd(t_in, t_out), half))
+        return placed(i, b.select(within(newton, t_in, t_out), newton, s))
+
+    with b.if_else(b.icmp_signed("==", phase, const(I64, 0))) as (first, later):
+        with first:
+            with for_range(b, n) as i:
+                store_at(b, i, rows, i)
+                with if_(b, b.not_(b.fcmp_ordered("<", load_at(b, fa, i), zero))):
+                    for axis in range(3):
+                        p, q = slot(a, i, axis), slot(bb, i, axis)
+                        vp, vq = b.load(p), b.load(q)
+                        b.store(vq, p)
+                        b.store(vp, q)
+                    vp, vq = load_at(b, fa, i), load_at(b, fb, i)
+                    store_at(b, vq, fa, i)
+                    store_at(b, vp, fb, i)
+                f_in, f_out = load_at(b, fa, i), load_at(b, fb, i)
+                crosses = b.and_(b.fcmp_ordered("<", f_in, zero), b.not_(b.fcmp_ordered("<", f_out, zero)))
+                with if_(b, b.not_(crosses)):
+                    counted.set(b.add(counted.get(), const(I64, 1)))
+                for k, value in enumerate((zero, one_d, f_in, f_out)):
+                    b.store(value, field(i, k))
+                t = guess(i, zero, one_d, f_in, f_out, const(double, float("nan")))
+                b.store(t, field(i, 4))
+                write_point(i, t, [(vertices, i)])
+        with later:
+            with for_range(b, n) as j:
+                i = load_at(b, rows, j)
+                t_in, t_out, f_in, f_out, t = (b.load(field(i, k)) for k in range(5))
+                with b.if_else(b.icmp_signed("==", phase, const(I64, 1))) as (step, last):
+                    with step:
+                        value = load_at(b, f, j)
+                        neg = b.fcmp_ordered("<", value, zero)  # false for NaN: outside
+                        bracket = (b.select(neg, t, t_in), b.select(neg, t_out, t),
+                                   b.select(neg, value, b.fmul(f_in, half)),  # Illinois: halve the end that stays
+                                   b.select(neg, b.fmul(f_out, half), value))
+                        for k, v in enumerate(bracket):
+                            b.store(v, field(i, k))
+                        slope = zero
+                        for axis in range(3):
+                            d = b.fsub(b.load(slot(bb, i, axis)), b.load(slot(a, i, axis)))
+                            slope = b.fadd(slope, b.fmul(b.load(slot(g, j, axis)), d))
+                        newton = b.fsub(t, b.fdiv(value, slope))
+                        following = guess(i, *bracket, newton)
+                        distance = b.fsub(following, t)
+                        close = b.and_(b.fcmp_ordered("<=", distance, tolerance),
+                                       b.fcmp_ordered(">=", distance, b.fneg(tolerance)))
+                        done = b.or_(b.fcmp_ordered("==", value, zero),
+                                     b.and_(within(newton, bracket[0], bracket[1]), close))
+                        with b.if_else(done) as (finished, open_):
+                            with finished:  # at the Newton point (the guess itself where F is 0 there)
+                                write_point(i, b.select(b.fcmp_ordered("==", value, zero), t, following),
+                                            [(vertices, i)])
+                                for axis in range(3):
+                                    b.store(b.load(slot(g, j, axis)), slot(normals, i, axis))
+                            with open_:  # packed: row w <= j, whose point was read already
+                                w = counted.get()
+                                store_at(b, i, rows, w)
+                                b.store(following, field(i, 4))
+                                write_point(i, following, [(guesses, w)])
+                                counted.set(b.add(w, const(I64, 1)))
+                    with last:
+                        s = secant(t_in, t_out, f_in, f_out)
+                        s = b.select(within(s, t_in, t_out), s, b.fmul(b.fadd(t_in, t_out), half))
+                        write_point(i, placed(i, s), [(vertices, i), (guesses, j)])
+    b.ret(counted.get())
