@@ -46,9 +46,9 @@ def build_tape_engine(directed: bool) -> str:
     simplify = emit_tape_simplify(module)
     normals = emit_tape_normals(module, dual)
     box_gradient = emit_tape_box_gradient(module, directed)
-    tighten = emit_tape_tighten(module, interval, box_gradient, directed)
-    emit_tape_subdivide(module, prefill, interval, simplify, normals, tighten)
     point = emit_tape_dual(module, partials=False)
+    tighten = emit_tape_tighten(module, interval, box_gradient, point, directed)
+    emit_tape_subdivide(module, prefill, interval, simplify, normals, tighten)
     emit_tape_grouped(module, prefill, interval, simplify, point, dual, box_gradient)
     null_remap = ir.Constant(_P(ir.IntType(32)), None)
 
