@@ -80,6 +80,10 @@ PROOF_LEVELS = 2
 """How many levels below the grid the proof of regular cells looks, in the cells it has not proven yet."""
 PROOF_YIELD = 0.25
 """The share of the boxes a level of the proof must prove for the next level to be tried (:func:`_prove`)."""
+PROOF_SAMPLE, PROOF_SAMPLE_MIN = 16, 256
+"""The first level below the grid, given PROOF_SAMPLE × PROOF_SAMPLE_MIN boxes or more, is tried first on
+every PROOF_SAMPLE-th, and on the others only where those gained at least :data:`PROOF_YIELD`: around
+colonnade's creases at 512³ it proved 182 of 82,234 cells for 0.2 s of CPU."""
 MAX_DEPTH = 14
 """The deepest grid contoured: vertex keys hold (2^depth + 1)³ corners times 64 kinds of edge."""
 
@@ -1130,20 +1134,36 @@ def _regular(grid: _Grid, cells: np.ndarray) -> np.ndarray:
     return regular
 
 
-def _prove(grid: _Grid, lo, hi, wanted: np.ndarray, levels: int, signs: np.ndarray | None = None) -> np.ndarray:
+def _prove(grid: _Grid, lo, hi, wanted: np.ndarray, levels: int, signs: np.ndarray | None = None,
+           sample: bool = True) -> np.ndarray:
     """Which of the ``wanted`` signs of F's partials ((n, 6): rising along x, y, z, then falling) are
     proven over each box [lo, hi]: by the box's own enclosures (``signs`` where known), or else by its 8
     sub-boxes, down to ``levels`` levels. A partial keeping one sign over every sub-box keeps it over the
     box they cover; so below a box only the signs that every proven sub-box shares are still sought, and
     a box whose proven sub-boxes share none is given up (a crease: one side rises along x, the other
     along y); and a level pays for the next only where it proved at least :data:`PROOF_YIELD` of the
-    boxes it was given (around creases finer boxes prove almost nothing: colonnade's, 0.4%)."""
+    boxes it was given (around creases finer boxes prove almost nothing: colonnade's, 0.4%). The first
+    level, where ``sample`` and it is given many boxes, is tried on a sample of them first
+    (:data:`PROOF_SAMPLE`)."""
     if signs is None:
         signs = _partial_signs(grid, lo, hi)
     signs &= wanted
     open_ = np.flatnonzero(~signs.any(1) & wanted.any(1))
     if not levels or not len(open_):
         return signs
+    if sample and len(open_) >= PROOF_SAMPLE_MIN * PROOF_SAMPLE:
+        first = np.zeros(len(open_), bool)
+        first[::PROOF_SAMPLE] = True
+        if _prove_below(grid, lo, hi, wanted, levels, signs, open_[first]) < PROOF_YIELD:
+            return signs
+        open_ = open_[~first]
+    _prove_below(grid, lo, hi, wanted, levels, signs, open_)
+    return signs
+
+
+def _prove_below(grid: _Grid, lo, hi, wanted, levels: int, signs: np.ndarray, open_: np.ndarray) -> float:
+    """:func:`_prove`'s next level for the boxes ``open_``: their signs proven by their sub-boxes, in place;
+    returns the share of them proven."""
     sub_lo, sub_hi = _halves(lo[open_], hi[open_])  # (m, 8, 3)
     m = len(open_)
     sub = _partial_signs(grid, sub_lo.reshape(-1, 3), sub_hi.reshape(-1, 3)).reshape(m, 8, 6) & wanted[open_, None]
@@ -1155,9 +1175,10 @@ def _prove(grid: _Grid, lo, hi, wanted: np.ndarray, levels: int, signs: np.ndarr
         rows, cols = np.nonzero(~proven & (sought.any(1) & ~gained)[:, None])
         if len(rows):
             sub[rows, cols] = _prove(grid, sub_lo[rows, cols], sub_hi[rows, cols], sought[rows], levels - 1,
-                                     sub[rows, cols])
+                                     sub[rows, cols], sample=False)
             signs[open_] = sub.all(1) & sought
-    return signs
+            gained = np.asarray(signs[open_].any(1))
+    return float(gained.mean())
 
 
 def _halves(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

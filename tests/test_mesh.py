@@ -626,3 +626,25 @@ def test_the_proof_looks_below_the_grid_where_a_cells_enclosures_are_too_wide(mo
         d = d.reshape(len(added), -1)
         keeps |= np.all(d > 0, axis=1) | np.all(d < 0, axis=1)
     assert keeps.all(), f"cells {added[~keeps][:5].tolist()} proven regular but every partial changes sign in them"
+
+
+def test_the_proof_below_the_grid_tries_a_sample_first(monkeypatch):
+    """The first level below the grid, given many cells, is tried on every PROOF_SAMPLE-th first: where the
+    sample gains enough the others follow and the proof is the one without a sample (each box's enclosures
+    are its own); where it does not (here forced), only the sample's cells can be added."""
+    from implc import contour
+    sc = load_scene("paper_blobs")
+    surface = implc.compile(sc.surface, sc.bounds)
+    voxels = implc.voxelize(surface, 4)
+    unproven = {}
+    for name, settings in {"whole": {"PROOF_SAMPLE_MIN": 10**9}, "sampled": {"PROOF_SAMPLE_MIN": 1},
+                           "sample only": {"PROOF_SAMPLE_MIN": 1, "PROOF_YIELD": 1.5},
+                           "none": {"PROOF_LEVELS": 0}}.items():
+        with monkeypatch.context() as patch:
+            for key, value in settings.items():
+                patch.setattr(contour, key, value)
+            unproven[name] = {tuple(c) for c in voxels.mesh().unproven_cells.tolist()}
+    assert unproven["sampled"] == unproven["whole"] < unproven["none"]
+    assert unproven["whole"] < unproven["sample only"] < unproven["none"]
+    gained = len(unproven["none"]) - len(unproven["sample only"])
+    assert gained <= len(unproven["none"]) / contour.PROOF_SAMPLE + 1
