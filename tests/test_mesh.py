@@ -537,8 +537,11 @@ def test_a_voxel_point_cloud_ply_is_still_described_as_voxels(tmp_path, capsys):
 @pytest.mark.slow
 def test_tetgen_tetrahedralizes_the_meshes(tmp_path):
     """tetgen (as an FEA user would run it, in a subprocess: it can crash on bad input) accepts the meshes
-    and fills them with tetrahedra (its -p mode, the defaults here, stops on facets that intersect); csg_part
-    simplified too (its flat faces' long thin triangles)."""
+    and fills them with tetrahedra: its -p mode, the constrained Delaunay tetrahedralization of the facets,
+    which stops on facets that intersect; csg_part simplified too (its flat faces' long thin triangles).
+    Without the quality refinement (-q, the wrapper's default), which is not reliable on angles this small
+    (docs/soundness.md): it failed inside on the torus before the vertices' Newton steps, loops on csg_part
+    since; neither says anything of the mesh's validity."""
     pytest.importorskip("tetgen")
     for name, simplify in (("csg_part", None), ("paper_blobs", None), ("csg_part", 1e-3 * 2 / 64)):
         sc = load_scene(name)
@@ -547,7 +550,7 @@ def test_tetgen_tetrahedralizes_the_meshes(tmp_path):
         script = ("import sys, numpy as np, tetgen\n"
                   "d = np.load(sys.argv[1])\n"
                   "t = tetgen.TetGen(d['v'], d['f'].astype(np.int32))\n"
-                  "nodes, elems = t.tetrahedralize()[:2]\n"
+                  "nodes, elems = t.tetrahedralize(quality=False)[:2]\n"
                   "print(len(elems))\n")
         run = subprocess.run([sys.executable, "-c", script, str(tmp_path / f"{name}.npz")], capture_output=True,
                              text=True, timeout=300)

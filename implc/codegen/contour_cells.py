@@ -408,7 +408,7 @@ def emit_edge_roots(module: ir.Module):
                                             [(vertices, i)])
                                 for axis in range(3):
                                     b.store(b.load(slot(g, j, axis)), slot(normals, i, axis))
-                            with open_:  # packed: row w <= j, whose point was read already
+                            with open_:  # packed: row w <= j, whose entry was read already
                                 w = counted.get()
                                 store_at(b, i, rows, w)
                                 b.store(following, field(i, 4))
