@@ -318,6 +318,7 @@ def emit_edge_roots(module: ir.Module):
     three, five = const(I64, 3), const(I64, 5)
     counted = Local(b, I64, 0, "counted")  # phase 0: edges without a sign change; phase 1: edges still open
     top = b.fsub(one_d, margin)
+    no_newton = const(double, float("nan"))  # a guess with no Newton point: the secant, else the middle
 
     def field(i, k):
         return at(b, state, b.add(b.mul(i, five), const(I64, k)))
@@ -375,7 +376,7 @@ def emit_edge_roots(module: ir.Module):
                     counted.set(b.add(counted.get(), const(I64, 1)))
                 for k, value in enumerate((zero, one_d, f_in, f_out)):
                     b.store(value, field(i, k))
-                t = guess(i, zero, one_d, f_in, f_out, const(double, float("nan")))
+                t = guess(i, zero, one_d, f_in, f_out, no_newton)
                 b.store(t, field(i, 4))
                 write_point(i, t, [(vertices, i)])
         with later:
@@ -414,8 +415,6 @@ def emit_edge_roots(module: ir.Module):
                                 b.store(following, field(i, 4))
                                 write_point(i, following, [(guesses, w)])
                                 counted.set(b.add(w, const(I64, 1)))
-                    with last:
-                        s = secant(t_in, t_out, f_in, f_out)
-                        s = b.select(within(s, t_in, t_out), s, b.fmul(b.fadd(t_in, t_out), half))
-                        write_point(i, placed(i, s), [(vertices, i), (guesses, j)])
+                    with last:  # the secant through the bracket (no Newton point: NaN)
+                        write_point(i, guess(i, t_in, t_out, f_in, f_out, no_newton), [(vertices, i), (guesses, j)])
     b.ret(counted.get())
