@@ -29,16 +29,25 @@ def host_has_avx512() -> bool:
     return "+avx512f" in _host()[1].split(",")
 
 
+LIGHT_PASSES = ("sroa", "instruction_combine", "simplify_cfg", "dead_code_elimination")
+"""The optimisation of ``opt_level="light"``: the locals into registers, one round of combining and the
+control flow tidied, then the code generator at its level 2. For modules whose IR is written already
+vectorised and unrolled (the tape engine's interpreters): LLVM's level-1 pipeline runs instcombine over
+them many times for nothing measurable."""
+
+
 class NativeModule:
     """One JIT-compiled LLVM module and the execution engine that keeps its code alive.
 
     ``llvm_ir`` is a callable producing the module's text; it is only called on a cache miss.
+    ``opt_level``: LLVM's pipeline at that speed level (0-3), or ``"light"`` (:data:`LIGHT_PASSES`).
     """
 
-    def __init__(self, llvm_ir, source_key: str, opt_level: int = 2):
+    def __init__(self, llvm_ir, source_key: str, opt_level: int | str = 2):
         cpu, features = _host()
         target = llvm.Target.from_default_triple()
-        self._target_machine = target.create_target_machine(cpu=cpu, features=features, opt=opt_level,
+        self._target_machine = target.create_target_machine(cpu=cpu, features=features,
+                                                            opt=2 if opt_level == "light" else opt_level,
                                                             reloc="pic", codemodel="jitdefault")
         self.opt_level = opt_level
         self.key = kernel_cache.key(source_key, cpu, features, opt_level)
@@ -58,9 +67,16 @@ class NativeModule:
         module.triple = llvm.get_process_triple()
         module.data_layout = str(self._target_machine.target_data)
         module.verify()
-        tuning = llvm.create_pipeline_tuning_options(speed_level=self.opt_level)
+        light = self.opt_level == "light"
+        tuning = llvm.create_pipeline_tuning_options(speed_level=2 if light else self.opt_level)
         builder = llvm.create_pass_builder(self._target_machine, tuning)
-        builder.getModulePassManager().run(module, builder)
+        if light:
+            passes = llvm.create_new_module_pass_manager()
+            for name in LIGHT_PASSES:
+                getattr(passes, f"add_{name}_pass")()
+            passes.run(module, builder)
+        else:
+            builder.getModulePassManager().run(module, builder)
         return self._target_machine.emit_object(module)
 
     def address(self, name: str) -> int:

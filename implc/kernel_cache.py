@@ -42,7 +42,7 @@ def package_fingerprint() -> str:
     return h.hexdigest()
 
 
-def key(source_key: str, cpu: str, features: str, opt_level: int) -> str:
+def key(source_key: str, cpu: str, features: str, opt_level: int | str) -> str:
     """The cache key of a module: see the module docstring for what it covers."""
     text = "|".join((source_key, f"O{opt_level}", package_fingerprint(), llvmlite.__version__, cpu, features))
     return hashlib.sha256(text.encode()).hexdigest()

@@ -18,10 +18,11 @@ from .codegen.runtime_module import build_kernel_walk, build_mesh_simplify, buil
 from .codegen.tape_engine_module import build_tape_engine
 from .jit import NativeModule
 
-TAPE_ENGINE_OPT = 1
-"""LLVM's optimisation level for the tape engine: its first compile on a fresh machine took 0.96-1.01 s at
-2 and 0.90-0.91 s at 1 (colonnade's load and compile), and the interpreters ran as fast (colonnade and
-bear voxelized at 512³ and 256³, colonnade meshed, within the noise)."""
+TAPE_ENGINE_OPT: int | str = "light"
+"""LLVM's optimisation of the tape engine (:data:`implc.jit.LIGHT_PASSES`): its IR is written vectorised
+and unrolled, so LLVM's pipelines found nothing to gain at runtime (bear, colonnade and Prospero voxelized
+at 512³ and meshed at 256³, within the noise against level 1) and spent most of a first compile: the
+module's optimisation 0.42 -> 0.08 s of the 0.9 s its compile took at level 1."""
 
 
 class TapeEngine:
