@@ -198,6 +198,11 @@ def load(path: str | os.PathLike[str]) -> Mesh:
     vertices, faces = np.asarray(getattr(loaded, "vertices", ())), np.asarray(getattr(loaded, "faces", ()))
     if vertices.ndim != 2 or len(faces) == 0:
         raise MeshFileError(f"{path} holds no triangles")
+    if vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:  # what a damaged file can give
+        raise MeshFileError(f"{path} holds no triangle mesh in three dimensions (vertices {vertices.shape}, "
+                            f"faces {faces.shape})")
+    if not np.issubdtype(faces.dtype, np.integer) or faces.min() < 0 or faces.max() >= len(vertices):
+        raise MeshFileError(f"{path}: its faces name vertices it does not hold")
     return Mesh(vertices, faces)
 
 

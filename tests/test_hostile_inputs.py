@@ -231,6 +231,16 @@ def test_forged_mesh_ply_counts(tmp_path):
         load_mesh(path)
 
 
+def test_a_mesh_file_with_one_coordinate_per_vertex_is_refused(tmp_path, capsys):
+    """A damaged OBJ whose vertex lines lost two numbers: trimesh reads vertices of one coordinate (the
+    fuzzing below found it), which are no mesh in three dimensions."""
+    path = tmp_path / "m.obj"
+    path.write_text("v 1\nv 2\nv 3\nf 1 2 3\n")
+    with pytest.raises(MeshFileError, match="three dimensions"):
+        load_mesh(path)
+    assert "three dimensions" in one_line_error(capsys, ["info", path])
+
+
 def _vdb(tmp_path, solid) -> bytes:
     voxel_files.save(solid, tmp_path / "v.vdb")
     return (tmp_path / "v.vdb").read_bytes()
