@@ -33,6 +33,10 @@ READ_TIMEOUT = 10.0
 """Seconds a connection may stay silent before it is closed (a slow client holds no thread for ever)."""
 MAX_CONNECTIONS = 32
 """Connections served at once; more wait until one ends."""
+LISTEN_QUEUE = 128
+"""Connections the kernel queues before they are accepted (socketserver's default is 5): a burst beyond
+that, as a page fetching its chunks or many clients at once make, had each connection past the queue
+wait for TCP's retransmission of its SYN, a second or more."""
 CHUNK_PATH = re.compile(r"chunks/(\d{1,2})-(\d{1,7})-(\d{1,7})-(\d{1,7})\.bin")
 SECTION_PATH = re.compile(r"sections/(\d)-(\d{1,7})-(\d{1,2})\.bin")
 
@@ -107,7 +111,9 @@ class ViewServer:
 
 class _Server(ThreadingHTTPServer):
     """One thread per connection, at most :data:`MAX_CONNECTIONS` at once; a client's hang-up is not an
-    error worth a traceback."""
+    error worth a traceback. The listen queue holds :data:`LISTEN_QUEUE` connections not yet accepted."""
+
+    request_queue_size = LISTEN_QUEUE
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)

@@ -213,6 +213,8 @@ def test_clients_that_hang_up_or_stall_leave_no_traceback(server, capfd):
     err = capfd.readouterr().err
     assert "Traceback" not in err and "Exception" not in err
     assert view_server.READ_TIMEOUT <= 30 and view_server._Handler.timeout == view_server.READ_TIMEOUT
+    # the burst above fits the listen queue (with socketserver's 5, connections waited for TCP's SYN retry)
+    assert server.httpd.request_queue_size == view_server.LISTEN_QUEUE >= 100
 
 
 def test_connections_are_capped(flower):
