@@ -94,12 +94,11 @@ def _check_range(value, name, lo, hi):
 
 
 def _surface_from_args(args):
-    """(name, compiled surface, scene or None) from SCENE or --expr."""
-    from .expr import ExprError
-    from .expr import parse as parse_expr
-    from .scene import load as load_scene
+    """(name, compiled surface, scene or None) from SCENE or --expr (a .vm model never imports SymPy)."""
     from .surface import compile as compile_surface
     if args.expr is not None:
+        from .expr import ExprError
+        from .expr import parse as parse_expr
         if args.scene:
             raise UsageError("give either a SCENE or --expr, not both")
         if not args.expr.strip():
@@ -118,6 +117,7 @@ def _surface_from_args(args):
     if Path(args.scene).suffix.lower() in (".npz", ".ply", ".npy"):
         raise UsageError(f"{args.scene} is a voxel file: 'implc {args.command}' takes a scene or --expr"
                          + (" (render reads .npz files)" if args.command == "voxelize" else ""))
+    from .scene import load as load_scene
     sc = load_scene(args.scene)
     bounds = _bounds(args.bounds) if args.bounds else sc.bounds
     return sc.name, compile_surface(sc.surface, bounds), sc

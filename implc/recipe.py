@@ -13,8 +13,6 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
-import sympy
-
 from .kernel_cache import package_fingerprint
 from .surface import Surface
 from .surface import compile as compile_surface
@@ -63,6 +61,8 @@ def recipe_of(surface: Surface) -> SurfaceRecipe:
             raise TravelError(f"the model {expr.name} was built without its .vm text, which is what travels to "
                               "a cluster's workers: read it with implc.load_vm or implc.vm.parse_vm")
         return SurfaceRecipe("vm", expr.source, expr.name, **options, software=software())
+    import sympy  # only for an expression's recipe: a .vm model's never imports SymPy
+
     inlined = sorted({str(f.func) for f in expr.atoms(sympy.Function) if getattr(f.func, "implc_tape", None)})
     if inlined:
         raise TravelError(f"this expression applies the .vm model(s) {', '.join(inlined)}, which cannot travel to a "
@@ -88,6 +88,7 @@ def software() -> str:
 
 def _read_srepr(source: str) -> Any:
     """The expression ``sympy.srepr`` printed (SymPy's own classes only: the names are SymPy's namespace)."""
+    import sympy
     from sympy.functions.elementary.piecewise import ExprCondPair
     namespace: dict[str, Any] = {name: getattr(sympy, name) for name in dir(sympy) if not name.startswith("_")}
     namespace["ExprCondPair"] = ExprCondPair  # printed by srepr inside Piecewise, not exported by sympy

@@ -16,7 +16,6 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-import sympy
 from numpy.typing import ArrayLike
 
 from . import abi
@@ -33,7 +32,6 @@ from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape
 from .jit import NativeModule, host_has_avx512
-from .lower import lower
 from .regions import plan_regions
 from .runtime import Runtime
 from .tape_program import TapeProgram, encode, slot_scratch, unsupported_ops
@@ -533,6 +531,9 @@ def compile(expr: Any, bounds: Any = None, *, vector_width: int = WIDTH, roundin
     if isinstance(expr, VmModel):
         checked, directed = _check_options(expr.bounds if bounds is None else bounds, vector_width, rounding, engine)
         return Surface(expr, checked, expr.tape, vector_width, directed, choose_engine(expr.tape, engine, vector_width))
+    import sympy  # here, not above: a .vm model never needs SymPy (its import is a quarter second)
+
+    from .lower import lower
     if not isinstance(expr, sympy.Basic):
         raise TypeError(f"implc.compile expects a SymPy expression or a .vm model, got {type(expr).__name__}")
     if isinstance(expr, sympy.Equality):

@@ -17,12 +17,14 @@ import re
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
-
-import sympy
+from typing import TYPE_CHECKING
 
 from .errors import CompileError
 from .ir import Tape, const_attr_from_fraction
 from .untrusted import decimal, printable, read_text
+
+if TYPE_CHECKING:
+    import sympy
 
 MAX_BYTES = 1 << 30
 """The largest ``.vm`` file read (fidget's models are a few MiB)."""
@@ -57,6 +59,8 @@ class VmModel:
         """F of this model at (x, y, z) (SymPy expressions): an application of a SymPy function that
         :func:`implc.compile` inlines, so that a model composes with SymPy (CSG, transforms, extrusion:
         ``Max(model(x, y, z), Abs(z) - 1/10)``)."""
+        import sympy  # only here: reading and compiling a model needs no SymPy
+
         function = sympy.Function(f"{self.name}_{self.tape.fingerprint()[:8]}")
         function.implc_tape = self.tape  # what implc.lower inlines (the name tells tapes apart)
         return function(x, y, z)

@@ -193,6 +193,28 @@ def test_cli_takes_a_vm_file(tmp_path, capsys):
     assert not (tmp_path / "b.npz").exists()
 
 
+def test_a_model_runs_without_importing_sympy(tmp_path):
+    """A .vm model needs no SymPy (its import is about a quarter of a second of a fresh process): the
+    CLI and the API load, compile, voxelize and mesh it in a process that never imports it."""
+    import os
+    import subprocess
+    import sys
+    path = tmp_path / "csg.vm"
+    path.write_text(CSG)
+    cli = [["mesh", str(path), "--depth", "4", "--quiet", "-o", str(tmp_path / "m.stl")],
+           ["voxelize", str(path), "--depth", "4", "--quiet", "-o", str(tmp_path / "v.npz")]]
+    script = ("import sys, implc\nfrom implc.cli import main\n"
+              f"m = implc.load_vm({str(path)!r}); s = implc.compile(m)\n"
+              "assert len(implc.voxelize(s, 5)) > 0 and len(implc.mesh(s, 5).faces) > 0\n"
+              f"assert [main(argv) for argv in {cli!r}] == [0, 0]\n"
+              "print(sorted(name for name in sys.modules if name.split('.')[0] == 'sympy'))\n")
+    env = {**os.environ, "IMPLC_CACHE_DIR": str(tmp_path / "kernels")}
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, cwd=tmp_path,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "[]"
+
+
 DISC = "x var-x\ny var-y\nr const 0.6\nx2 square x\ny2 square y\ns add x2 y2\nd sqrt s\nout sub d r\n"
 
 
