@@ -10,6 +10,7 @@ foreign, truncated or damaged file is a :class:`VoxelFileError` naming the probl
 from __future__ import annotations
 
 import os
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -124,7 +125,8 @@ def load_npz(path: str | os.PathLike[str]) -> Voxels:
             arrays = {k: data[k] for k in ("coords", "normals", "depth", "bounds", "inside") if k in data}
     except VoxelFileError:
         raise
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError) as exc:
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
+            SyntaxError, tokenize.TokenError) as exc:  # the last two: numpy's parser of a damaged .npy header
         raise VoxelFileError(f"cannot read {path}: damaged or truncated ({type(exc).__name__}: "
                              f"{printable(str(exc), 120)})") from None
     for name, value in arrays.items():

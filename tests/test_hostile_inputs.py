@@ -176,6 +176,21 @@ def test_npz_member_that_is_not_an_array(tmp_path, solid, capsys):
     assert "not an array" in one_line_error(capsys, ["info", path])
 
 
+def test_npz_member_whose_header_does_not_parse(tmp_path, solid, capsys):
+    """A .npy header with a bracket left open: numpy's header parser raises tokenize's TokenError (not a
+    ValueError); the fuzzing of the .npz reader found it."""
+    path = forged_npz(tmp_path / "v.npz", solid)
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    members["bounds.npy"] = members["bounds.npy"].replace(b"'shape': (3, 2)", b"'shape': ((3, 2", 1)
+    with zipfile.ZipFile(path, "w") as z:
+        for n, data in members.items():
+            z.writestr(n, data)
+    with pytest.raises(voxel_files.VoxelFileError, match="damaged"):
+        voxel_files.load_npz(path)
+    assert "damaged" in one_line_error(capsys, ["info", path])
+
+
 def test_zip_bomb_is_refused_before_it_inflates(tmp_path, solid, capsys):
     path = tmp_path / "bomb.npz"
     buffer = io.BytesIO()
