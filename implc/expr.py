@@ -28,6 +28,11 @@ BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, 
 MAX_LENGTH = 10_000
 MAX_NUMERIC_EXPONENT = 64
 """The largest exponent of a number raised to a number (2**64**64 would take the machine's memory)."""
+MAX_ARGUMENT_BITS = 1 << 16
+"""A function of a number beyond 2^MAX_ARGUMENT_BITS in magnitude is refused: SymPy evaluates a function
+of a number as it builds it, and mpmath's exp, cosh or sin of such a number ran for minutes (cosh(exp(1e8)
+* 1e308): its argument reduction works to as many bits as the number's exponent); every such value is
+far beyond a double anyway."""
 
 
 class ExprError(ValueError):
@@ -48,6 +53,8 @@ def parse(text: str) -> sympy.Expr:
         raise ExprError("the expression is nested too deeply") from None
     except OverflowError:  # SymPy evaluates as it builds (cosh of cosh of ... asks mpmath whether it is zero)
         raise ExprError(f"a number in {shorten(text, quoted=True)} is too large for SymPy to build") from None
+    except ZeroDivisionError:  # a number divided by a number that is zero only once evaluated
+        raise ExprError(f"division by zero in {shorten(text, quoted=True)}") from None
 
 
 
@@ -65,7 +72,7 @@ def _build(node) -> sympy.Expr:
             if not abs(right) <= limit:
                 raise ExprError(f"exponent {shorten(right)} is too large (at most {limit}"
                                 f"{' for a number' if left.is_number else ''})")
-        if isinstance(node.op, ast.Div) and right == 0:
+        if isinstance(node.op, ast.Div) and right.is_zero:  # 0.0 too (a Float is not == the Integer 0)
             raise ExprError(f"division by zero in {shorten(ast.unparse(node), quoted=True)}")
         return BINARY[type(node.op)](left, right)
     if isinstance(node, ast.BinOp) and isinstance(node.op, ast.BitXor):
@@ -81,9 +88,24 @@ def _build(node) -> sympy.Expr:
             raise ExprError(f"keyword arguments are not allowed in {node.func.id}()")
         if not node.args:
             raise ExprError(f"{node.func.id}() needs an argument")
+        args = [_build(a) for a in node.args]
+        if any(_huge(a) for a in args):
+            raise ExprError(f"a number in {shorten(ast.unparse(node), quoted=True)} is too large (beyond "
+                            f"2^{MAX_ARGUMENT_BITS}) for a function of it to be built")
         try:
-            return FUNCTIONS[node.func.id](*[_build(a) for a in node.args])
+            return FUNCTIONS[node.func.id](*args)
         except (TypeError, ValueError) as exc:
             raise ExprError(f"bad call {ast.unparse(node)}: {exc}") from None
     raise ExprError(f"{type(node).__name__} is not allowed: only numbers, x y z r theta phi, + - * / ** and "
                     f"functions ({ast.unparse(node)!r})")
+
+
+def _huge(value) -> bool:
+    """Whether ``value`` is a number beyond 2^MAX_ARGUMENT_BITS in magnitude (a Float's exponent, an exact
+    number's bit length)."""
+    if isinstance(value, sympy.Float):
+        _, mantissa, exponent, bits = value._mpf_
+        return bool(mantissa) and exponent + bits > MAX_ARGUMENT_BITS
+    if isinstance(value, sympy.Rational):
+        return abs(value.p).bit_length() - value.q.bit_length() > MAX_ARGUMENT_BITS
+    return False
