@@ -74,7 +74,7 @@ def _build(node) -> sympy.Expr:
                                 f"{' for a number' if left.is_number else ''})")
         if isinstance(node.op, ast.Div) and right.is_zero:  # 0.0 too (a Float is not == the Integer 0)
             raise ExprError(f"division by zero in {shorten(ast.unparse(node), quoted=True)}")
-        return BINARY[type(node.op)](left, right)
+        return _sympy(node, BINARY[type(node.op)], left, right)
     if isinstance(node, ast.BinOp) and isinstance(node.op, ast.BitXor):
         raise ExprError("'^' is not a power: write x**2")
     if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
@@ -92,12 +92,23 @@ def _build(node) -> sympy.Expr:
         if any(_huge(a) for a in args):
             raise ExprError(f"a number in {shorten(ast.unparse(node), quoted=True)} is too large (beyond "
                             f"2^{MAX_ARGUMENT_BITS}) for a function of it to be built")
-        try:
-            return FUNCTIONS[node.func.id](*args)
-        except (TypeError, ValueError) as exc:
-            raise ExprError(f"bad call {ast.unparse(node)}: {exc}") from None
+        return _sympy(node, FUNCTIONS[node.func.id], *args)
     raise ExprError(f"{type(node).__name__} is not allowed: only numbers, x y z r theta phi, + - * / ** and "
                     f"functions ({ast.unparse(node)!r})")
+
+
+def _sympy(node, operation, *args) -> sympy.Expr:
+    """``operation(*args)`` (SymPy builds and evaluates as it goes): its own failures named in one line
+    (asin(cos(10 / (pi / 1e300))) made SymPy's cache fail with an AttributeError)."""
+    try:
+        return operation(*args)
+    except (OverflowError, ZeroDivisionError, RecursionError, MemoryError):
+        raise  # parse() names them
+    except Exception as exc:  # noqa: BLE001 - SymPy's own failure on this formula
+        if isinstance(node, ast.Call) and isinstance(exc, (TypeError, ValueError)):  # atan2 of one argument
+            raise ExprError(f"bad call {ast.unparse(node)}: {exc}") from None
+        raise ExprError(f"SymPy cannot build {shorten(ast.unparse(node), quoted=True)} ({type(exc).__name__})") \
+            from None
 
 
 def _huge(value) -> bool:
