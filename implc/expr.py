@@ -68,6 +68,8 @@ def _build(node) -> sympy.Expr:
     if isinstance(node, ast.BinOp) and type(node.op) in BINARY:
         left, right = _build(node.left), _build(node.right)
         if isinstance(node.op, ast.Pow) and right.is_number:
+            if right.is_extended_real is not True:  # (-1)**pi: the comparison below would raise TypeError
+                raise ExprError(f"exponent {shorten(right)} is not a real number (surfaces are real)")
             limit = MAX_NUMERIC_EXPONENT if left.is_number else POWI_MAX
             if not abs(right) <= limit:
                 raise ExprError(f"exponent {shorten(right)} is too large (at most {limit}"

@@ -100,6 +100,7 @@ BAD_INPUTS = [  # (argv, words the message must contain); {d} is the folder of t
     # SymPy evaluates a function of a number as it builds it: mpmath's cosh of this one ran for minutes (fuzzing)
     (["voxelize", "--expr", "cosh(exp(1e308 / 1e300) * 1e308) + x", "-o", "{d}/new.npz"], "is too large"),
     (["voxelize", "--expr", "asin(cos(10 / (pi / 1e300))) + x", "-o", "{d}/new.npz"], "SymPy cannot build"),
+    (["voxelize", "--expr", "tanh(x) ** sinh((-1) ** pi)", "-o", "{d}/new.npz"], "not a real number"),
     (["voxelize", "--expr", "x", "--bounds=-1e308,1e308,-1,1,-1,1", "-o", "{d}/new.npz"], "too far apart"),
     (["voxelize", "--expr", "x", "--bounds", "0,1e-320,-1,1,-1,1", "-o", "{d}/new.npz"], "too close"),
     (["voxelize", "--expr", "x", "--bounds", "0,inf,-1,1,-1,1", "-o", "{d}/new.npz"], "--bounds must be finite"),
