@@ -101,7 +101,11 @@ def load(path: str | os.PathLike[str], region: Any = None) -> Voxels:
     cell ranges ((i0, i1), (j0, j1), (k0, k1)): :func:`implc.zarr_store.load_zarr`)."""
     if Path(path).is_dir():
         from .zarr_store import load_zarr
-        return load_zarr(path, region)
+        voxels = load_zarr(path, region)  # checked as an .npz is: a damaged store must not reach native code
+        coords, normals, depth, bounds = _validated(path, voxels.coords, voxels.normals, np.asarray(voxels.depth),
+                                                    np.asarray(voxels.bounds, dtype=np.float64))
+        inside = _validated_inside(path, voxels.inside, depth)
+        return Voxels(coords, normals, depth, bounds, stats=None, inside=inside)
     if region is not None:
         raise ValueError("region= reads part of a Zarr store; an .npz is read whole")
     return load_npz(path)

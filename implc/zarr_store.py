@@ -662,6 +662,9 @@ def _open(path: str | os.PathLike[str]) -> tuple[Any, dict]:
         rows: list[Any] = [group[name] for name in ("bricks", "voxels/rows", "voxels/coords", "voxels/normals")]
     except KeyError as exc:
         raise StoreError(f"{path}: damaged implc Zarr store (missing {printable(str(exc), 60)})") from None
+    except Exception as exc:  # noqa: BLE001 - an array's damaged metadata: zarr raises TypeError and others
+        raise StoreError(f"{path}: damaged implc Zarr store ({type(exc).__name__}: {printable(str(exc), 120)})") \
+            from None
     if tuple(occupancy.shape) != (n, n, n) or str(occupancy.dtype) != "bool":
         raise StoreError(f"{path}: damaged implc Zarr store (a {printable(str(occupancy.dtype), 20)} occupancy "
                          f"{'x'.join(map(str, occupancy.shape))}, where depth {depth} means bool {n}³)")
@@ -695,24 +698,46 @@ def load_zarr(path: str | os.PathLike[str], region: Any = None) -> Voxels:
     ((i0, i1), (j0, j1), (k0, k1)), half open: the voxels in it, and the inside octants that meet it,
     whole), reading only the bricks the region meets."""
     group, about = _open(path)
+    box = None if region is None else _region(region, about["depth"])
+    try:
+        return _read(group, about, box)
+    except StoreError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a damaged chunk: zarr's codecs raise RuntimeError and others
+        raise StoreError(f"{path}: damaged implc Zarr store ({type(exc).__name__}: {printable(str(exc), 120)})") \
+            from None
+
+
+def _region(region: Any, depth: int) -> np.ndarray:
+    """``region`` as a (3, 2) array of cell ranges within the grid; ValueError otherwise."""
+    box = np.asarray(region, dtype=np.int64)
+    if box.shape != (3, 2) or np.any(box[:, 0] >= box[:, 1]) or np.any(box[:, 0] < 0) \
+            or np.any(box[:, 1] > 1 << depth):
+        raise ValueError(f"region must be three cell ranges (lo, hi) with 0 <= lo < hi <= {1 << depth}, "
+                         f"got {region!r}")
+    return box
+
+
+def _read(group: Any, about: dict, box: np.ndarray | None) -> Voxels:
+    """:func:`load_zarr`'s reading, once the store is open (``box``: the region's cell ranges, or None)."""
     depth, solid = about["depth"], about["solid"]
     bounds = tuple(tuple(map(float, b)) for b in about["bounds"])
     brick = group["occupancy"].shards[0]
     shift = brick.bit_length() - 1
     bricks = group["bricks"][...].astype(np.int64)
-    if region is None:
+    if box is None:
         lo, hi = np.zeros(3, np.int64), np.full(3, 1 << depth, np.int64)
         chosen = np.arange(len(bricks))
     else:
-        box = np.asarray(region, dtype=np.int64)
-        if box.shape != (3, 2) or np.any(box[:, 0] >= box[:, 1]) or np.any(box[:, 0] < 0) \
-                or np.any(box[:, 1] > 1 << depth):
-            raise ValueError(f"region must be three cell ranges (lo, hi) with 0 <= lo < hi <= {1 << depth}, "
-                             f"got {region!r}")
         lo, hi = box[:, 0], box[:, 1]
         first, last = bricks << shift, (bricks + 1) << shift
         chosen = np.flatnonzero(np.all((first < hi) & (last > lo), axis=1))
     coords, normals = _rows(group, "voxels", chosen, ("voxels/coords", "voxels/normals"))
+    # each row lies in the brick that lists it: a damaged chunk that still decompresses (zstd without its
+    # checksum) gives rows elsewhere, which the region's filter below would otherwise drop in silence
+    owner = np.repeat(bricks[chosen], np.diff(group["voxels/rows"][...].astype(np.int64))[chosen], axis=0)
+    if owner.shape != coords.shape or np.any((coords.astype(np.int64) >> shift) != owner):
+        raise ValueError("voxel rows lie outside the bricks that list them")
     keep = np.all((coords >= lo) & (coords < hi), axis=1)
     inside = None
     if solid:
