@@ -701,7 +701,7 @@ def load_zarr(path: str | os.PathLike[str], region: Any = None) -> Voxels:
     box = None if region is None else _region(region, about["depth"])
     try:
         return _read(group, about, box)
-    except StoreError:
+    except (StoreError, MemoryError):  # a store too large for this machine is not a damaged one
         raise
     except Exception as exc:  # noqa: BLE001 - a damaged chunk: zarr's codecs raise RuntimeError and others
         raise StoreError(f"{path}: damaged implc Zarr store ({type(exc).__name__}: {printable(str(exc), 120)})") \
