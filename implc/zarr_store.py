@@ -159,6 +159,14 @@ def paint(block: np.ndarray, origin: np.ndarray, level: int, depth: int, coords:
             block[cells[:, 0], cells[:, 1], cells[:, 2]] = True
 
 
+def _compressors() -> Any:
+    """Every array's codec: zarr's default zstd, with the frame's checksum, so that a damaged chunk is an
+    error when it is read rather than other data (without it, damage inside a chunk decoded to rows in
+    the wrong places)."""
+    from zarr.codecs import ZstdCodec
+    return ZstdCodec(level=0, checksum=True)
+
+
 def _create(folder: Path, layout: Layout, plan: dict) -> Any:
     """The group with its occupancy and level-of-detail arrays (rows come once their lengths are known)."""
     import zarr
@@ -168,16 +176,16 @@ def _create(folder: Path, layout: Layout, plan: dict) -> Any:
                              "index": "[i, j, k]: cell (i, j, k) of the grid"}
     group = zarr.open_group(str(folder), mode="w", zarr_format=3, attributes={"implc": about})
     group.create_array("occupancy", shape=(n, n, n), chunks=(layout.chunk,) * 3, shards=(layout.brick,) * 3,
-                       dtype="bool", fill_value=False)
+                       dtype="bool", fill_value=False, compressors=_compressors())
     for level in range(1, layout.depth):
         edge = 1 << level
         if level <= layout.client_level:
             group.create_array(f"lod/{level}", shape=(edge,) * 3, chunks=(min(CHUNK, edge),) * 3, dtype="bool",
-                               fill_value=False)
+                               fill_value=False, compressors=_compressors())
         else:
             shard = layout.lod_shard(level)
             group.create_array(f"lod/{level}", shape=(edge,) * 3, chunks=(min(layout.chunk, shard),) * 3,
-                               shards=(shard,) * 3, dtype="bool", fill_value=False)
+                               shards=(shard,) * 3, dtype="bool", fill_value=False, compressors=_compressors())
     return group
 
 
@@ -195,7 +203,8 @@ class _FullShards:
         if (shard, chunk) not in self.encoded:
             with tempfile.TemporaryDirectory() as scratch:
                 template = zarr.create_array(store=scratch, shape=(shard,) * 3, chunks=(chunk,) * 3,
-                                             shards=(shard,) * 3, dtype="bool", fill_value=False, zarr_format=3)
+                                             shards=(shard,) * 3, dtype="bool", fill_value=False, zarr_format=3,
+                                             compressors=_compressors())
                 template[...] = True
                 self.encoded[(shard, chunk)] = (Path(scratch) / "c" / "0" / "0" / "0").read_bytes()
         index = (origin // shard).astype(int)
@@ -534,10 +543,11 @@ def _finish(folder: Path, layout: Layout, summaries: list[dict], client: Any, th
         if family == "voxels":
             for name, dtype in (("voxels/coords", "uint32"), ("voxels/normals", "float32")):
                 group.create_array(name, shape=(total, 3), chunks=(ROW_CHUNK, 3), shards=(ROW_SHARD, 3),
-                                   dtype=dtype, fill_value=0, overwrite=True)
+                                   dtype=dtype, fill_value=0, overwrite=True, compressors=_compressors())
         else:
             group.create_array("inside/octants", shape=(total, 4), chunks=(ROW_CHUNK, 4), shards=(ROW_SHARD, 4),
-                               dtype="int32", fill_value=0, overwrite=True)
+                               dtype="int32", fill_value=0, overwrite=True,
+                               compressors=_compressors())
         starts = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)])
         for shard in range(math.ceil(total / ROW_SHARD)):
             lo, hi = shard * ROW_SHARD, min(total, (shard + 1) * ROW_SHARD)
@@ -578,7 +588,7 @@ def _finish(folder: Path, layout: Layout, summaries: list[dict], client: Any, th
 def _small(group, name: str, array: np.ndarray) -> None:
     """A small array written whole by the caller."""
     group.create_array(name, shape=array.shape, chunks=(max(1, min(len(array), ROW_SHARD)),) + array.shape[1:],
-                       dtype=array.dtype, fill_value=0, overwrite=True)[...] = array
+                       dtype=array.dtype, fill_value=0, overwrite=True, compressors=_compressors())[...] = array
 
 
 def _pooled(grid: np.ndarray) -> np.ndarray:
@@ -733,8 +743,9 @@ def _read(group: Any, about: dict, box: np.ndarray | None) -> Voxels:
         first, last = bricks << shift, (bricks + 1) << shift
         chosen = np.flatnonzero(np.all((first < hi) & (last > lo), axis=1))
     coords, normals = _rows(group, "voxels", chosen, ("voxels/coords", "voxels/normals"))
-    # each row lies in the brick that lists it: a damaged chunk that still decompresses (zstd without its
-    # checksum) gives rows elsewhere, which the region's filter below would otherwise drop in silence
+    # each row lies in the brick that lists it: a damaged chunk that still decompresses (a store written
+    # before its chunks had zstd's checksum) gives rows elsewhere, which the region's filter below would
+    # otherwise drop in silence
     owner = np.repeat(bricks[chosen], np.diff(group["voxels/rows"][...].astype(np.int64))[chosen], axis=0)
     if owner.shape != coords.shape or np.any((coords.astype(np.int64) >> shift) != owner):
         raise ValueError("voxel rows lie outside the bricks that list them")
