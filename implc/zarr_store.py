@@ -673,8 +673,7 @@ def _open(path: str | os.PathLike[str]) -> tuple[Any, dict]:
     except KeyError as exc:
         raise StoreError(f"{path}: damaged implc Zarr store (missing {printable(str(exc), 60)})") from None
     except Exception as exc:  # noqa: BLE001 - an array's damaged metadata: zarr raises TypeError and others
-        raise StoreError(f"{path}: damaged implc Zarr store ({type(exc).__name__}: {printable(str(exc), 120)})") \
-            from None
+        raise _damaged(path, exc) from None
     if tuple(occupancy.shape) != (n, n, n) or str(occupancy.dtype) != "bool":
         raise StoreError(f"{path}: damaged implc Zarr store (a {printable(str(occupancy.dtype), 20)} occupancy "
                          f"{'x'.join(map(str, occupancy.shape))}, where depth {depth} means bool {n}³)")
@@ -714,8 +713,12 @@ def load_zarr(path: str | os.PathLike[str], region: Any = None) -> Voxels:
     except (StoreError, MemoryError):  # a store too large for this machine is not a damaged one
         raise
     except Exception as exc:  # noqa: BLE001 - a damaged chunk: zarr's codecs raise RuntimeError and others
-        raise StoreError(f"{path}: damaged implc Zarr store ({type(exc).__name__}: {printable(str(exc), 120)})") \
-            from None
+        raise _damaged(path, exc) from None
+
+
+def _damaged(path, exc: Exception) -> StoreError:
+    """The error for a store that zarr, or the check of its rows, could not read: what went wrong, named."""
+    return StoreError(f"{path}: damaged implc Zarr store ({type(exc).__name__}: {printable(str(exc), 120)})")
 
 
 def _region(region: Any, depth: int) -> np.ndarray:
@@ -742,17 +745,18 @@ def _read(group: Any, about: dict, box: np.ndarray | None) -> Voxels:
         lo, hi = box[:, 0], box[:, 1]
         first, last = bricks << shift, (bricks + 1) << shift
         chosen = np.flatnonzero(np.all((first < hi) & (last > lo), axis=1))
-    coords, normals = _rows(group, "voxels", chosen, ("voxels/coords", "voxels/normals"))
+    starts = group["voxels/rows"][...].astype(np.int64)
+    coords, normals = _rows(group, starts, chosen, ("voxels/coords", "voxels/normals"))
     # each row lies in the brick that lists it: a damaged chunk that still decompresses (a store written
     # before its chunks had zstd's checksum) gives rows elsewhere, which the region's filter below would
     # otherwise drop in silence
-    owner = np.repeat(bricks[chosen], np.diff(group["voxels/rows"][...].astype(np.int64))[chosen], axis=0)
+    owner = np.repeat(bricks[chosen], np.diff(starts)[chosen], axis=0)
     if owner.shape != coords.shape or np.any((coords.astype(np.int64) >> shift) != owner):
         raise ValueError("voxel rows lie outside the bricks that list them")
     keep = np.all((coords >= lo) & (coords < hi), axis=1)
     inside = None
     if solid:
-        (fine,) = _rows(group, "inside", chosen, ("inside/octants",))
+        (fine,) = _rows(group, group["inside/rows"][...].astype(np.int64), chosen, ("inside/octants",))
         coarse = group["inside/coarse"][...]
         rows = np.concatenate([coarse, fine]) if len(coarse) or len(fine) else np.empty((0, 4), np.int32)
         size = np.left_shift(np.int64(1), depth - rows[:, 3].astype(np.int64))[:, None]
@@ -762,9 +766,9 @@ def _read(group: Any, about: dict, box: np.ndarray | None) -> Voxels:
     return Voxels(coords[keep], normals[keep], depth, bounds, None, inside=inside)
 
 
-def _rows(group, family: str, chosen: np.ndarray, names: tuple) -> list[np.ndarray]:
-    """The rows of the chosen bricks (consecutive bricks read as one range)."""
-    starts = group[f"{family}/rows"][...]
+def _rows(group, starts: np.ndarray, chosen: np.ndarray, names: tuple) -> list[np.ndarray]:
+    """The rows of the chosen bricks (``starts``: where each brick's rows start in the arrays ``names``;
+    consecutive bricks read as one range)."""
     arrays = [group[name] for name in names]
     pieces: list[list[np.ndarray]] = [[] for _ in arrays]
     if len(chosen):
