@@ -168,7 +168,7 @@ def test_api_arguments_are_checked():
     assert len(implc.voxelize(s, 2, max_voxels=16)) > 1
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)])  # 7 s each
 def test_an_interrupted_save_never_damages_the_old_file(tmp_path, sig):
     """Interrupt `implc voxelize -o keep.npz` at several moments, saving included (a compressed save of
     a depth-9 torus takes a good part of the run): keep.npz is always the old file or a complete new one,

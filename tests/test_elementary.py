@@ -104,6 +104,7 @@ def test_sin_cos_beyond_their_range_take_the_c_library_value(name):
     assert abs(got[7] - expected[7]) <= PROVEN_SIN
 
 
+@pytest.mark.slow  # two compiles of a long tape with its kernels, 10 s
 def test_outlined_vector_functions_compute_what_expanded_ones_do(monkeypatch):
     """A tape with many sin, cos and atan2 nodes calls one copy of each (small IR, fast compiles); the
     results are bit-identical to expanding them at every use."""

@@ -56,6 +56,7 @@ def test_another_process_reuses_the_cache(tmp_path):
     assert [_probe(tmp_path)[1] for _ in range(2)] == [False, True]
 
 
+@pytest.mark.slow  # twelve fresh processes, 9 s; test_another_process_reuses_the_cache stays in the default run
 def test_editing_any_module_of_the_package_invalidates_the_cache(tmp_path):
     """A comment appended to a module that the code generator never reads as code (the region planner,
     the IR, the gradient, the package's __init__) is still a different package: no cached kernel of the

@@ -367,6 +367,7 @@ def test_a_drag_turns_the_view_and_reset_brings_it_back(browser, server):
     page.close()
 
 
+@pytest.mark.slow  # a 1024³ voxelization and its chunks, 8 s
 def test_zooming_in_fetches_deeper_chunks(browser):
     """At 256 pixels the 1024³ flower needs only coarse chunks; the wheel brings the camera close, and
     the page fetches deeper ones for what is in view, within its point budget."""
