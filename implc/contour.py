@@ -84,6 +84,10 @@ PROOF_SAMPLE, PROOF_SAMPLE_MIN = 16, 256
 """The first level below the grid, given PROOF_SAMPLE × PROOF_SAMPLE_MIN boxes or more, is tried first on
 every PROOF_SAMPLE-th, and on the others only where those gained at least :data:`PROOF_YIELD`: around
 colonnade's creases at 512³ it proved 182 of 82,234 cells for 0.2 s of CPU."""
+VERTEX_CHUNK = 1 << 18
+"""Surface vertices placed, or cells' corners sampled, at a time (:func:`_vertices`, :func:`_corner_signs`):
+Scene 1's 1.5 million vertices at 512³ took 0.3 GB more at once, and fresh memory is what a big mesh costs
+most."""
 MAX_DEPTH = 14
 """The deepest grid contoured: vertex keys hold (2^depth + 1)³ corners times 64 kinds of edge."""
 
@@ -390,6 +394,10 @@ class _Grid:
                 centre[axis] = (self.lo, self.hi)[side][axis]
                 if self.values(centre[None])[0] > 0:
                     self.outside_faces.add((axis, side))
+
+    def forget_samples(self):
+        """Let the corners' index and F's samples there go (the mesh's vertices are placed)."""
+        self._corners, self._corner_values = None, np.zeros(0)
 
     def touched(self, cells: np.ndarray) -> bool:
         """Whether some of ``cells`` (added by the samples' signs) touch a face taken as outside: that face
@@ -964,24 +972,39 @@ def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: 
     """Positions of the vertices named by ``keys`` (unique): a point itself, or the root of F on its edge
     (:func:`_edge_roots`). Returns (positions, unit normals (NaN at a point named by itself, and where F's
     gradient is not usable), witnesses: (V, 2, 3) the edge's ends, the one where F < 0 first, a point named
-    by itself twice; None unless ``witnesses``)."""
-    a, b, fa, fb = _endpoints(grid, keys, cell_points, face_points)
-    on_edge = np.flatnonzero(np.any(a != b, axis=1))
-    ends = np.stack([a, b], 1) if witnesses else None
-    if len(on_edge) == len(keys):
-        positions, normals = _edge_roots(grid, keys, a, b, fa, fb)  # a and b: the inside end first
-    else:  # the edges' rows taken (np.take: a boolean mask of an (N, 3) array is several times slower)
-        positions = a  # a point named by itself: its own position (a is not used again)
-        a, b = np.take(a, on_edge, axis=0), np.take(b, on_edge, axis=0)
-        fa, fb = np.take(fa, on_edge), np.take(fb, on_edge)
-        normals = np.full_like(positions, np.nan)
-        positions[on_edge], normals[on_edge] = _edge_roots(grid, np.take(keys, on_edge), a, b, fa, fb)
-    if ends is not None:
-        ends[on_edge, 0], ends[on_edge, 1] = a, b
+    by itself twice; None unless ``witnesses``). Done :data:`VERTEX_CHUNK` keys at a time, so that the
+    edges' ends, brackets and samples take memory for a chunk, not for the mesh."""
+    n = len(keys)
+    positions, normals = np.empty((n, 3)), np.empty((n, 3))
+    ends = np.empty((n, 2, 3)) if witnesses else None
+    for start in range(0, n, VERTEX_CHUNK):
+        rows = slice(start, min(n, start + VERTEX_CHUNK))
+        _vertex_chunk(grid, keys[rows], cell_points, face_points, positions[rows], normals[rows],
+                      None if ends is None else ends[rows])
     return positions, normals, ends
 
 
-def _edge_roots(grid: _Grid, keys, a, b, fa, fb) -> tuple[np.ndarray, np.ndarray]:
+def _vertex_chunk(grid: _Grid, keys, cell_points: _Points, face_points: _Points, positions, normals, ends):
+    """:func:`_vertices` for one chunk of keys, written into ``positions``, ``normals`` and ``ends`` (or None)."""
+    a, b, fa, fb = _endpoints(grid, keys, cell_points, face_points)
+    on_edge = np.flatnonzero(np.any(a != b, axis=1))
+    if ends is not None:
+        ends[:, 0], ends[:, 1] = a, b  # a point named by itself: both ends; an edge's are swapped below
+    if len(on_edge) == len(keys):
+        _edge_roots(grid, keys, a, b, fa, fb, positions, normals)  # a and b: the inside end first
+    else:  # the edges' rows taken (np.take: a boolean mask of an (N, 3) array is several times slower)
+        positions[:] = a  # a point named by itself: its own position
+        a, b = np.take(a, on_edge, axis=0), np.take(b, on_edge, axis=0)
+        fa, fb = np.take(fa, on_edge), np.take(fb, on_edge)
+        normals[:] = np.nan
+        edge_positions, edge_normals = np.empty((len(on_edge), 3)), np.empty((len(on_edge), 3))
+        _edge_roots(grid, np.take(keys, on_edge), a, b, fa, fb, edge_positions, edge_normals)
+        positions[on_edge], normals[on_edge] = edge_positions, edge_normals
+    if ends is not None:
+        ends[on_edge, 0], ends[on_edge, 1] = a, b
+
+
+def _edge_roots(grid: _Grid, keys, a, b, fa, fb, vertices: np.ndarray, normals: np.ndarray) -> None:
     """The surface vertex on each edge (a, b) with values (fa, fb) of opposite signs, and a unit normal:
     Newton's method along the edge from the secant through its ends, inside a bracket (regula falsi where
     a Newton step would leave it), F and its gradient sampled together. An edge is done where Newton's step
@@ -990,28 +1013,25 @@ def _edge_roots(grid: _Grid, keys, a, b, fa, fb) -> tuple[np.ndarray, np.ndarray
     takes the secant through its bracket, and the gradient there. Every point is kept :data:`EDGE_MARGIN`
     inside the edge and nudged by the hash of its key (native: ``implc_edge_roots``). Swaps the ends in
     place so that F(a) < 0. The points are grouped once (each stays on its edge): the edges still open at
-    each step are a subset of that grouping."""
+    each step are a subset of that grouping. Writes the vertices and their unit normals into ``vertices``
+    and ``normals`` (C-contiguous, (n, 3))."""
     n = len(keys)
-    keys = np.ascontiguousarray(keys, dtype=np.int64)
-    vertices = np.empty((n, 3))
     if not n:
-        return vertices, vertices.copy()
+        return
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
     rows, state = np.empty(n, np.int64), np.empty((n, 5))
     run = grid.runtime.edge_roots
     ends = [keys.ctypes.data, a.ctypes.data, b.ctypes.data, fa.ctypes.data, fb.ctypes.data, state.ctypes.data]
     tail = [EDGE_MARGIN, NUDGE, ROOT_TOLERANCE]
     if run(0, n, rows.ctypes.data, *ends, None, None, None, vertices.ctypes.data, None, *tail):
         raise AssertionError("a surface vertex's edge does not change sign: the samples are not repeatable")
-    # the first samples are taken at the vertices' rows and their gradients are the normals' rows (an edge
-    # done at once has its normal in place); the others' next guesses are packed into ``guesses``
+    # the first samples are taken at the vertices' rows (an edge done at once takes its normal from them);
+    # the others' next guesses are packed into ``guesses``
     whole = grid.grouping(vertices)
-    f, normals = grid.values_and_gradients(vertices, whole)
-    normals = np.ascontiguousarray(normals, dtype=np.float64)
-    g, guesses = normals, np.empty((n, 3))  # pages of guesses never written cost nothing
+    guesses = np.empty((n, 3))  # pages of guesses never written cost nothing
     grouping, open_ = whole, n
     for step in range(ROOT_STEPS):
-        if step:
-            f, g = grid.values_and_gradients(guesses[:open_], grouping)
+        f, g = grid.values_and_gradients(guesses[:open_] if step else vertices, grouping)
         f, g = np.ascontiguousarray(f, dtype=np.float64), np.ascontiguousarray(g, dtype=np.float64)
         open_ = run(1, open_, rows.ctypes.data, *ends, f.ctypes.data, g.ctypes.data, guesses.ctypes.data,
                      vertices.ctypes.data, normals.ctypes.data, *tail)
@@ -1022,7 +1042,7 @@ def _edge_roots(grid: _Grid, keys, a, b, fa, fb) -> tuple[np.ndarray, np.ndarray
         run(2, open_, rows.ctypes.data, *ends, None, None, guesses.ctypes.data, vertices.ctypes.data,
             normals.ctypes.data, *tail)
         normals[rows[:open_]] = grid.gradients(guesses[:open_], grouping)
-    return vertices, _unit(normals)
+    _unit(normals)
 
 
 def _unit(normals: np.ndarray) -> np.ndarray:
@@ -1096,10 +1116,13 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     feature_rows = _feature_cells(runtime, todo.cells, kuhn, owner, normals) if features else []
     stats.feature_cells = len(feature_rows)
     mesh = _Pieces(vertices, normals, ends, kuhn, owner, caps)
+    del vertices, normals, ends, kuhn, owner, caps  # the pieces hold them, and let each go once it is joined
     if len(feature_rows):
         stats.added_cells += _with_features(grid, todo, feature_rows, index, mesh)
-    vertices, normals, faces, ends = mesh.compacted()
+    del index
+    grid.forget_samples()
     stats.cap_triangles = sum(map(len, mesh.caps.values()))
+    vertices, normals, faces, ends = mesh.compacted()
     normals = _fill_normals(grid, normals, vertices, faces)
     t4 = time.perf_counter()
     crossed_cells = todo.cells[todo.crossed()]
@@ -1230,45 +1253,63 @@ class _Pieces:
 
     def compacted(self):
         """(vertices, normals, faces, witnesses), each written once, with the vertices no triangle uses left
-        out (those of the first pass's triangles that the feature pass replaced)."""
+        out (those of the first pass's triangles that the feature pass replaced). The pieces are let go as
+        they are joined (this object is empty afterwards): the old and the new mesh are never both whole."""
         caps = [block for block in self.caps.values() if len(block)]
-        if self.keep is None and not caps:
-            return self.vertices, self.normals, self.faces, self.ends
-        kept = len(self.faces) if self.keep is None else int(np.count_nonzero(self.keep))
-        faces = np.empty((kept + sum(map(len, self.more)) + sum(map(len, caps)), 3), np.int64)
-        if self.keep is None:
-            faces[:kept] = self.faces
+        first = (self.vertices, self.normals, self.ends)
+        blocks = [first, *self.added]
+        with_ends = self.ends is not None
+        source_faces, keep, more = self.faces, self.keep, self.more
+        self.vertices = self.normals = self.ends = self.faces = self.owner = self.keep = None
+        self.added, self.more, self.caps = [], [], {}
+        if keep is None and not caps:
+            return first[0], first[1], source_faces, first[2]
+        kept = len(source_faces) if keep is None else int(np.count_nonzero(keep))
+        faces = np.empty((kept + sum(map(len, more)) + sum(map(len, caps)), 3), np.int64)
+        if keep is None:
+            faces[:kept] = source_faces
         else:
             # np.take with out= and mode="clip" (the rows are valid): compress with out= is several times slower,
             # and so is take with out= and the default mode (it checks every index before it writes)
-            np.take(self.faces, np.flatnonzero(self.keep), axis=0, out=faces[:kept], mode="clip")
+            np.take(source_faces, np.flatnonzero(keep), axis=0, out=faces[:kept], mode="clip")
+        del source_faces, keep
         at = kept
-        for block in [*self.more, *caps]:
-            faces[at:at + len(block)] = block
-            at += len(block)
-        blocks = [(self.vertices, self.normals, self.ends), *self.added]
-        if not self.added:
-            return self.vertices, self.normals, faces, self.ends
+        for piece in [*more, *caps]:
+            faces[at:at + len(piece)] = piece
+            at += len(piece)
+        del more, caps
+        if len(blocks) == 1:
+            return first[0], first[1], faces, first[2]
+        del first
         used = np.zeros(sum(len(b[0]) for b in blocks), bool)
         used[faces.reshape(-1)] = True
         renumber = np.cumsum(used) - 1
         np.take(renumber, faces, out=faces, mode="clip")  # in place: each index read before its slot is written
+        del renumber
         rows = np.flatnonzero(used)  # np.take of rows: several times faster than a boolean mask on (V, 3)
         out = [np.empty((len(rows), 3)), np.empty((len(rows), 3))]
-        if self.ends is not None:
+        if with_ends:
             out.append(np.empty((len(rows), 2, 3)))
-        first = 0
-        for block in blocks:  # the rows of each block, taken straight into the outputs
-            lo, hi = np.searchsorted(rows, [first, first + len(block[0])])
+        start = 0
+        while blocks:  # the rows of each block, taken straight into the outputs; the block then let go
+            block = blocks.pop(0)
+            lo, hi = np.searchsorted(rows, [start, start + len(block[0])])
             for source, target in zip(block, out):
-                np.take(source, rows[lo:hi] - first, axis=0, out=target[lo:hi], mode="clip")
-            first += len(block[0])
-        return out[0], out[1], faces, (out[2] if self.ends is not None else None)
+                np.take(source, rows[lo:hi] - start, axis=0, out=target[lo:hi], mode="clip")
+            start += len(block[0])
+            del block
+        return out[0], out[1], faces, (out[2] if with_ends else None)
 
 
 def _corner_signs(grid: _Grid, cells: np.ndarray) -> np.ndarray:
-    """F < 0 at each corner of each cell, (n, 8): each distinct corner sampled once (NaN counts as outside)."""
-    return grid.corner_values(grid.key(cells)[:, None] + grid.key(CORNERS)) < 0
+    """F < 0 at each corner of each cell, (n, 8): each distinct corner sampled once (NaN counts as outside).
+    :data:`VERTEX_CHUNK` cells at a time: the corners' keys and numbers take memory for a chunk."""
+    inside = np.empty((len(cells), 8), bool)
+    offsets = grid.key(CORNERS)
+    for start in range(0, len(cells), VERTEX_CHUNK):
+        part = cells[start:start + VERTEX_CHUNK]
+        np.less(grid.corner_values(grid.key(part)[:, None] + offsets), 0, out=inside[start:start + len(part)])
+    return inside
 
 
 def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pieces) -> int:
