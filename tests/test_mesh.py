@@ -317,6 +317,30 @@ def test_the_same_mesh_for_every_worker_count():
     assert np.array_equal(one.vertices, two.vertices) and np.array_equal(one.faces, two.faces)
 
 
+@pytest.mark.parametrize("name", ["box_minus_ball", "heightfield", "vm"])
+def test_vertices_and_corners_done_in_chunks_keep_every_promise(name, monkeypatch):
+    """The vertices are placed, and the cells' corners sampled, a chunk at a time (so that a big mesh's
+    memory follows the chunk): with chunks of 97 (creases fanned from cell and face points, caps on the
+    bounds, the tape engine's grouped samples all cut across chunks) the mesh passes every check, and is
+    the mesh made in one chunk."""
+    from implc import contour
+
+    if name == "vm":
+        s, f = implc.compile(parse_vm(CSG, name="csg"), engine="tape"), vm_f(CSG)
+    else:
+        expr, bounds = SURFACES[name]
+        s, f = implc.compile(expr, bounds), numpy_f(expr)
+    whole = implc.voxelize(s, 5, solid=True).mesh(witnesses=True)
+    assert whole.stats.feature_cells > 0 or name == "heightfield"
+    assert whole.stats.cap_triangles > 0 or name != "heightfield"
+    assert len(whole.vertices) > 10 * 97
+    monkeypatch.setattr(contour, "VERTEX_CHUNK", 97)
+    chunked = check_mesh(s, 5, f)
+    for a, b in ((whole.vertices, chunked.vertices), (whole.faces, chunked.faces), (whole.normals, chunked.normals),
+                 (whole.witnesses, chunked.witnesses)):
+        assert np.array_equal(a, b)
+
+
 @pytest.mark.parametrize("name", ["paper_blobs", "box_minus_ball", "vm"])
 def test_the_same_mesh_for_every_tightness(name):
     """A tighter voxelization drops only cells proven not to meet the surface (their sampled corners agree):
