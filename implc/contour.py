@@ -88,6 +88,9 @@ VERTEX_CHUNK = 1 << 18
 """Surface vertices placed, or cells' corners sampled, at a time (:func:`_vertices`, :func:`_corner_signs`):
 Scene 1's 1.5 million vertices at 512³ took 0.3 GB more at once, and fresh memory is what a big mesh costs
 most."""
+CORNERS_PER_CELL = 2
+"""The distinct corners a band of cells has per cell, about (1.45 on bear, 1.9 on Scene 1, 2.2 on colonnade):
+the size the corners' index starts with."""
 MAX_DEPTH = 14
 """The deepest grid contoured: vertex keys hold (2^depth + 1)³ corners times 64 kinds of edge."""
 
@@ -364,9 +367,10 @@ class _Grid:
             self._corners = _KeyIndex(self.runtime, max(1 << 16, expected))
         return self._corners
 
-    def corner_values(self, keys: np.ndarray) -> np.ndarray:
-        """F at the corners ``keys``, each sampled once for the whole contouring (and remembered)."""
-        index = self._corner_index(keys.size // 6)  # a band of cells has about one corner per cell
+    def corner_values(self, keys: np.ndarray, expected: int | None = None) -> np.ndarray:
+        """F at the corners ``keys``, each sampled once for the whole contouring (and remembered);
+        ``expected``: how many corners the contouring will sample in all, where known (the index's size)."""
+        index = self._corner_index(expected or keys.size // 6)  # a band of cells: one to two corners per cell
         before = index.count
         numbers = index.number(keys)
         if index.count > before:
@@ -1319,9 +1323,11 @@ def _corner_signs(grid: _Grid, cells: np.ndarray) -> np.ndarray:
     :data:`VERTEX_CHUNK` cells at a time: the corners' keys and numbers take memory for a chunk."""
     inside = np.empty((len(cells), 8), bool)
     offsets = grid.key(CORNERS)
+    expected = CORNERS_PER_CELL * len(cells)  # the index sized once for all the chunks
     for start in range(0, len(cells), VERTEX_CHUNK):
         part = cells[start:start + VERTEX_CHUNK]
-        np.less(grid.corner_values(grid.key(part)[:, None] + offsets), 0, out=inside[start:start + len(part)])
+        np.less(grid.corner_values(grid.key(part)[:, None] + offsets, expected), 0,
+                out=inside[start:start + len(part)])
     return inside
 
 
