@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -96,15 +97,26 @@ def assert_vertices_on_sign_changes(mesh: Mesh, f, bounds, depth, kept):
     v, w = mesh.vertices, mesh.witnesses
     lo = np.array([b[0] for b in bounds], float)
     hi = np.array([b[1] for b in bounds], float)
-    n = 1 << depth
     assert np.all(v >= lo) and np.all(v <= hi), "a vertex outside the bounds"
     itself = np.all(w[:, 0] == w[:, 1], axis=1)
     assert np.array_equal(v[itself], w[itself, 0])
     assert np.all(f(v[itself]) < 0)
     on_bounds = (v[itself] == lo) | (v[itself] == hi)
     assert np.all(on_bounds.any(1))
-    a, b, p = w[~itself, 0], w[~itself, 1], v[~itself]
+    a, b = w[~itself, 0], w[~itself, 1]
     assert np.all(f(a) < 0) and not np.any(f(b) < 0), "a witness pair without a sign change of numpy's F"
+    assert_on_witness_edges_in_kept_cells(mesh, bounds, depth, kept)
+
+
+def assert_on_witness_edges_in_kept_cells(mesh: Mesh, bounds, depth, kept):
+    """Each vertex not named by itself lies strictly inside the segment between its witnesses, which lie in
+    one cell of the 2^depth grid, a cell the voxelizer kept (``kept``)."""
+    w = mesh.witnesses
+    lo = np.array([b[0] for b in bounds], float)
+    hi = np.array([b[1] for b in bounds], float)
+    n = 1 << depth
+    itself = np.all(w[:, 0] == w[:, 1], axis=1)
+    a, b, p = w[~itself, 0], w[~itself, 1], mesh.vertices[~itself]
     t = np.einsum("ij,ij->i", p - a, b - a) / np.einsum("ij,ij->i", b - a, b - a)
     assert np.all((t > 0) & (t < 1))
     assert np.allclose(a + t[:, None] * (b - a), p, rtol=0, atol=1e-12)
@@ -117,13 +129,31 @@ def assert_vertices_on_sign_changes(mesh: Mesh, f, bounds, depth, kept):
     assert np.all(np.isin(keys.astype(np.int64), kept_keys)), "a vertex in a cell the voxelizer did not keep"
 
 
+def exact_volume(mesh: Mesh) -> Fraction:
+    """The volume the mesh encloses, in exact rational arithmetic over its vertices' doubles (the
+    divergence theorem, each triangle's signed tetrahedron with the origin)."""
+    exact = [[Fraction(c) for c in row] for row in mesh.vertices.tolist()]
+    total = Fraction(0)
+    for i, j, k in mesh.faces.tolist():
+        a, b, c = exact[i], exact[j], exact[k]
+        total += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                  + a[2] * (b[0] * c[1] - b[1] * c[0]))
+    return total / 6
+
+
+def assert_volume_within(mesh: Mesh, lo: float, hi: float):
+    """lo <= the mesh's exact volume <= hi: Mesh.volume's double sum first, and where that lies outside
+    (it can, by its rounding, where the solid fills the bounds and lo = hi up to an ulp) the exact sum."""
+    if not lo <= mesh.volume <= hi:
+        assert Fraction(lo) <= exact_volume(mesh) <= Fraction(hi), (lo, mesh.volume, hi)
+
+
 def check_mesh(surface, depth, f, solid_voxels=None):
     voxels = implc.voxelize(surface, depth, solid=solid_voxels is None or solid_voxels)
     mesh = voxels.mesh(witnesses=True)
     assert_closed_manifold(mesh)
     assert_vertices_on_sign_changes(mesh, f, surface.bounds, depth, voxels.coords)
-    lo, hi = voxels.volume_bounds()
-    assert lo <= mesh.volume <= hi
+    assert_volume_within(mesh, *voxels.volume_bounds())
     assert mesh.stats.added_cells == 0
     assert np.allclose(np.linalg.norm(mesh.normals, axis=1), 1)
     return mesh
@@ -309,6 +339,46 @@ def test_the_key_index_numbers_keys_in_first_seen_order_as_it_grows():
 
 
 # -- properties of the construction ------------------------------------------------------------------
+def test_a_solid_filling_odd_bounds_has_their_exact_volume():
+    """Found by fuzzing: a plane that misses the bounds, the solid filling them, gives the box's six caps;
+    their volume summed in doubles fell an ulp below volume_bounds()' lower bound (the box's exact volume,
+    rounded down). The mesh's exact volume is the box's."""
+    bounds = ((-0.71, 1.2), (-0.43, 0.61), (-0.56, 0.88))
+    expr = -3 * x / 20 - 21 * y / 100 - 23 * z / 100 - sympy.Rational(17, 50)
+    mesh = check_mesh(implc.compile(expr, bounds), 5, numpy_f(expr))
+    box = Fraction(1)
+    for lo, hi in bounds:
+        box *= Fraction(hi) - Fraction(lo)
+    assert mesh.stats.cells == 0 and exact_volume(mesh) == box
+
+
+@pytest.mark.parametrize("engine", ["jit", "tape"])
+def test_a_plane_through_grid_corners_brackets_its_exact_zeros(engine):
+    """Found by fuzzing: where F is exactly 0 at grid corners (a plane with rational coefficients through
+    them), a double evaluation may give ±1e-17 there (numpy's lambdify does, the tape engine's order of
+    operations too), so numpy's F is no oracle of the signs. In exact rational arithmetic every witness
+    pair still brackets a zero of F on its edge (F <= 0 at the inside end, >= 0 at the other) and every
+    cap corner has F <= 0; every vertex lies in a kept cell."""
+    expr = 7 * x / 20 - 61 * y / 100 - 69 * z / 100 - sympy.Rational(1, 25)
+    coefficients = [Fraction(7, 20), Fraction(-61, 100), Fraction(-69, 100)]
+
+    def exact(p):
+        return sum(c * Fraction(v) for c, v in zip(coefficients, p)) - Fraction(1, 25)
+
+    surface = implc.compile(expr, ((-1, 1),) * 3, engine=engine)
+    voxels = implc.voxelize(surface, 6, solid=True)
+    mesh = voxels.mesh(witnesses=True)
+    assert_closed_manifold(mesh)
+    ends = mesh.witnesses.tolist()
+    zeros = 0
+    for a, b in ends:
+        fa, fb = exact(a), exact(b)
+        assert fa <= 0 and (a == b or fb >= 0), (a, b, fa, fb)
+        zeros += fa == 0
+    assert zeros > 0, "the case the test is for: witnesses where F is exactly 0"
+    assert_on_witness_edges_in_kept_cells(mesh, ((-1, 1),) * 3, 6, voxels.coords)
+
+
 def test_the_same_mesh_for_every_worker_count():
     sc = load_scene("paper_blobs")
     s = implc.compile(sc.surface, sc.bounds)
