@@ -917,7 +917,8 @@ def test_fuzz_random_csg_meshes(seed, engine, depth):
     def sign(p, value):
         if abs(value) > 1e-9:
             return np.sign(value)
-        return sympy.sign(expr.subs({x: sympy.Rational(p[0]), y: sympy.Rational(p[1]), z: sympy.Rational(p[2])}))
+        exact = sympy.N(expr.subs({x: sympy.Rational(p[0]), y: sympy.Rational(p[1]), z: sympy.Rational(p[2])}), 60)
+        return 0 if abs(exact) < 1e-50 else (1 if exact > 0 else -1)  # 60 digits: 0 where F is exactly 0
 
     w = mesh.witnesses
     fa, fb = f(w[:, 0]), f(w[:, 1])
