@@ -733,14 +733,15 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature, faces=None):
             keys = grid.key(corners)
             values = grid.face_values(axis, side, keys)
             signs = values < 0
-            if not signs.any():
+            split4 = is_feature(cells)  # squares fanned from a face point, which may be inside where no corner is
+            if not signs.any() and not face_points.inside[face_points.find(_face_ids(grid, cells[split4], axis,
+                                                                                        side))].any():
                 continue
             grid.remember(keys.reshape(-1), values.reshape(-1))
             inside = np.zeros((len(cells), 8), bool)
             for k, (du, dv) in enumerate(SQUARE):
                 inside[:, local[k]] = signs[cells[:, b] + du, cells[:, c] + dv]
             seeds.append(cells[_both_signs(inside[:, local])])
-            split4 = is_feature(cells)
             whole = inside[:, local].all(1) & ~split4  # squares inside throughout, with no face point
             blocks, in_block = _cap_blocks(whole.reshape(n, n))
             if blocks:  # the corners the triangles beside the blocks use: the other squares' and the blocks'

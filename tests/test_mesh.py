@@ -433,6 +433,24 @@ def test_a_slab_across_an_axis_mid_cell_passes_the_exact_intersection_test():
     check_mesh(implc.compile(expr, ((-0.39, 0.55), (-0.75, 0.53), (-0.56, 0.58))), 6, numpy_f(expr))
 
 
+def test_a_cap_around_an_inside_face_point_where_no_corner_of_the_face_is_inside():
+    """Found by fuzzing (test_fuzz_random_csg_meshes): a crease reaching a face of the bounds where F is
+    positive at every grid corner, but negative at the face point of a feature cell's square there. The
+    fan's tetrahedra reached the face around that point and the face got no cap (it was skipped for having
+    no negative corner): 8 edges in one face only. The cap now closes it."""
+    r16 = sympy.Rational(1, 16)
+    expr = sympy.Max(sympy.Min(sympy.Abs(z + sympy.Rational(3, 8)) - sympy.Rational(1, 32),
+                               (43 * x + 43 * y + 38 * z - 3) / 100),
+                     sympy.Min((-81 * x + 13 * y + 32 * z + 13) / 100, y**2 + z**2 + (x - 5 * r16) ** 2 - r16,
+                               y**2 + z**2 + (x + 3 * r16) ** 2 - r16))
+    bounds = ((-0.43, 0.77), (-1.19, 1.04), (-0.37, 1.15))
+    surface = implc.compile(expr, bounds)
+    corners = np.stack(np.meshgrid(*[np.linspace(lo, hi, 17) for lo, hi in bounds], indexing="ij"), -1)
+    assert np.all(numpy_f(expr)(corners[0].reshape(-1, 3)) > 0), "the case: no corner of the face x = lo inside"
+    mesh = check_mesh(surface, 4, numpy_f(expr))
+    assert np.any(mesh.vertices[:, 0] == bounds[0][0]) and mesh.stats.feature_cells > 0
+
+
 def test_a_solid_filling_odd_bounds_has_their_exact_volume():
     """Found by fuzzing: a plane that misses the bounds, the solid filling them, gives the box's six caps;
     their volume summed in doubles fell an ulp below volume_bounds()' lower bound (the box's exact volume,
