@@ -911,7 +911,10 @@ def random_surface(rng):
 
 
 @pytest.mark.slow
-@hypothesis_settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# derandomized: the same 40 surfaces every run, so that a red run is a bug, never the draw (the harness it
+# comes from ran 1,500 random ones; to explore, run the body over other seeds)
+@hypothesis_settings(max_examples=40, deadline=None, derandomize=True,
+                     suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), engine=st.sampled_from(["jit", "tape"]), depth=st.sampled_from([4, 5, 6]))
 def test_fuzz_random_csg_meshes(seed, engine, depth):
     """Random CSG surfaces over random bounds keep every promise: closed, oriented, manifold, no two faces
