@@ -734,8 +734,8 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature, faces=None):
             values = grid.face_values(axis, side, keys)
             signs = values < 0
             split4 = is_feature(cells)  # squares fanned from a face point, which may be inside where no corner is
-            if not signs.any() and not face_points.inside[face_points.find(_face_ids(grid, cells[split4], axis,
-                                                                                        side))].any():
+            points_inside = face_points.inside[face_points.find(_face_ids(grid, cells[split4], axis, side))]
+            if not signs.any() and not points_inside.any():
                 continue
             grid.remember(keys.reshape(-1), values.reshape(-1))
             inside = np.zeros((len(cells), 8), bool)
