@@ -95,11 +95,14 @@ def assert_closed_manifold(mesh: Mesh):
     assert tm.volume == pytest.approx(mesh.volume, rel=1e-9)
 
 
+def _triple(u, v, w):
+    """u · (v × w), exact for rationals."""
+    return u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0]) + u[2] * (v[0] * w[1] - v[1] * w[0])
+
+
 def _orientation(a, b, c, d) -> int:
     """The sign of the volume of (a, b, c, d), exact (rationals from the doubles)."""
-    ab, ac, ad = ([q - p for p, q in zip(a, e)] for e in (b, c, d))
-    det = (ab[0] * (ac[1] * ad[2] - ac[2] * ad[1]) - ab[1] * (ac[0] * ad[2] - ac[2] * ad[0])
-           + ab[2] * (ac[0] * ad[1] - ac[1] * ad[0]))
+    det = _triple(*([q - p for p, q in zip(a, e)] for e in (b, c, d)))
     return (det > 0) - (det < 0)
 
 
@@ -204,12 +207,7 @@ def exact_volume(mesh: Mesh) -> Fraction:
     """The volume the mesh encloses, in exact rational arithmetic over its vertices' doubles (the
     divergence theorem, each triangle's signed tetrahedron with the origin)."""
     exact = [[Fraction(c) for c in row] for row in mesh.vertices.tolist()]
-    total = Fraction(0)
-    for i, j, k in mesh.faces.tolist():
-        a, b, c = exact[i], exact[j], exact[k]
-        total += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-                  + a[2] * (b[0] * c[1] - b[1] * c[0]))
-    return total / 6
+    return sum((_triple(exact[i], exact[j], exact[k]) for i, j, k in mesh.faces.tolist()), Fraction(0)) / 6
 
 
 def assert_volume_within(mesh: Mesh, lo: float, hi: float):
