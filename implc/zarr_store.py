@@ -34,6 +34,7 @@ import functools
 import json
 import math
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -582,7 +583,22 @@ def _finish(folder: Path, layout: Layout, summaries: list[dict], client: Any, th
                          "inside_voxels": int(sum(s["inside_voxels"] for s in summaries)),
                          "bricks": int(len(bricks_all)), "shards": int(sum(len(s["shards"]) for s in summaries))}
     shutil.rmtree(folder / "_parts", ignore_errors=True)
+    _remove_abandoned_writes(folder)
     group.attrs["implc"] = about  # last: the store is complete
+
+
+ABANDONED_WRITE = re.compile(r"\.[0-9a-f]{32}\.partial$")
+"""The name zarr's local store writes a chunk or shard under before renaming it into place (``NAME.<uuid4
+hex>.partial``): a worker killed in the middle of that write leaves one behind."""
+
+
+def _remove_abandoned_writes(folder: Path) -> None:
+    """Delete the files that writers killed mid-write left (:data:`ABANDONED_WRITE`): every task has finished,
+    so nothing writes any more, and the task of a killed worker ran again elsewhere (a killed worker at 2048³
+    left ``occupancy/c/2/1/3.<uuid>.partial`` beside the shard its task's second run wrote)."""
+    for path in folder.rglob("*.partial"):
+        if path.is_file() and ABANDONED_WRITE.search(path.name):
+            path.unlink(missing_ok=True)
 
 
 def _small(group, name: str, array: np.ndarray) -> None:
