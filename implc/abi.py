@@ -80,14 +80,15 @@ BOX_GRADIENT_ENTRIES = (BOX_GRADIENT,)
 partial's), in a small module compiled on a surface's first mesh."""
 
 # -- the generic runtime module (implc.codegen.runtime_module), one per process ------------------------
-SUBDIVIDE = _entry("implc_subdivide",
-                   "octant:fn* fine_octant:fn* fine_level:i64 prune:i64 refine:i64 geom:f64* stack:i32* "
-                   "masks:i64* state:i64* out:i32* out_masks:i64* capacity:i64 inside:i32* inside_capacity:i64 "
-                   "stats:i64* cancel:i32*", "i64")
-NORMALS = _entry("implc_normals", "gradient_live:fn* point:fn* leaf_geom:f64* coords:i32* masks:i64* n:i64 out:f32* "
-                                  "flags:i8*")
-TIGHTEN = _entry("implc_tighten", "bound:fn* point:fn* geom:f64* depth:i64 coords:i32* masks:i64* normals:f32* "
-                                  "flags:i8* n:i64 inside:i32* inside_count:i64* stats:i64*", "i64")
+WALK_PARAMS = _entry("implc_walk", "evaluator:i64* prune:i64 refine:i64 geom:f64* state:i64* frames:i32* out:i32* "
+                     "out_masks:i64* out_normals:f32* out_flags:i8* capacity:i64 inside:i32* "
+                     "inside_capacity:i64 stats:i64* cancel:i32*", "i64").params
+"""The subdivision walk's parameters (:mod:`implc.codegen.walk`), the same over every evaluator: the
+evaluator's words (its context and kernels: :data:`KERNEL_EVALUATOR_WORDS`, :data:`TAPE_EVALUATOR_WORDS`),
+then the walk's own state and frames, its outputs (cells, per-voxel masks, normals, flags for the second
+look) and the inside octants."""
+SUBDIVIDE = Entry("implc_subdivide", WALK_PARAMS, "i64")
+"""The walk over a surface's compiled kernels (:mod:`implc.codegen.subdivision`)."""
 DROP_MARKED = _entry("implc_drop_marked", "depth:i64 coords:i32* masks:i64* normals:f32* flags:i8* n:i64 inside:i32* "
                                           "inside_count:i64* stats:i64*", "i64")
 OCTREE_INSERT = _entry("implc_octree_insert", "nodes:i32* node_capacity:i64 state:i64* coords:i32* n:i64 "
@@ -118,7 +119,7 @@ FLAT_COLLAPSE = _entry("implc_flat_collapse", "faces:i64* vertices:f64* region:i
 MESH_SIMPLIFY_ENTRIES = (FLAT_COLLAPSE,)
 """... and the simplification of meshes' flat regions (:mod:`implc.codegen.flat_collapse`), a module of its
 own built on first use by ``simplify``."""
-KERNEL_WALK_ENTRIES = (SUBDIVIDE, NORMALS, TIGHTEN)
+KERNEL_WALK_ENTRIES = (SUBDIVIDE,)
 """... and the compiled kernels' walk (subdivision, normals, second look), a module of its own
 (:func:`implc.codegen.runtime_module.build_kernel_walk`), built on first use by a surface with compiled
 kernels: a process that only runs the tape engine never compiles it."""
@@ -131,10 +132,8 @@ TAPE_INTERVAL = _entry("implc_tape_interval", "program:i64* slots:f64* choices:i
 TAPE_GRADIENT = _entry("implc_tape_gradient", "program:i64* slots:f64* pts:f64* out_value:f64* out_grad:f64* n:i64")
 TAPE_POINT = _entry("implc_tape_point", "program:i64* slots:f64* pts:f64* out_value:f64* n:i64")
 """F at points: the dual numbers' value rules without the partials (``implc_tape_gradient``'s values)."""
-TAPE_SUBDIVIDE = _entry("implc_tape_subdivide",
-                        "program:i64* prune:i64 refine:i64 geom:f64* state:i64* frames:i32* tapes:i32* choices:i8* "
-                        "slots:f64* need:i32* marks:i8* remap:i32* out:i32* out_normals:f32* out_flags:i8* "
-                        "capacity:i64 inside:i32* inside_capacity:i64 stats:i64* cancel:i32*", "i64")
+TAPE_SUBDIVIDE = Entry("implc_tape_subdivide", WALK_PARAMS, "i64")
+"""The walk over the tape engine (:mod:`implc.codegen.tape_subdivision`)."""
 TAPE_BOX_GRADIENT = _entry("implc_tape_box_gradient", "program:i64* slots:f64* lo:f64* hi:f64* out:f64* n:i64")
 """Enclosures of F and its partials over boxes: eight doubles per box in ``out`` (F's lo, hi, then each
 partial's lo, hi), as the tape engine's second look uses them."""
@@ -150,22 +149,15 @@ TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_POINT, TAPE_SUBDIVIDE, TAPE_B
 MAX_DEPTH = 21
 """The deepest grid (2^21 cells per axis: cell indices fit in uint32 with room for a child level)."""
 
-STACK_ENTRIES = 7 * (MAX_DEPTH + 1) + 8
-"""The subdivider's depth-first stack bound: at most 7 pending siblings per level plus one octant's 8
-children. An entry is four int32 (i, j, k, level) in ``stack`` and one int64 live-term mask in ``masks``."""
-
 GEOMETRY_DOUBLES = 6 + 3 * (MAX_DEPTH + 2)
 """Subdivision geometry (``geom``): origin (3), outward pad (3), then cell size per level (3 per level,
 one level past the deepest grid for leaf refinement)."""
 
 TIGHTEN_STATS_WORDS = 2
-"""``implc_tighten``'s counts (int64, added to): leaves tested, leaves dropped."""
+"""``implc_drop_marked``'s counts (int64, added to): leaves flagged for the second look, leaves dropped."""
 TIGHTEN_ABOVE, TIGHTEN_BELOW = 1, 4
 """The normals' flags for tightening (:data:`TIGHTEN_ABOVE`: F(c) above the linear model's reach over the
 cell, so the test is whether F > 0 on all of it; :data:`TIGHTEN_BELOW`: below, F < 0); 0: kept as is."""
-SUBDIVIDE_STATE_WORDS = 3
-"""``implc_subdivide``'s resumable state (int64): stack size, grid depth, and the inside octants it wrote in
-its last call."""
 INSIDE_WORDS = 4
 """An inside octant, as both subdividers write them where ``inside`` is not NULL (int32): its cell (i, j,
 k) and its level. Its whole box lies where F < 0."""
@@ -187,23 +179,35 @@ PROGRAM_SLOT_COUNT = 9
 PROGRAM_WORDS = 10
 INSTRUCTION_WORDS = 5
 """A tape instruction (int32): opcode, output slot, three operand slots (unused ones 0)."""
-TAPE_LEVELS = MAX_DEPTH + 2
-"""Levels the tape subdivider keeps a program, choices and a frame for (0 to MAX_DEPTH + 1)."""
-TAPE_FRAME_WORDS = 5
-"""``implc_tape_subdivide``'s frame per level (int32): the octant's cell (i, j, k), the children still
-to visit (bit c: child c), the children whose program is shorter than the octant's (a choice decided)."""
-TAPE_PHASE, TAPE_LEVEL, TAPE_DEPTH, TAPE_TASK_LEVEL, TAPE_PENDING, TAPE_INSIDE_COUNT, TAPE_STAMP = range(7)
-"""``implc_tape_subdivide``'s state (int64): phase (0 new task, 1 running, 2 done), the level of the
-frame in hand, the grid depth, the task's level, whether the frame in hand still needs its children, the
-inside octants written in the last call, the last stamp simplification used (``need`` starts zeroed)."""
-TAPE_PROGRAMS = 7
-"""Start of the instructions' address per level (TAPE_LEVELS words), then of their count, then of the
-output slot (TAPE_LEVELS words each)."""
-TAPE_STATE_WORDS = TAPE_PROGRAMS + 3 * TAPE_LEVELS
-TAPE_STATS_WORDS = 3 * TAPE_LEVELS
-"""The tape subdivider's statistics (int64): boxes enclosed, then octants kept per level (as
-``implc_subdivide``'s, TAPE_LEVELS words), instructions run per level (the octant's level), octants
-expanded per level."""
+WALK_LEVELS = MAX_DEPTH + 2
+"""Levels the walk keeps a frame (and an evaluator a context) for (0 to MAX_DEPTH + 1)."""
+WALK_FRAME_WORDS = 5
+"""The walk's frame per level (int32): the octant's cell (i, j, k), the children still to visit (bit c:
+child c), the children with a choice decided (their context may be shorter than the octant's)."""
+WALK_PHASE, WALK_LEVEL, WALK_DEPTH, WALK_TASK_LEVEL, WALK_PENDING, WALK_INSIDE_COUNT = range(6)
+"""The walk's state (int64): phase (0 new task, 1 running, 2 done), the level of the frame in hand, the
+grid depth, the task's level, whether the frame in hand still needs its children, the inside octants
+written in the last call."""
+WALK_STATE_WORDS = 6
+WALK_STATS_WORDS = 3 * WALK_LEVELS
+"""The walk's statistics (int64, added to): boxes enclosed, then octants kept per level (at 1 + level,
+WALK_LEVELS words), then for evaluators with a size (the tape engine) instructions run per level (the
+octant's level) and octants expanded per level."""
+KERNEL_OCTANT, KERNEL_FINE_OCTANT, KERNEL_FINE_LEVEL, KERNEL_GRADIENT, KERNEL_POINT, KERNEL_BOUND = range(6)
+"""The compiled kernels' evaluator words (int64): the addresses of the octant kernel, of the one from
+``fine_level`` on (the mean-value form's, or the same), that level, of the gradient (live terms), point
+and monotonicity-bound kernels (0: no second look)..."""
+KERNEL_MASKS = 6
+"""... then each level's live-term mask (WALK_LEVELS words), then each level's children's (8 per level)."""
+KERNEL_EVALUATOR_WORDS = KERNEL_MASKS + 9 * WALK_LEVELS
+TAPE_HEADER, TAPE_TAPES, TAPE_CHOICES, TAPE_SLOTS, TAPE_NEED, TAPE_MARKS, TAPE_REMAP, TAPE_STAMP = range(8)
+"""The tape engine's evaluator words (int64): the addresses of the program header, of room for a program
+per level, of each level's choices (8 bytes per instruction), the interpreter's slots, ``need`` (stamps,
+zeroed), the marks and the remap scratch of simplification, then the last stamp simplification used..."""
+TAPE_PROGRAMS = 8
+"""... then each level's program: the instructions' address (WALK_LEVELS words), their count, the output
+slot (WALK_LEVELS words each)."""
+TAPE_EVALUATOR_WORDS = TAPE_PROGRAMS + 3 * WALK_LEVELS
 
 # implc_octree_insert's state (int64 words; implc_octree_mark_inside reads and updates NODE_COUNT, DEPTH
 # and LEVEL_COUNTS)

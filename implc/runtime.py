@@ -46,8 +46,8 @@ class TapeEngine:
 class Runtime:
     """The runtime module's entry points: ``drop_marked``, ``octree_insert``, ``octree_traverse``,
     ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``, ``kuhn_triangles``,
-    ``bent_cells``, ``edge_ends``, ``edge_roots`` and ``corner_points``; the compiled kernels' walk,
-    ``subdivide``, ``normals`` and ``tighten``, from a module of its own compiled on first use, and
+    ``bent_cells``, ``edge_ends``, ``edge_roots`` and ``corner_points``; the walk over compiled kernels,
+    ``subdivide``, from a module of its own compiled on first use, and
     likewise ``flat_collapse`` (meshes' simplification; signatures in :mod:`implc.abi`)."""
 
     _shared: Runtime | None = None
@@ -87,14 +87,6 @@ class Runtime:
     @functools.cached_property
     def subdivide(self):
         return self._walk_entry(abi.SUBDIVIDE)
-
-    @functools.cached_property
-    def normals(self):
-        return self._walk_entry(abi.NORMALS)
-
-    @functools.cached_property
-    def tighten(self):
-        return self._walk_entry(abi.TIGHTEN)
 
     def tape_engine(self, directed: bool, built: TapeEngine | None = None) -> TapeEngine:
         """The tape engine for one rounding mode, compiled on first use (from the disk cache after the

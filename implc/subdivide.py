@@ -2,8 +2,9 @@
 
 After the paper's Fig. 3, with today's means: a plan pass subdivides the root down to a coarse level
 and keeps the octants that may meet the surface; those become tasks, handed to workers as they go idle
-(a shared counter). Each worker runs the native depth-first subdivider (:mod:`implc.codegen.subdivision`)
-on its task with the GIL released, then the native normal kernel. Finished tasks reach the storage
+(a shared counter). Each worker runs the native depth-first walk (:mod:`implc.codegen.walk`, over the
+surface's evaluator: its compiled kernels or the tape engine) on its task with the GIL released: the
+voxels, their normals and the second look's marks; then the drop of the marked ones. Finished tasks reach the storage
 backend strictly in task order (the paper's master's role, taken by whichever worker finds the next task
 ready, so that no extra thread competes for the cores): the voxels arrive in Morton order and the result
 is identical for every worker count. With a *placement* (the default octree's), that serial step shrinks
@@ -23,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import abi, big_arrays
-from .abi import GEOMETRY_DOUBLES, MAX_DEPTH, STACK_ENTRIES
+from .abi import GEOMETRY_DOUBLES, MAX_DEPTH
 from .runtime import Runtime
 from .tape_program import slot_scratch
 
@@ -50,8 +51,9 @@ class SubdivisionStats:
 
     ``seconds``: wall time of each stage (plan, subdivide — the parallel phase, normals included —,
     storage — the time one task at a time spent storing, the serial part —, finish, total).
-    ``worker_busy``: seconds each worker spent working (its tasks, their normals, storing), of which
-    ``worker_normals`` computing normals.
+    ``worker_busy``: seconds each worker spent working (its tasks, storing), of which ``worker_leaves`` in
+    the pass after each task's walk (the drop of the leaves its second look proved empty; the normals and
+    the second look run in the walk).
     """
 
     depth: int
@@ -62,7 +64,7 @@ class SubdivisionStats:
     kept_per_level: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     worker_busy: list = field(default_factory=list)
-    worker_normals: list = field(default_factory=list)
+    worker_leaves: list = field(default_factory=list)
     worker_tasks: list = field(default_factory=list)
     program_length: int = 0
     tightened: list = field(default_factory=lambda: [0] * abi.TIGHTEN_STATS_WORDS)  # leaves tested, dropped
@@ -147,35 +149,39 @@ class _TaskResult:
 
 
 class _Worker:
-    """Per-thread native buffers and counters (for the tape engine, with its ``program``: its frames, a
-    program and choices per level, and the interpreter's scratch)."""
+    """Per-thread native buffers and counters: the walk's state, frames and statistics, and its evaluator's
+    words (``words``, with the buffers they point to kept alive in ``buffers``)."""
 
-    def __init__(self, depth, program=None):
-        self.stack = np.zeros(4 * STACK_ENTRIES, dtype=np.int32)
-        self.masks = np.full(STACK_ENTRIES, -1, dtype=np.int64)  # live-term mask of each stack entry
-        self.state = np.zeros(abi.SUBDIVIDE_STATE_WORDS, dtype=np.int64)
-        self.stats = np.zeros(abi.TAPE_STATS_WORDS, dtype=np.int64)
+    def __init__(self, depth, words: np.ndarray, buffers: tuple = ()):
+        self.state = np.zeros(abi.WALK_STATE_WORDS, dtype=np.int64)
+        self.frames = np.zeros(abi.WALK_LEVELS * abi.WALK_FRAME_WORDS, dtype=np.int32)
+        self.stats = np.zeros(abi.WALK_STATS_WORDS, dtype=np.int64)
         self.tighten_stats = np.zeros(abi.TIGHTEN_STATS_WORDS, dtype=np.int64)
         self.inside_count = np.zeros(1, dtype=np.int64)
         self.depth = depth
+        self.words, self.buffers = words, buffers
         # raw pointers, taken once: numpy's .ctypes.data costs microseconds per access
-        self.stack_ptr, self.state_ptr = self.stack.ctypes.data, self.state.ctypes.data
-        self.masks_ptr, self.stats_ptr = self.masks.ctypes.data, self.stats.ctypes.data
-        if program is not None:
-            n, slots = max(len(program), 1), program.slot_count
-            self.tape_state = np.zeros(abi.TAPE_STATE_WORDS, dtype=np.int64)
-            self.frames = np.zeros(abi.TAPE_LEVELS * abi.TAPE_FRAME_WORDS, dtype=np.int32)
-            self.tapes = np.empty(abi.TAPE_LEVELS * n * abi.INSTRUCTION_WORDS, dtype=np.int32)  # untouched: free
-            self.choices = np.empty(abi.TAPE_LEVELS * n * 8, dtype=np.uint8)
-            self.slots = slot_scratch(slots)
-            self.need = np.zeros(slots, dtype=np.int32)  # stamps (abi.TAPE_STAMP): zero is no call's
-            self.marks = np.empty(n, dtype=np.uint8)
-            self.remap = np.empty(slots, dtype=np.int32)
-            self.tape_buffers = tuple(a.ctypes.data for a in (self.tape_state, self.frames, self.tapes, self.choices,
-                                                              self.slots, self.need, self.marks, self.remap))
+        self.walk_buffers = tuple(a.ctypes.data for a in (words, self.state, self.frames))
+        self.stats_ptr = self.stats.ctypes.data
         self.busy = 0.0
-        self.normals = 0.0
+        self.leaves = 0.0
         self.tasks = 0
+
+
+def _tape_words(program) -> tuple[np.ndarray, tuple]:
+    """The tape engine's evaluator words (:data:`implc.abi.TAPE_EVALUATOR_WORDS`) for ``program``: a
+    program and choices per level, and the interpreter's scratch."""
+    n, slots = max(len(program), 1), program.slot_count
+    buffers = (program.header,
+               np.empty(abi.WALK_LEVELS * n * abi.INSTRUCTION_WORDS, dtype=np.int32),  # untouched pages: free
+               np.empty(abi.WALK_LEVELS * n * 8, dtype=np.uint8),
+               slot_scratch(slots),
+               np.zeros(slots, dtype=np.int32),  # stamps (abi.TAPE_STAMP): zero is no call's
+               np.empty(n, dtype=np.uint8),
+               np.empty(slots, dtype=np.int32))
+    words = np.zeros(abi.TAPE_EVALUATOR_WORDS, dtype=np.int64)
+    words[abi.TAPE_HEADER: abi.TAPE_REMAP + 1] = [a.ctypes.data for a in buffers]
+    return words, buffers
 
 
 class Subdivider:
@@ -190,8 +196,6 @@ class Subdivider:
         self.runtime = runtime
         self.max_voxels = max_voxels
         self.geom = geometry(surface.bounds, depth)
-        leaf = self.geom[6 + 3 * depth: 9 + 3 * depth]
-        self.leaf_geom = np.concatenate([self.geom[:3], leaf])
         self.prune = int(bool(prune))
         self.refine = int(refine_leaves is True)
         self.solid = bool(solid)
@@ -201,71 +205,55 @@ class Subdivider:
         self.fine_level = depth - mean_value_levels + 1 if mean_value_levels > 0 else MAX_DEPTH + 1
         # the tape engine runs the surface where it is the surface's engine (the mean-value form is compiled only)
         self.program = surface.program if mean_value_levels == 0 else None
-        if self.program is None:  # compiled kernels
-            self.box = surface.kernel_address(abi.OCTANT)
-            self.fine_box = surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else self.box
-            self.gradient = surface.kernel_address(abi.GRADIENT_LIVE)
-            self.point = surface.kernel_address(abi.POINT)
-        # the second look at the leaves the normals flag: with compiled kernels, the monotonicity form's bound
-        # over each leaf (implc.codegen.tighten); the tape engine looks below each leaf itself
-        # (implc.codegen.tape_tighten) and the pass only drops what it proved
+        # the second look at the leaves the normals flag (with compiled kernels, their monotonicity bound)
         self.tightens = refine_leaves == "auto"
-        self.bound = surface.kernel_address(abi.BOUND_MONOTONE) if self.tightens and self.program is None else None
+        if self.program is None:  # compiled kernels: their addresses in the evaluator's words
+            self.walk = runtime.subdivide
+            self.kernel_words = np.zeros(abi.KERNEL_EVALUATOR_WORDS, dtype=np.int64)
+            box = surface.kernel_address(abi.OCTANT)
+            self.kernel_words[:abi.KERNEL_MASKS] = (
+                box, surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else box, self.fine_level,
+                surface.kernel_address(abi.GRADIENT_LIVE), surface.kernel_address(abi.POINT),
+                surface.kernel_address(abi.BOUND_MONOTONE) if self.tightens else 0)
+        else:
+            self.walk = surface.tape_engine.subdivide
         self.cancel = np.zeros(1, dtype=np.int32)
-        self.geom_ptr, self.leaf_geom_ptr = self.geom.ctypes.data, self.leaf_geom.ctypes.data
+        self.geom_ptr = self.geom.ctypes.data
         self.cancel_ptr = self.cancel.ctypes.data
         self.stats = SubdivisionStats(depth=depth, workers=workers, kept_per_level=[1] + [0] * depth)
         self._plan_normals = None  # where the plan reached the leaves: their normals, and the time that took
         self._plan_leaves_seconds = 0.0
         if self.program is not None:
-            self.tape_engine = surface.tape_engine
-            self.program_args = (self.program.header.ctypes.data, self.prune, self.refine)
             self.stats.program_length = len(self.program)
             self.stats.live_ops_per_level = [0] * (depth + 1)
             self.stats.octants_per_level = [0] * (depth + 1)
 
     # -- native steps ------------------------------------------------------------------------------
     def _new_worker(self, depth) -> _Worker:
-        return _Worker(depth, self.program)
+        if self.program is None:
+            return _Worker(depth, self.kernel_words.copy())
+        return _Worker(depth, *_tape_words(self.program))
 
     def _run_task(self, w: _Worker, cell, level: int, depth: int, result: _TaskResult) -> None:
-        """Append all kept cells at ``depth`` below ``cell`` (at ``level``) to ``result``, in Morton order
-        (the tape engine: with their normals)."""
-        if self.program is not None:
-            self._run_tape_task(w, cell, level, depth, result)
-            return
-        w.stack[:4] = (*cell, level)
-        w.masks[0] = -1  # every term live at a task's root
-        w.state[:] = (1, depth, 0)
-        while True:
-            room = result.make_room(OUTPUT_CHUNK)
-            n = self.runtime.subdivide(self.box, self.fine_box, self.fine_level, self.prune, self.refine,
-                                       self.geom_ptr, w.stack_ptr, w.masks_ptr, w.state_ptr,
-                                       result.coords_ptr + 12 * result.count, result.masks_ptr + 8 * result.count,
-                                       room, *result.inside_args(self.solid), w.stats_ptr, self.cancel_ptr)
-            result.count += n
-            result.inside_count += int(w.state[2])
-            if w.state[0] == 0 or self.cancel[0]:
-                break
-
-    def _run_tape_task(self, w: _Worker, cell, level: int, depth: int, result: _TaskResult) -> None:
-        frame = level * abi.TAPE_FRAME_WORDS
+        """Append all kept cells at ``depth`` below ``cell`` (at ``level``) to ``result``, in Morton order,
+        with their normals (and, where tightening, the second look's marks)."""
+        frame = level * abi.WALK_FRAME_WORDS
         w.frames[frame: frame + 3] = cell
-        w.tape_state[abi.TAPE_PHASE] = 0
-        w.tape_state[abi.TAPE_DEPTH] = depth
-        w.tape_state[abi.TAPE_TASK_LEVEL] = level
+        w.state[abi.WALK_PHASE] = 0
+        w.state[abi.WALK_DEPTH] = depth
+        w.state[abi.WALK_TASK_LEVEL] = level
         while True:
             room = result.make_room(OUTPUT_CHUNK)
-            # the leaves' flags (and so the engine's second look) only where the task reaches the leaves:
-            # never for the plan's cells above them
+            # the leaves' flags (and so the second look) only where the task reaches the leaves: never for
+            # the plan's cells above them
             flags = result.flags_ptr + result.count if self.tightens and depth == self.depth else None
-            n = self.tape_engine.subdivide(*self.program_args, self.geom_ptr, *w.tape_buffers,
-                                           result.coords_ptr + 12 * result.count,
-                                           result.normals_ptr + 12 * result.count, flags, room,
-                                           *result.inside_args(self.solid), w.stats_ptr, self.cancel_ptr)
+            n = self.walk(w.walk_buffers[0], self.prune, self.refine, self.geom_ptr, *w.walk_buffers[1:],
+                          result.coords_ptr + 12 * result.count, result.masks_ptr + 8 * result.count,
+                          result.normals_ptr + 12 * result.count, flags, room, *result.inside_args(self.solid),
+                          w.stats_ptr, self.cancel_ptr)
             result.count += n
-            result.inside_count += int(w.tape_state[abi.TAPE_INSIDE_COUNT])
-            if w.tape_state[abi.TAPE_PHASE] == 2 or self.cancel[0]:
+            result.inside_count += int(w.state[abi.WALK_INSIDE_COUNT])
+            if w.state[abi.WALK_PHASE] == 2 or self.cancel[0]:
                 break
 
     @property
@@ -274,26 +262,11 @@ class Subdivider:
         parts = [p for p in self._inside_parts if len(p)]
         return np.concatenate(parts) if parts else np.empty((0, abi.INSIDE_WORDS), dtype=np.int32)
 
-    def _normals(self, coords: np.ndarray, out: np.ndarray, masks: np.ndarray | None = None,
-                 flags: np.ndarray | None = None) -> np.ndarray:
-        """Unit normals at the centres of ``coords``, written to ``out`` (same length); ``masks``: each
-        cell's live-term mask (None: every term live); ``flags``: receives each cell's flag for
-        :meth:`_leaves`."""
-        if len(coords):
-            self.runtime.normals(self.gradient, self.point, self.leaf_geom_ptr, coords.ctypes.data,
-                                 None if masks is None else masks.ctypes.data, len(coords), out.ctypes.data,
-                                 None if flags is None else flags.ctypes.data)
-        return out
-
     def _leaves(self, w: _Worker, result: _TaskResult) -> None:
-        """The pass over a task's kept leaves: their normals (the tape engine wrote them with the voxels),
-        then, where tightening, the leaves flagged by the normals tested again and the proven-empty ones
-        dropped (:mod:`implc.codegen.tighten`; a solid's proven-inside ones join the task's inside
-        octants)."""
+        """The end of a task's second look: the leaves it proved empty dropped
+        (:func:`implc.codegen.tighten.emit_drop_marked`; a solid's proven-inside ones join the task's
+        inside octants)."""
         n = result.count
-        if self.program is None:
-            flags = result.flags[:n] if self.tightens else None
-            self._normals(result.coords[:n], result.normals[:n], result.masks[:n], flags)
         if not self.tightens or n == 0:
             return
         inside = None
@@ -301,12 +274,9 @@ class Subdivider:
             result.make_inside_room(n)
             inside = result.inside.ctypes.data
             w.inside_count[0] = result.inside_count
-        marked = (self.depth, result.coords_ptr, result.masks_ptr, result.normals_ptr, result.flags_ptr, n, inside,
-                  w.inside_count.ctypes.data, w.tighten_stats.ctypes.data)
-        if self.bound:  # compiled kernels: the monotonicity bound's test, then the drop (F spares crossed leaves)
-            result.count = self.runtime.tighten(self.bound, self.point, self.geom_ptr, *marked)
-        else:  # the tape engine's look marked the leaves already
-            result.count = self.runtime.drop_marked(*marked)
+        result.count = self.runtime.drop_marked(self.depth, result.coords_ptr, result.masks_ptr,
+                                                result.normals_ptr, result.flags_ptr, n, inside,
+                                                w.inside_count.ctypes.data, w.tighten_stats.ctypes.data)
         if self.solid:
             result.inside_count = int(w.inside_count[0])
 
@@ -368,8 +338,8 @@ class Subdivider:
             self.stats.kept_per_level[level] += int(w.stats[level + 1])
         if self.program is not None:
             for level in range(self.depth + 1):
-                self.stats.live_ops_per_level[level] += int(w.stats[abi.TAPE_LEVELS + level])
-                self.stats.octants_per_level[level] += int(w.stats[2 * abi.TAPE_LEVELS + level])
+                self.stats.live_ops_per_level[level] += int(w.stats[abi.WALK_LEVELS + level])
+                self.stats.octants_per_level[level] += int(w.stats[2 * abi.WALK_LEVELS + level])
         w.stats[:] = 0
 
     def run(self, emit, progress=None, plan=None, emit_inside=None, placement=None) -> SubdivisionStats:
@@ -396,7 +366,7 @@ class Subdivider:
             # the plan's pass over the leaves is this stage's work (it ran in plan(), on this thread)
             self.stats.seconds["subdivide"] = time.perf_counter() - t0 + self._plan_leaves_seconds
             self.stats.worker_busy = [self._plan_leaves_seconds]
-            self.stats.worker_normals = [self._plan_leaves_seconds]
+            self.stats.worker_leaves = [self._plan_leaves_seconds]
             self.stats.worker_tasks = [len(cells)]
             return self.stats
         self._parallel(cells, level, emit, progress, placement)
@@ -481,7 +451,7 @@ class Subdivider:
                     if placement is not None:
                         placement.prepare(result, cells[t])
                     w.busy += time.perf_counter() - t0
-                    w.normals += t2 - t1
+                    w.leaves += t2 - t1
                     w.tasks += 1
                     with lock:
                         produced[0] += result.count
@@ -521,5 +491,5 @@ class Subdivider:
         for w in workers:
             self._absorb(w)
         self.stats.worker_busy = [w.busy for w in workers]
-        self.stats.worker_normals = [w.normals for w in workers]
+        self.stats.worker_leaves = [w.leaves for w in workers]
         self.stats.worker_tasks = [w.tasks for w in workers]

@@ -16,7 +16,7 @@ from sympy import Abs, Max, Min, Piecewise, Rational, cos, sin, sqrt
 import implc
 from implc import CompileError, x, y, z
 from implc import subdivide as subdivide_module
-from implc.codegen.tighten import OUTSIDE
+from implc.codegen.leaf_split import OUTSIDE
 from implc.lower import lower
 from implc.surface import Grouping, choose_engine
 from implc.tape_program import OPCODES, encode, slot_scratch
@@ -384,10 +384,10 @@ def test_simplification_stamps_start_over_without_changing_anything(monkeypatch)
     expected = implc.voxelize(s, 7, workers=1)
     original = subdivide_module._Worker.__init__
 
-    def near_the_end(self, depth, program=None):
-        original(self, depth, program)
-        if program is not None:
-            self.tape_state[abi.TAPE_STAMP] = 0x7FFFFFFF - 5
+    def near_the_end(self, depth, words, buffers=()):
+        original(self, depth, words, buffers)
+        assert len(words) == abi.TAPE_EVALUATOR_WORDS  # the tape engine's evaluator
+        self.words[abi.TAPE_STAMP] = 0x7FFFFFFF - 5
     monkeypatch.setattr(subdivide_module._Worker, "__init__", near_the_end)
     again = implc.voxelize(s, 7, workers=1)
     np.testing.assert_array_equal(again.coords, expected.coords)

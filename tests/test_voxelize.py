@@ -357,15 +357,15 @@ def test_worker_errors_reach_the_caller_and_no_thread_is_left(monkeypatch):
     from implc.subdivide import Subdivider
     s = implc.compile(x**2 + y**2 + z**2 - Rational(1, 2))
     calls = {"n": 0}
-    original = Subdivider._normals
+    original = Subdivider._leaves  # the pass after each task's walk, in the worker
 
-    def failing(self, coords, out, masks=None, flags=None):
+    def failing(self, w, result):
         calls["n"] += 1
         if calls["n"] > 3:
             raise RuntimeError("boom in a worker")
-        return original(self, coords, out, masks, flags)
+        return original(self, w, result)
 
-    monkeypatch.setattr(Subdivider, "_normals", failing)
+    monkeypatch.setattr(Subdivider, "_leaves", failing)
     before = threading.active_count()
     with pytest.raises(RuntimeError, match="boom in a worker"):
         implc.voxelize(s, 8, workers=2)

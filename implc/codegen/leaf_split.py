@@ -1,14 +1,20 @@
-"""What both second looks at the leaves share: the flagged leaves taken eight at a time
-(:func:`for_flagged_batches`, :func:`load_batch`), and the split of a leaf the first test could not prove whole: its
-eighths, then theirs, depth first (:func:`emit_split`).
+"""The second look at the leaves, written once over an evaluator's tests (:class:`Look`): the flagged leaves
+taken eight at a time, the first test over their boxes, and for a leaf it leaves open the further tests
+and the split (:func:`emit_second_look`).
 
-Both second looks (:mod:`implc.codegen.tighten` with a surface's compiled bound, and the tape engine's
-:mod:`implc.codegen.tape_tighten`) test a flagged leaf's box first; where that leaves it open, the tests
-tighten as boxes shrink (the partials keep their sign on smaller boxes, the rest of the enclosure
-shrinks with the box), so the leaf is split :data:`LEVELS_BELOW` levels down and proven when every box at
-the last level is, the boxes a level proves dropping out. A box's cell at k levels below the leaves is
-given as doubles (exact: below 2^53); the caller makes its box as the subdivider would at that level
-(origin + i·h, h the leaves' size times 2^-k exactly, padded outward), so the boxes cover the leaf.
+The normals flag the kept leaves that the linear model at their centre misses, with the side F(c) lies on
+(:data:`implc.abi.TIGHTEN_ABOVE`: prove F > 0 on the whole box, :data:`implc.abi.TIGHTEN_BELOW`: F < 0). A
+leaf proven is marked :data:`OUTSIDE` or :data:`INSIDE`, for ``implc_drop_marked`` to drop. The first
+test runs over a batch of eight leaves' boxes. A leaf it leaves open gets the evaluator's test over a face
+of it where it has one (:meth:`Look.face`); else, unless F at one of its corners (in floating point)
+already lies across 0 (:meth:`Look.crossed`: the surface crosses it, so splitting it would only spend
+time), it is split (:func:`emit_split`): the tests tighten as boxes shrink (the partials keep their sign on
+smaller boxes, the rest of the enclosure shrinks with the box), so the leaf is split :data:`LEVELS_BELOW`
+levels down and proven when every box at the last level is, the boxes a level proves dropping out. A box's
+cell at k levels below the leaves is given as doubles (exact: below 2^53); the evaluator makes its box as
+the subdivider would at that level (origin + i·h, h the leaves' size times 2^-k exactly, padded outward),
+so the boxes cover the leaf. The evaluators: a surface's compiled monotonicity bound
+(:mod:`implc.codegen.tighten`) and the tape engine's interval gradients (:mod:`implc.codegen.tape_tighten`).
 """
 
 from __future__ import annotations
@@ -24,6 +30,85 @@ LEVELS_BELOW = 2
 LANES = 8
 V8 = ir.VectorType(DOUBLE, LANES)
 I8 = ir.IntType(8)
+OUTSIDE, INSIDE = 2, 3
+"""The marks of the leaves a second look proves: F > 0 on the whole box, F < 0 (the normals' flags are
+:data:`implc.abi.TIGHTEN_ABOVE` and :data:`implc.abi.TIGHTEN_BELOW`)."""
+
+
+class Look:
+    """What the second look asks of an evaluator: IR emitted at its builder ``b``. Boxes are given by their
+    cells (``cells``: three rows of eight doubles, axis by axis) and their sides (+1.0: prove F > 0, -1.0:
+    prove F < 0)."""
+
+    def first(self, cells, sides):
+        """The first test over the batch's eight boxes (the leaves'; unused lanes repeat the first): the
+        lanes proven on their side (an i8 mask)."""
+        raise NotImplementedError
+
+    def flagged(self, index) -> None:
+        """Leaf ``index`` (an i64) joins the batch."""
+
+    def batch_done(self) -> None:
+        """The batch is done."""
+
+    def open(self, index, side, lane) -> None:
+        """Leaf ``index``, in ``lane`` of the first test (i64 values), on ``side`` (a double), was left open
+        by it: its further tests follow."""
+
+    def face(self, leaf):
+        """An i1: the leaf (three double cells) proven over a face where F is least (greatest) along its
+        monotone axes; None where the evaluator has no such test."""
+        return None
+
+    def crossed(self, leaf, side):
+        """An i1: F at one of the leaf's corners, in floating point, lies across 0 from ``side``."""
+        raise NotImplementedError
+
+    def prove(self, factor, level):
+        """The boxes (cells at the look's ``cells``, of the leaves' size times ``factor``, ``level`` (an i64,
+        1 or more) levels below the leaf) proven on the open leaf's side (an i8 mask)."""
+        raise NotImplementedError
+
+    def descend(self, level, c) -> None:
+        """Before the boxes below box ``c`` (an i32) of ``level`` are proven."""
+
+
+def emit_second_look(b: ir.IRBuilder, coords, flags, n, look: Look, cells) -> None:
+    """Emit the second look at the flagged ones of the ``n`` leaves at ``coords`` (int32 cells), marking the
+    proven ones in ``flags``; ``cells``: the (3, 8) doubles the boxes' cells are written to, which ``look``
+    reads."""
+    slots = local_array(b, I64, LANES, "look.slots")  # the leaf in each lane of the first test
+    sides = local_array(b, DOUBLE, LANES, "look.sides")
+    zero = const(DOUBLE, 0.0)
+
+    def mark(index, side):
+        store_at(b, b.select(b.fcmp_ordered(">", side, zero), const(I8, OUTSIDE), const(I8, INSIDE)), flags, index)
+
+    def test(count):
+        """The first test over ``count`` flagged leaves' boxes; the ones it leaves open tried further."""
+        load_batch(b, coords, flags, slots, count, cells, sides)
+        proven = b.zext(look.first(cells, sides), I32)
+        with for_range(b, count) as j:
+            index, side = load_at(b, slots, j), load_at(b, sides, j)
+            with b.if_else(b.trunc(b.lshr(proven, b.trunc(j, I32)), ir.IntType(1))) as (yes, no):
+                with yes:
+                    mark(index, side)
+                with no:
+                    leaf = [b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE)
+                            for a in range(3)]
+                    look.open(index, side, j)
+                    face = look.face(leaf)
+                    face = ir.Constant(ir.IntType(1), 0) if face is None else face
+                    with b.if_else(face) as (on_face, box):
+                        with on_face:
+                            mark(index, side)
+                        with box:
+                            with if_(b, b.not_(look.crossed(leaf, side))):
+                                with if_(b, emit_split(b, leaf, cells, look.prove, look.descend)):
+                                    mark(index, side)
+        look.batch_done()
+
+    for_flagged_batches(b, flags, n, slots, test, look.flagged)
 
 
 def emit_split(b: ir.IRBuilder, leaf, cells, prove, descend=None):

@@ -1,8 +1,10 @@
-"""``implc_normals``: unit normals at voxel centres, computed natively for a block of voxels at a time.
+"""Unit normals at voxel centres, computed natively for a block of voxels at a time.
 
-It calls a surface's gradient kernel over the terms live in the voxels' cells (where masks are given),
-normalises in vector registers when every gradient of a block of eight is usable, and otherwise falls
-back to central differences and then to a fixed direction: a normal is never NaN, never zero.
+:func:`emit_normals_body` is the pass over any evaluator's gradients; :func:`emit_normals` over a surface's
+compiled kernels (the walk's, :mod:`implc.codegen.subdivision`). It calls the gradient over the terms live
+in the voxels' cells (where masks are given), normalises in vector registers when every gradient of a
+block of eight is usable, and otherwise falls back to central differences and then to a fixed direction: a
+normal is never NaN, never zero.
 
 Where ``flags`` is not NULL it also marks, with the value and gradient it has anyway, each voxel whose
 cell the linear model at its centre does not cross: |F(c)| > Σ |∂F/∂xᵢ(c)|·hᵢ/2 (flag
@@ -15,16 +17,24 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, Local, at, const, define, for_range, if_, intrinsic, load_at, local_array, store_at
+from .control import I32, I64, Local, at, const, for_range, if_, intrinsic, load_at, local_array, store_at
 from .vector import broadcast
 
 DOUBLE = ir.DoubleType()
 FLOAT = ir.FloatType()
 
 
-def emit_normals(module: ir.Module):
-    fn, b = define(module, abi.NORMALS)
+def emit_normals(module: ir.Module) -> ir.Function:
+    """``kernel.normals(gradient_live, point, leaf_geom, coords, masks, n, out, flags)`` (internal): the
+    normals of ``n`` voxels through a surface's compiled gradient (over the live terms of ``masks``, one
+    per voxel) and point kernels; ``leaf_geom``: the origin, then the voxels' size."""
+    p = ir.PointerType
+    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [p(ir.IntType(8)), p(ir.IntType(8)), p(DOUBLE), p(I32),
+                                                              p(I64), I64, p(FLOAT), p(ir.IntType(8))]),
+                     name="implc.kernel.normals")
+    fn.linkage = "internal"
     grad_ptr, point_ptr, geom, coords, masks, n, out, flags = fn.args
+    b = ir.IRBuilder(fn.append_basic_block("entry"))
     grad_fn = b.bitcast(grad_ptr, ir.PointerType(abi.GRADIENT_LIVE.llvm_type()))
     point_fn = b.bitcast(point_ptr, ir.PointerType(abi.POINT.llvm_type()))
     emit_normals_body(b, geom, coords, masks, n, out,
@@ -32,6 +42,7 @@ def emit_normals(module: ir.Module):
                       lambda probe, probe_values: b.call(point_fn, [probe, probe_values, const(I64, 48)]),
                       flags)
     b.ret_void()
+    return fn
 
 
 def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at, values_at, flags=None):

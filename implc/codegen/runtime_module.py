@@ -2,9 +2,9 @@
 
 The runtime module: the tape engine's end of the second look (dropping the leaves it marked,
 :func:`.tighten.emit_drop_marked`), the octree (:mod:`.octree_index`), splatting (:mod:`.splat`) and the
-contouring's cells (:mod:`.contour_cells`). The kernel-walk module: the compiled kernels' subdivision
-(:mod:`.subdivision`), normals (:mod:`.normals`) and second look (:mod:`.tighten`), which the tape
-engine does not use (it has its own). The mesh-simplification module: the collapse of flat regions'
+contouring's cells (:mod:`.contour_cells`). The kernel-walk module: the walk (:mod:`.walk`) over a
+surface's compiled kernels (:mod:`.subdivision`, with their normals and second look), which the tape engine
+does not use (its module holds the walk over itself). The mesh-simplification module: the collapse of flat regions'
 interior vertices (:mod:`.flat_collapse`). :class:`implc.runtime.Runtime` compiles each once per process,
 the walk and the simplification on first use: a cold start on a tape-engine model compiles a fifth of the
 IR it used to.
@@ -23,7 +23,6 @@ from .contour_cells import (
     emit_kuhn_triangles,
 )
 from .flat_collapse import emit_flat_collapse
-from .normals import emit_normals
 from .octree_index import (
     emit_octree_insert,
     emit_octree_mark_inside,
@@ -32,15 +31,13 @@ from .octree_index import (
 )
 from .splat import emit_splat
 from .subdivision import emit_subdivide
-from .tighten import emit_drop_marked, emit_tighten
+from .tighten import emit_drop_marked
 
 
 def build_kernel_walk() -> str:
     """The LLVM IR text of the kernel-walk module."""
     module = ir.Module(name="implc_kernel_walk")
     emit_subdivide(module)
-    emit_normals(module)
-    emit_tighten(module)
     return str(module)
 
 

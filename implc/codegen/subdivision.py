@@ -1,149 +1,110 @@
-"""``implc_subdivide``: Fig. 1 of the paper, the native depth-first subdivision of one task.
+"""A surface's compiled kernels as an evaluator of the walk (:mod:`implc.codegen.walk`): ``implc_subdivide``.
 
-A loop over an explicit stack. It calls a surface's octant kernel (``implc_octant``: the eight children of
-an octant, generated and enclosed in vector registers) through a function pointer (a second, finer kernel,
-e.g. the mean-value form, from a given child level on; optionally a leaf is kept only if one of its eight
-halves-per-axis may meet the surface), prunes children whose enclosure excludes 0, pushes the rest in
-reverse so that leaves come out in Morton order, and writes leaf coordinates with their live-term masks;
-where ``inside`` is not NULL (a solid), also every child whose enclosure lies below 0
-(:data:`implc.abi.INSIDE_WORDS` each; their count goes to the state). It is resumable: when the output
-buffer is full or the cancel flag is raised it returns with its stack intact (the layouts are
-:mod:`implc.abi`'s)."""
+Enclosing an octant's children calls the surface's octant kernel (``implc_octant``: the eight children
+generated and enclosed in vector registers; from a given child level on a second, finer one, e.g. the
+mean-value form's) through a function pointer, with the octant's live-term mask; it returns each child's
+mask, which becomes the child's context as the walk enters it (all ones where pruning is off), and each
+voxel keeps its own (``out_masks``). The normals come from the surface's gradient kernel over each block's
+live terms (:mod:`implc.codegen.normals`), the second look from its monotonicity bound
+(:mod:`implc.codegen.tighten`). The evaluator's words are :data:`implc.abi.KERNEL_EVALUATOR_WORDS`.
+"""
 
 from __future__ import annotations
 
 from llvmlite import ir
 
 from .. import abi
-from .control import (
-    I32,
-    I64,
-    Local,
-    at,
-    bit_intrinsic,
-    bump,
-    const,
-    define,
-    if_,
-    load_at,
-    local_array,
-    store_at,
-    while_true,
-)
+from .control import I32, I64, at, const, load_at, local_array, store_at
+from .normals import emit_normals
+from .tighten import emit_tighten
+from .walk import Evaluator, Walk, emit_walk
+
+I8 = ir.IntType(8)
+_P = ir.PointerType
 
 
-def append_inside(b: ir.IRBuilder, inside, count: Local, cells, level, inside_bits):
-    """Append the eight children ``cells`` (per child, three i32) of one octant at ``level`` (i32) whose
-    bit is set in ``inside_bits`` (i32, bit c: child c) to ``inside`` (:data:`implc.abi.INSIDE_WORDS` per
-    row), in Morton order and branch-free (every child is written, only the inside ones are kept)."""
-    n = count.get()
-    for c in range(8):
-        row = b.mul(n, const(I64, abi.INSIDE_WORDS))
+class KernelEvaluator(Evaluator):
+    """The walk's evaluator over a surface's compiled kernels, called through the addresses in its words."""
+
+    def __init__(self, normals: ir.Function, tighten: ir.Function):
+        self.normals_fn, self.tighten = normals, tighten
+
+    def begin(self, walk: Walk) -> None:
+        b, words = walk.b, walk.evaluator
+        self.words = words
+        octant_type = _P(abi.OCTANT.llvm_type())
+        self.box = b.inttoptr(load_at(b, words, abi.KERNEL_OCTANT), octant_type)
+        self.fine = b.inttoptr(load_at(b, words, abi.KERNEL_FINE_OCTANT), octant_type)
+        self.fine_level = load_at(b, words, abi.KERNEL_FINE_LEVEL)
+        self.gradient = b.inttoptr(load_at(b, words, abi.KERNEL_GRADIENT), _P(I8))
+        self.point = b.inttoptr(load_at(b, words, abi.KERNEL_POINT), _P(I8))
+        self.bound = b.inttoptr(load_at(b, words, abi.KERNEL_BOUND), _P(I8))
+        self.sub_cell = local_array(b, I32, 3, "sub_cell")
+        self.leaf_geom = local_array(b, ir.DoubleType(), 6, "leaf_geom")
         for a in range(3):
-            store_at(b, cells[c][a], inside, b.add(row, const(I64, a)))
-        store_at(b, level, inside, b.add(row, const(I64, 3)))
-        n = b.add(n, b.zext(b.trunc(b.lshr(inside_bits, const(I32, c)), ir.IntType(1)), I64))
-    count.set(n)
+            store_at(b, load_at(b, walk.geom, a), self.leaf_geom, a)
+            store_at(b, load_at(b, walk.geom, b.add(b.mul(walk.depth, const(I64, 3)), const(I64, 6 + a))),
+                     self.leaf_geom, 3 + a)
 
+    def mask_at(self, b, level):
+        return at(b, self.words, b.add(level, const(I64, abi.KERNEL_MASKS)))
 
-def emit_subdivide(module: ir.Module):
-    fn, b = define(module, abi.SUBDIVIDE)
-    (box_ptr, fine_ptr, fine_level, prune, refine, geom, stack, masks, state, out, out_masks, cap, inside,
-     inside_cap, stats, cancel) = fn.args
-    box = b.bitcast(box_ptr, ir.PointerType(abi.OCTANT.llvm_type()))
-    fine = b.bitcast(fine_ptr, ir.PointerType(abi.OCTANT.llvm_type()))
-    depth = b.trunc(load_at(b, state, 1), I32)
-    size = Local(b, I64, load_at(b, state, 0), "size")
-    count = Local(b, I64, 0, "count")
-    inside_count = Local(b, I64, 0, "inside_count")
-    solid = b.icmp_unsigned("!=", inside, ir.Constant(inside.type, None))
-    child_masks = local_array(b, I64, 8, "child_masks")
-    sub_cell = local_array(b, I32, 3, "sub_cell")
-    pruning = b.icmp_signed("!=", prune, const(I64, 0))
-    refining = b.icmp_signed("!=", refine, const(I64, 0))
-    null64 = ir.Constant(ir.PointerType(I64), None)
-    all_live = const(I64, -1)
+    def child_masks(self, b, level):
+        """The eight children's masks the octant kernel wrote at ``level``."""
+        return at(b, self.words, b.add(b.mul(level, const(I64, 8)), const(I64, abi.KERNEL_MASKS + abi.WALK_LEVELS)))
 
-    with while_true(b) as loop:
-        s = size.get()
-        loop.break_if(b.icmp_signed("==", s, const(I64, 0)))
-        flag = b.load_atomic(cancel, "monotonic", 4)
-        loop.break_if(b.icmp_signed("!=", flag, const(I32, 0)))
-        top = b.mul(b.sub(s, const(I64, 1)), const(I64, 4))
-        cell = [load_at(b, stack, b.add(top, const(I64, a))) for a in range(3)]
-        child_level = b.add(load_at(b, stack, b.add(top, const(I64, 3))), const(I32, 1))
-        leaf = b.icmp_signed("==", child_level, depth)
-        no_room = b.icmp_signed(">", b.add(count.get(), const(I64, 8)), cap)
-        loop.break_if(b.and_(leaf, no_room))
-        loop.break_if(b.and_(solid, b.icmp_signed(">", b.add(inside_count.get(), const(I64, 8)), inside_cap)))
-        size.set(b.sub(s, const(I64, 1)))
-        parent_mask = b.select(pruning, load_at(b, masks, b.sub(s, const(I64, 1))), all_live)
+    def child_mask(self, walk: Walk, level, c):
+        """Child ``c``'s live-term mask (all ones where pruning is off)."""
+        b = walk.b
+        return b.select(walk.pruning, b.load(b.gep(self.child_masks(b, level), [b.zext(c, I64)])), const(I64, -1))
 
-        level64 = b.zext(child_level, I64)
-        children = [[b.add(b.shl(cell[a], const(I32, 1)), const(I32, (c >> a) & 1)) for a in range(3)]
-                    for c in range(8)]
-        kernel = b.select(b.icmp_signed(">=", level64, fine_level), fine, box)
-        decided = b.call(kernel, [geom, at(b, stack, top), level64, parent_mask, child_masks])
+    def kernel(self, b, level):
+        """The octant kernel for the children of an octant at ``level``."""
+        return b.select(b.icmp_signed(">=", b.add(level, const(I64, 1)), self.fine_level), self.fine, self.box)
+
+    def start(self, walk: Walk, level, cell) -> None:
+        walk.b.store(const(I64, -1), self.mask_at(walk.b, level))  # every term live at a task's root
+
+    def enclose(self, walk: Walk, level, cell):
+        b = walk.b
+        parent_mask = b.select(walk.pruning, b.load(self.mask_at(b, level)), const(I64, -1))
+        decided = b.call(self.kernel(b, level), [walk.geom, walk.frame(level, 0), b.add(level, const(I64, 1)),
+                                                 parent_mask, self.child_masks(b, level)])
         kept = b.and_(decided, const(I32, 0xFF))
-        bump(b, stats, 0, 8)
-        with if_(b, solid):  # children whose box lies inside
-            append_inside(b, inside, inside_count, children, child_level,
-                          b.lshr(decided, const(I32, abi.OCTANT_INSIDE_SHIFT)))
-        stat_slot = b.add(level64, const(I64, 1))
+        below = b.and_(b.lshr(decided, const(I32, abi.OCTANT_INSIDE_SHIFT)), const(I32, 0xFF))
+        return kept, below, const(I32, 0xFF)
 
-        def keep(c):
-            return b.trunc(b.lshr(kept, const(I32, c)), ir.IntType(1))
+    def refine(self, walk: Walk, level, c, leaf):
+        b = walk.b
+        for a in range(3):
+            store_at(b, leaf[a], self.sub_cell, a)
+        sub_kept = b.call(self.kernel(b, level), [walk.geom, self.sub_cell, b.add(level, const(I64, 2)),
+                                                  self.child_mask(walk, level, c), ir.Constant(_P(I64), None)])
+        return b.icmp_unsigned("!=", b.and_(sub_kept, const(I32, 0xFF)), const(I32, 0))
 
-        def child_mask(c):
-            return b.select(pruning, load_at(b, child_masks, c), all_live)
+    def enter(self, walk: Walk, level, c, decided) -> None:
+        b = walk.b
+        b.store(self.child_mask(walk, level, c), self.mask_at(b, b.add(level, const(I64, 1))))
 
-        def refined_keep(c):
-            """Whether some eighth of leaf c may meet the surface (one more level, for tightness)."""
-            for a in range(3):
-                store_at(b, children[c][a], sub_cell, a)
-            sub_kept = b.call(kernel, [geom, sub_cell, b.add(level64, const(I64, 1)), child_mask(c), null64])
-            bump(b, stats, 0, 8)
-            return b.icmp_unsigned("!=", b.and_(sub_kept, const(I32, 0xFF)), const(I32, 0))
+    def leaf(self, walk: Walk, level, c, slot) -> None:
+        store_at(walk.b, self.child_mask(walk, level, c), walk.out_masks, slot)
 
-        ctpop = bit_intrinsic(module, "ctpop")
+    def normals(self, walk: Walk, level, first, count) -> None:
+        b = walk.b
+        offset = b.mul(first, const(I64, 3))
+        has_flags = b.icmp_unsigned("!=", walk.out_flags, ir.Constant(walk.out_flags.type, None))
+        b.call(self.normals_fn, [self.gradient, self.point, self.leaf_geom, b.gep(walk.out, [offset]),
+                                 b.gep(walk.out_masks, [first]), count, b.gep(walk.out_normals, [offset]),
+                                 b.select(has_flags, b.gep(walk.out_flags, [first]), walk.out_flags)])
 
-        def append(array, masks_array, n, c, width):
-            """Write child c at slot n whether it is kept or not; the next slot is n + its keep bit
-            (branch-free: which children survive is unpredictable)."""
-            for a in range(3):
-                store_at(b, children[c][a], array, b.add(b.mul(n, const(I64, width)), const(I64, a)))
-            if width == 4:
-                store_at(b, child_level, array, b.add(b.mul(n, const(I64, 4)), const(I64, 3)))
-            store_at(b, child_mask(c), masks_array, n)
-            return b.add(n, b.zext(keep(c), I64))
-
-        with b.if_else(b.and_(leaf, refining)) as (refined, plain):
-            with refined:  # emit the kept leaves that pass refinement, in Morton order
-                for c in range(8):
-                    with if_(b, keep(c)):
-                        with if_(b, refined_keep(c)):
-                            n = count.get()
-                            for a in range(3):
-                                store_at(b, children[c][a], out, b.add(b.mul(n, const(I64, 3)), const(I64, a)))
-                            store_at(b, child_mask(c), out_masks, n)
-                            count.set(b.add(n, const(I64, 1)))
-                            bump(b, stats, stat_slot)
-            with plain:
-                slot = at(b, stats, stat_slot)
-                b.store(b.add(b.load(slot), b.zext(b.call(ctpop, [kept]), I64)), slot)
-                with b.if_else(leaf) as (then, otherwise):
-                    with then:  # kept leaves in Morton order, each with its live mask (for the normals)
-                        n = count.get()
-                        for c in range(8):
-                            n = append(out, out_masks, n, c, 3)
-                        count.set(n)
-                    with otherwise:  # kept octants pushed in reverse, so child 0 is popped first
-                        t = size.get()
-                        for c in reversed(range(8)):
-                            t = append(stack, masks, t, c, 4)
-                        size.set(t)
-    store_at(b, size.get(), state, 0)
-    store_at(b, inside_count.get(), state, 2)
-    b.ret(count.get())
+    def second_look(self, walk: Walk, level, first, count) -> None:
+        b = walk.b
+        with b.if_then(b.icmp_unsigned("!=", self.bound, ir.Constant(self.bound.type, None))):
+            b.call(self.tighten, [self.bound, self.point, walk.geom, walk.depth,
+                                  b.gep(walk.out, [b.mul(first, const(I64, 3))]), b.gep(walk.out_masks, [first]),
+                                  b.gep(walk.out_flags, [first]), count])
 
 
+def emit_subdivide(module: ir.Module) -> ir.Function:
+    """``implc_subdivide``: the walk over a surface's compiled kernels."""
+    return emit_walk(module, abi.SUBDIVIDE, KernelEvaluator(emit_normals(module), emit_tighten(module)))

@@ -3,7 +3,8 @@
 The normals pass flags the kept leaves whose cell the linear model at their centre misses, with the side
 F(c) lies on (:mod:`implc.codegen.normals`). This pass tries to prove F on that side over each flagged
 leaf's whole box with the program of the leaves' octant (simplified by every choice decided above it),
-and marks the proven ones for :mod:`implc.codegen.tighten` to drop. The proof over a box, eight boxes
+and marks the proven ones for ``implc_drop_marked`` to drop; the control (batches, the order of the
+tests, the split) is :func:`implc.codegen.leaf_split.emit_second_look`'s. The proof over a box, eight boxes
 at a time (:func:`emit_tape_tighten`'s ``prove``):
 
 - the enclosure of F over the box (``tape_box_gradient``), with those of its three partials;
@@ -25,10 +26,9 @@ from __future__ import annotations
 
 from llvmlite import ir
 
-from .control import I32, I64, Local, const, for_range, if_, load_at, local_array, store_at
-from .leaf_split import LEVELS_BELOW, emit_split, for_flagged_batches, load_batch
+from .control import I32, I64, Local, const, if_, load_at, local_array
+from .leaf_split import LEVELS_BELOW, Look, emit_second_look
 from .tape_eval import LANES, V8
-from .tighten import INSIDE, OUTSIDE
 from .vector import DOUBLE, VectorBuilder, broadcast
 
 I8 = ir.IntType(8)
@@ -39,8 +39,8 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
                       directed: bool) -> ir.Function:
     """``tape_tighten(header, program, length, output, slots, choices, geom, depth, coords, flags, n)``
     (internal): the flagged ones (:data:`implc.abi.TIGHTEN_ABOVE`, :data:`implc.abi.TIGHTEN_BELOW`) of
-    the ``n`` voxels at ``coords`` (int32 cells at ``depth``) get :data:`~implc.codegen.tighten.OUTSIDE` or
-    :data:`~implc.codegen.tighten.INSIDE` where F is proven on their side over the whole cell; ``choices``:
+    the ``n`` voxels at ``coords`` (int32 cells at ``depth``) get :data:`~implc.codegen.leaf_split.OUTSIDE` or
+    :data:`~implc.codegen.leaf_split.INSIDE` where F is proven on their side over the whole cell; ``choices``:
     scratch for ``tape_interval``'s choices. ``point``: ``tape_point`` (F alone at eight points)."""
     fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(I8),
                                                               _P(DOUBLE), I64, _P(I32), _P(I8), I64]),
@@ -55,9 +55,7 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
     result = local_array(b, DOUBLE, 2 * LANES, "result")
     cells = local_array(b, DOUBLE, 3 * LANES, "cells")  # the boxes' cells (as doubles) at the level tested
     corners = local_array(b, DOUBLE, 3 * LANES, "corners")  # a leaf's eight corners, axis by axis
-    sides = local_array(b, DOUBLE, LANES, "sides")  # +1: prove F > 0, -1: prove F < 0
-    first_sides = local_array(b, DOUBLE, LANES, "first_sides")  # the first test's, while its voxels are split
-    slots_of = local_array(b, I64, LANES, "slots_of")  # the voxel in each lane of the first test
+    sides = local_array(b, DOUBLE, LANES, "sides")  # the open leaf's side in every lane (+1: F > 0, -1: F < 0)
     vbox, vreduced, vgradient = (b.bitcast(p, _P(V8)) for p in (box, reduced, gradient))
     origin = [broadcast(b, load_at(b, geom, a), LANES) for a in range(3)]
     pad = [broadcast(b, load_at(b, geom, 3 + a), LANES) for a in range(3)]
@@ -94,13 +92,14 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
         vresult = b.bitcast(result, _P(V8))
         return b.load(vresult, align=8), b.load(b.gep(vresult, [const(I64, 1)]), align=8)
 
-    def prove(factor, level=None):
+    def prove(factor, level=None, box_sides=None):
         """The lanes (i8 mask) whose box (cells at ``cells``, of the leaves' size times ``factor``) is
-        proven on its side: by its enclosure, or by the enclosure over the face or corner its monotone axes
-        give. ``level`` (an i64, 1 or more): how far below one leaf the boxes lie (None: the leaves' own): those
-        are tested first over the face their parent's signs (``held``) give (the box itself where they give
-        none), and only where that leaves a box open with their own partials too. The signs are kept in
-        ``signs`` at ``level`` (0 for the leaves) for the boxes below."""
+        proven on its side (``box_sides``, default ``sides``): by its enclosure, or by the enclosure over
+        the face or corner its monotone axes give. ``level`` (an i64, 1 or more): how far below one leaf
+        the boxes lie (None: the leaves' own): those are tested first over the face their parent's signs
+        (``held``) give (the box itself where they give none), and only where that leaves a box open with
+        their own partials too. The signs are kept in ``signs`` at ``level`` (0 for the leaves) for the
+        boxes below."""
         first = level is None
         vcells = b.bitcast(cells, _P(V8))
         for a in range(3):
@@ -109,7 +108,7 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
             b.store(b.fsub(b.fadd(origin[a], b.fmul(i, h)), pad[a]), b.gep(vbox, [const(I64, a)]), align=8)
             b.store(b.fadd(b.fadd(origin[a], b.fmul(b.fadd(i, one), h)), pad[a]), b.gep(vbox, [const(I64, 3 + a)]),
                     align=8)
-        side = b.load(b.bitcast(sides, _P(V8)), align=8)
+        side = b.load(b.bitcast(sides if box_sides is None else box_sides, _P(V8)), align=8)
         above = vb.cmp(">", side, zero)
 
         def on_side(lo, hi):
@@ -139,10 +138,6 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
             proven = b.or_(proven, b.and_(defined, on_side(*enclose_reduced(above, rising, falling))))
             verdict.set(b.or_(verdict.get(), b.bitcast(proven, I8)))
         return verdict.get()
-
-    def mark(index, side):
-        store_at(b, b.select(b.fcmp_ordered(">", side, const(DOUBLE, 0.0)), const(I8, OUTSIDE), const(I8, INSIDE)),
-                 flags, index)
 
     lane_index = ir.Constant(V8, [float(j) for j in range(LANES)])
     quarter_low, quarter_high = (ir.Constant(V8, [float(j & 3) for j in range(LANES)]),
@@ -217,37 +212,26 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
         across = b.select(above, vb.cmp("<", values, zero), vb.cmp(">", values, zero))
         return b.icmp_unsigned("!=", b.bitcast(across, I8), const(I8, 0))
 
-    def split(index, side, lane):
-        """The voxel ``index`` (in ``lane`` of the first test), unless F at one of its corners lies across
-        0 (:func:`crossed`), proven over the face its partials give (:func:`prove_face`), else split below
-        (:func:`~implc.codegen.leaf_split.emit_split`): marked if every piece or box is proven."""
-        leaf = [b.uitofp(load_at(b, coords, b.add(b.mul(index, const(I64, 3)), const(I64, a))), DOUBLE)
-                for a in range(3)]
-        b.store(broadcast(b, side, LANES), b.bitcast(sides, _P(V8)), align=8)
-        hold(const(I64, 0), lane)
-        with b.if_else(prove_face(leaf)) as (face, box):
-            with face:
-                mark(index, side)
-            with box:
-                with if_(b, b.not_(crossed(leaf, side))):
-                    with if_(b, emit_split(b, leaf, cells, prove, lambda level, c: hold(level, b.zext(c, I64)))):
-                        mark(index, side)
+    class TapeLook(Look):
+        def first(self, cells, first_sides):
+            return prove(const(DOUBLE, 1.0), box_sides=first_sides)
 
-    def test_pending(count):
-        """The first test over ``count`` flagged voxels' own boxes (unused lanes repeat the first); the
-        ones it leaves open are split."""
-        load_batch(b, coords, flags, slots_of, count, cells, sides)
-        proven = b.zext(prove(const(DOUBLE, 1.0)), I32)
-        vsides = b.bitcast(sides, _P(V8))
-        b.store(b.load(vsides, align=8), b.bitcast(first_sides, _P(V8)), align=8)  # splitting overwrites sides
-        with for_range(b, count) as j:
-            index, side = load_at(b, slots_of, j), load_at(b, first_sides, j)
-            with b.if_else(b.trunc(b.lshr(proven, b.trunc(j, I32)), ir.IntType(1))) as (yes, no):
-                with yes:
-                    mark(index, side)
-                with no:
-                    split(index, side, j)
+        def open(self, index, side, lane) -> None:
+            b.store(broadcast(b, side, LANES), b.bitcast(sides, _P(V8)), align=8)
+            hold(const(I64, 0), lane)
 
-    for_flagged_batches(b, flags, n, slots_of, test_pending)
+        def face(self, leaf):
+            return prove_face(leaf)
+
+        def crossed(self, leaf, side):
+            return crossed(leaf, side)
+
+        def prove(self, factor, level):
+            return prove(factor, level)
+
+        def descend(self, level, c) -> None:
+            hold(level, b.zext(c, I64))
+
+    emit_second_look(b, coords, flags, n, TapeLook(), cells)
     b.ret_void()
     return fn
