@@ -41,6 +41,10 @@ from .control import (
     while_true,
 )
 
+NORMALS_BATCH = 512
+"""Voxels an evaluator whose context is per voxel gets normals for at once (or fewer, when the call ends):
+fewer calls, their rows still in cache."""
+
 
 class Evaluator:
     """What the walk asks of an evaluator: IR emitted at the walk's builder (``walk.b``), in the walk's
@@ -167,12 +171,15 @@ def emit_walk(module: ir.Module, entry, evaluator: Evaluator) -> ir.Function:
         store_at(b, const(I64, 1), state, abi.WALK_PHASE)
 
     def flush_normals(whole_blocks=False):
-        """Normals of the voxels written since the last flush (``whole_blocks``: of a multiple of eight)."""
+        """Normals of the voxels written since the last flush (``whole_blocks``: of a multiple of eight, and
+        where the context is per voxel, once :data:`NORMALS_BATCH` wait)."""
         first = normals_done.get()
         pending = b.sub(count.get(), first)
+        least = 0
         if whole_blocks:
             pending = b.and_(pending, const(I64, -8))
-        with if_(b, b.icmp_signed(">", pending, const(I64, 0))):
+            least = 0 if evaluator.octant_context else NORMALS_BATCH - 1
+        with if_(b, b.icmp_signed(">", pending, const(I64, least))):
             evaluator.normals(walk, normals_level, first, pending)
             normals_done.set(b.add(first, pending))
 
