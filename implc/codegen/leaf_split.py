@@ -140,8 +140,11 @@ def emit_split(b: ir.IRBuilder, leaf, cells, prove, descend=None):
         store_at(b, leaf[a], base, 3 + a)
     proven = Local(b, ir.IntType(1), ir.Constant(ir.IntType(1), 0), "split.proven")
     level = Local(b, I64, const(I64, 1), "split.level")
-    store_at(b, open_children(const(I64, 1)), open_, 1)
+    opening = Local(b, ir.IntType(1), ir.Constant(ir.IntType(1), 1), "split.opening")  # base[level] is new
     with while_true(b) as loop:
+        with if_(b, opening.get()):  # the boxes below a new base: proven once here (one copy of the test's code)
+            store_at(b, open_children(level.get()), open_, level.get())
+            opening.set(ir.Constant(ir.IntType(1), 0))
         k = level.get()
         remaining = load_at(b, open_, k)
         # a box at the last level stays open: so does the leaf
@@ -161,8 +164,8 @@ def emit_split(b: ir.IRBuilder, leaf, cells, prove, descend=None):
                     parent = load_at(b, base, b.add(b.mul(k, const(I64, 3)), const(I64, a)))
                     store_at(b, b.fadd(b.fmul(parent, const(DOUBLE, 2.0)), bit), base,
                              b.add(b.mul(child, const(I64, 3)), const(I64, a)))
-                store_at(b, open_children(child), open_, child)
                 level.set(child)
+                opening.set(ir.Constant(ir.IntType(1), 1))
         done = b.icmp_signed("==", level.get(), const(I64, 0))  # every box proven
         with if_(b, done):
             proven.set(ir.Constant(ir.IntType(1), 1))

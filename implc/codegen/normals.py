@@ -69,6 +69,10 @@ def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at,
     has_masks = b.icmp_unsigned("!=", masks, ir.Constant(ir.PointerType(I64), None))
     masks = b.select(has_masks, masks, local_array(b, I64, 8, "no_masks"))  # read, unused, at 0..7
 
+    def lane(j, a):
+        """Index of axis ``a`` of lane ``j`` (an i64) in an interleaved block."""
+        return b.add(b.mul(j, const(I64, 3)), const(I64, a))
+
     def usable(n2):
         return b.and_(b.fcmp_ordered(">", n2, zero), b.fcmp_ordered("<", n2, inf))
 
@@ -95,17 +99,17 @@ def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at,
                 row = b.bitcast(at(b, masks, b.select(has_masks, b.mul(block, const(I64, 8)), const(I64, 0))),
                                 ir.PointerType(ir.VectorType(I64, 8)))
                 live.set(b.select(has_masks, b.call(or_reduce, [b.load(row, align=8)]), const(I64, -1)))
-            with tail:  # lanes past the end repeat the last voxel
-                union = const(I64, 0)
-                for j in range(8):
-                    idx = b.select(b.icmp_signed(">", b.add(b.mul(block, const(I64, 8)), const(I64, j)), last), last,
-                                   b.add(b.mul(block, const(I64, 8)), const(I64, j)))
+            with tail:  # lanes past the end repeat the last voxel (a loop: rare, and small code)
+                union = Local(b, I64, 0, "union")
+                with for_range(b, const(I64, 8)) as j:
+                    slot = b.add(b.mul(block, const(I64, 8)), j)
+                    idx = b.select(b.icmp_signed(">", slot, last), last, slot)
                     for a in range(3):
                         c = b.uitofp(load_at(b, coords, b.add(b.mul(idx, const(I64, 3)), const(I64, a))), DOUBLE)
                         centre = b.fadd(origin[a], b.fmul(b.fadd(c, const(DOUBLE, 0.5)), h[a]))
-                        store_at(b, centre, pts, 3 * j + a)
-                    union = b.or_(union, load_at(b, masks, b.select(has_masks, idx, const(I64, 0))))
-                live.set(b.select(has_masks, union, const(I64, -1)))
+                        store_at(b, centre, pts, lane(j, a))
+                    union.set(b.or_(union.get(), load_at(b, masks, b.select(has_masks, idx, const(I64, 0)))))
+                live.set(b.select(has_masks, union.get(), const(I64, -1)))
         gradient_at(pts, values, grad, live.get())
         # the common case in vector registers: every gradient usable, a full block of 8
         v8 = ir.VectorType(DOUBLE, 8)
@@ -136,44 +140,44 @@ def emit_normals_body(b: ir.IRBuilder, geom, coords, masks, n, out, gradient_at,
                 interleaved = b.shuffle_vector(pair, third, ir.Constant(ir.VectorType(I32, 24), order))
                 target = at(b, out, b.mul(block, const(I64, 24)))
                 b.store(interleaved, b.bitcast(target, ir.PointerType(ir.VectorType(FLOAT, 24))), align=4)
-            with slow:  # fallbacks, lane by lane
+            with slow:  # fallbacks, lane by lane (loops: rare, and small code)
                 need.set(const(ir.IntType(1), 0))
-                for j in range(8):
-                    g = [load_at(b, grad, 3 * j + a) for a in range(3)]
-                    centre = [load_at(b, pts, 3 * j + a) for a in range(3)]
+                with for_range(b, const(I64, 8)) as j:
+                    g = [load_at(b, grad, lane(j, a)) for a in range(3)]
+                    centre = [load_at(b, pts, lane(j, a)) for a in range(3)]
                     bad = b.or_(b.not_(usable(norm2(g))), b.fcmp_ordered("<", norm2(centre), near_origin))
                     need.set(b.or_(need.get(), bad))
                 with if_(b, need.get()):  # central differences, half a voxel each way, for the whole block
                     for a in range(3):
                         for s, sign in enumerate((1.0, -1.0)):
-                            for j in range(8):
+                            with for_range(b, const(I64, 8)) as j:
                                 for k in range(3):
-                                    v = load_at(b, pts, 3 * j + k)
+                                    v = load_at(b, pts, lane(j, k))
                                     if k == a:
                                         v = b.fadd(v, b.fmul(h[a], const(DOUBLE, 0.5 * sign)))
-                                    store_at(b, v, probe, ((2 * a + s) * 8 + j) * 3 + k)
+                                    store_at(b, v, probe, b.add(b.mul(b.add(j, const(I64, (2 * a + s) * 8)),
+                                                                      const(I64, 3)), const(I64, k)))
                     values_at(probe, probe_values)
-                for j in range(8):
-                    g = [Local(b, DOUBLE, load_at(b, grad, 3 * j + a)) for a in range(3)]
-                    centre = [load_at(b, pts, 3 * j + a) for a in range(3)]
+                with for_range(b, const(I64, 8)) as j:
+                    g = [Local(b, DOUBLE, load_at(b, grad, lane(j, a))) for a in range(3)]
+                    centre = [load_at(b, pts, lane(j, a)) for a in range(3)]
                     r2 = norm2(centre)
                     bad = b.or_(b.not_(usable(norm2([v.get() for v in g]))), b.fcmp_ordered("<", r2, near_origin))
                     with if_(b, bad):
                         for a in range(3):
-                            up = load_at(b, probe_values, (2 * a) * 8 + j)
-                            down = load_at(b, probe_values, (2 * a + 1) * 8 + j)
+                            up = load_at(b, probe_values, b.add(j, const(I64, (2 * a) * 8)))
+                            down = load_at(b, probe_values, b.add(j, const(I64, (2 * a + 1) * 8)))
                             g[a].set(b.fdiv(b.fsub(up, down), h[a]))
                     with if_(b, b.not_(usable(norm2([v.get() for v in g])))):  # flat or undefined: point outward
                         radial = usable(r2)
                         for a in range(3):
                             g[a].set(b.select(radial, centre[a], const(DOUBLE, 1.0 if a == 2 else 0.0)))
                     length = b.call(sqrt, [norm2([v.get() for v in g])])
-                    index = b.add(b.mul(block, const(I64, 8)), const(I64, j))
+                    index = b.add(b.mul(block, const(I64, 8)), j)
                     with if_(b, b.icmp_signed("<", index, n)):
                         for a in range(3):
                             unit = b.fptrunc(b.fdiv(g[a].get(), length), FLOAT)
                             store_at(b, unit, out, b.add(b.mul(index, const(I64, 3)), const(I64, a)))
-
 
 def _store_flags(b: ir.IRBuilder, flags, block, n, values, g8, h):
     """Flag where |F(c)| > Σ |gᵢ|·hᵢ/2 (the linear model at the centre misses the cell; NaN: no flag),
