@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -168,28 +169,66 @@ class _Worker:
         self.tasks = 0
 
 
-def _tape_words(program) -> tuple[np.ndarray, tuple]:
-    """The tape engine's evaluator words (:data:`implc.abi.TAPE_EVALUATOR_WORDS`) for ``program``: a
-    program and choices per level, and the interpreter's scratch."""
-    n, slots = max(len(program), 1), program.slot_count
-    buffers = (program.header,
-               np.empty(abi.WALK_LEVELS * n * abi.INSTRUCTION_WORDS, dtype=np.int32),  # untouched pages: free
-               np.empty(abi.WALK_LEVELS * n * 8, dtype=np.uint8),
-               slot_scratch(slots),
-               np.zeros(slots, dtype=np.int32),  # stamps (abi.TAPE_STAMP): zero is no call's
-               np.empty(n, dtype=np.uint8),
-               np.empty(slots, dtype=np.int32))
-    words = np.zeros(abi.TAPE_EVALUATOR_WORDS, dtype=np.int64)
-    words[abi.TAPE_HEADER: abi.TAPE_REMAP + 1] = [a.ctypes.data for a in buffers]
-    return words, buffers
+class WalkEvaluator:
+    """An evaluator as the driver sees it: its native walk (:mod:`implc.codegen.walk`, with
+    :data:`implc.abi.WALK_PARAMS`) and each worker's words (and the buffers they point to, kept alive with
+    the worker)."""
+
+    walk: Callable[..., int]
+
+    def worker_words(self) -> tuple[np.ndarray, tuple]:
+        raise NotImplementedError
+
+
+class KernelWalk(WalkEvaluator):
+    """A surface's compiled kernels (:mod:`implc.codegen.subdivision`): their addresses in the words
+    (:data:`implc.abi.KERNEL_EVALUATOR_WORDS`), the same for every worker."""
+
+    def __init__(self, surface, runtime: Runtime, mean_value_levels: int, fine_level: int, tightens: bool):
+        self.walk = runtime.subdivide
+        self.words = np.zeros(abi.KERNEL_EVALUATOR_WORDS, dtype=np.int64)
+        box = surface.kernel_address(abi.OCTANT)
+        self.words[:abi.KERNEL_MASKS] = (
+            box, surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else box, fine_level,
+            surface.kernel_address(abi.GRADIENT_LIVE), surface.kernel_address(abi.POINT),
+            surface.kernel_address(abi.BOUND_MONOTONE) if tightens else 0)
+
+    def worker_words(self) -> tuple[np.ndarray, tuple]:
+        return self.words.copy(), ()
+
+
+class TapeWalk(WalkEvaluator):
+    """The tape engine over ``program`` (:mod:`implc.codegen.tape_subdivision`): per worker, the words
+    (:data:`implc.abi.TAPE_EVALUATOR_WORDS`) of a program and choices per level and the interpreter's
+    scratch."""
+
+    def __init__(self, surface, program):
+        self.walk = surface.tape_engine.subdivide
+        self.program = program
+
+    def worker_words(self) -> tuple[np.ndarray, tuple]:
+        program = self.program
+        n, slots = max(len(program), 1), program.slot_count
+        buffers = (program.header,
+                   np.empty(abi.WALK_LEVELS * n * abi.INSTRUCTION_WORDS, dtype=np.int32),  # untouched pages: free
+                   np.empty(abi.WALK_LEVELS * n * 8, dtype=np.uint8),
+                   slot_scratch(slots),
+                   np.zeros(slots, dtype=np.int32),  # stamps (abi.TAPE_STAMP): zero is no call's
+                   np.empty(n, dtype=np.uint8),
+                   np.empty(slots, dtype=np.int32))
+        words = np.zeros(abi.TAPE_EVALUATOR_WORDS, dtype=np.int64)
+        words[abi.TAPE_HEADER: abi.TAPE_REMAP + 1] = [a.ctypes.data for a in buffers]
+        return words, buffers
 
 
 class Subdivider:
-    """Runs one voxelization of ``surface`` to ``depth``; ``emit(coords, normals)`` receives the voxels."""
+    """Runs one voxelization of ``surface`` to ``depth``; ``emit(coords, normals)`` receives the voxels.
+    ``evaluator``: the :class:`WalkEvaluator` to run (default: the surface's compiled kernels or tape engine,
+    as its engine and the options ask)."""
 
     def __init__(self, surface, depth: int, workers: int, runtime: Runtime, max_voxels: int | None = None,
                  mean_value_levels: int = 0, prune: bool = True, refine_leaves: bool | str = "auto",
-                 solid: bool = False):
+                 solid: bool = False, evaluator: WalkEvaluator | None = None):
         self.surface = surface
         self.depth = depth
         self.workers = workers
@@ -207,16 +246,10 @@ class Subdivider:
         self.program = surface.program if mean_value_levels == 0 else None
         # the second look at the leaves the normals flag (with compiled kernels, their monotonicity bound)
         self.tightens = refine_leaves == "auto"
-        if self.program is None:  # compiled kernels: their addresses in the evaluator's words
-            self.walk = runtime.subdivide
-            self.kernel_words = np.zeros(abi.KERNEL_EVALUATOR_WORDS, dtype=np.int64)
-            box = surface.kernel_address(abi.OCTANT)
-            self.kernel_words[:abi.KERNEL_MASKS] = (
-                box, surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else box, self.fine_level,
-                surface.kernel_address(abi.GRADIENT_LIVE), surface.kernel_address(abi.POINT),
-                surface.kernel_address(abi.BOUND_MONOTONE) if self.tightens else 0)
-        else:
-            self.walk = surface.tape_engine.subdivide
+        if evaluator is None:
+            evaluator = (KernelWalk(surface, runtime, mean_value_levels, self.fine_level, self.tightens)
+                         if self.program is None else TapeWalk(surface, self.program))
+        self.evaluator = evaluator
         self.cancel = np.zeros(1, dtype=np.int32)
         self.geom_ptr = self.geom.ctypes.data
         self.cancel_ptr = self.cancel.ctypes.data
@@ -230,9 +263,7 @@ class Subdivider:
 
     # -- native steps ------------------------------------------------------------------------------
     def _new_worker(self, depth) -> _Worker:
-        if self.program is None:
-            return _Worker(depth, self.kernel_words.copy())
-        return _Worker(depth, *_tape_words(self.program))
+        return _Worker(depth, *self.evaluator.worker_words())
 
     def _run_task(self, w: _Worker, cell, level: int, depth: int, result: _TaskResult) -> None:
         """Append all kept cells at ``depth`` below ``cell`` (at ``level``) to ``result``, in Morton order,
@@ -247,7 +278,7 @@ class Subdivider:
             # the leaves' flags (and so the second look) only where the task reaches the leaves: never for
             # the plan's cells above them
             flags = result.flags_ptr + result.count if self.tightens and depth == self.depth else None
-            n = self.walk(w.walk_buffers[0], self.prune, self.refine, self.geom_ptr, *w.walk_buffers[1:],
+            n = self.evaluator.walk(w.walk_buffers[0], self.prune, self.refine, self.geom_ptr, *w.walk_buffers[1:],
                           result.coords_ptr + 12 * result.count, result.masks_ptr + 8 * result.count,
                           result.normals_ptr + 12 * result.count, flags, room, *result.inside_args(self.solid),
                           w.stats_ptr, self.cancel_ptr)

@@ -1,7 +1,8 @@
 """The subdivision walk is written once over an evaluator (implc.codegen.walk): a third evaluator, written here
-in a few lines of IR for one ball, runs through the same walk and the same Python driver as the compiled kernels
-and the tape engine, and gives the voxels, the inside octants and the normals that the exact arithmetic of the
-ball and the two engines give."""
+in a few lines of IR for one ball (an Evaluator for the walk's code, a WalkEvaluator for the driver, nothing
+else), runs through the same walk and the same Python driver as the compiled kernels and the tape engine,
+and gives the voxels, the inside octants and the normals that the exact arithmetic of the ball and the two
+engines give."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from implc.codegen.control import I32, I64, Local, const, for_range, load_at, lo
 from implc.codegen.walk import Evaluator, Walk, emit_walk
 from implc.jit import NativeModule
 from implc.morton import morton_codes
-from implc.subdivide import Subdivider
+from implc.subdivide import Subdivider, WalkEvaluator
 
 DOUBLE = ir.DoubleType()
 RADIUS2 = 0.5  # x² + y² + z² - 1/2: at depth 5 on [-1, 1]³ every corner value is a multiple of 2^-8, exact
@@ -127,12 +128,20 @@ def exact_cells():
     return (f_lo <= 0) & (f_hi >= 0)
 
 
-def voxelize_with(surface, walk, refine):
-    """Voxels (coords, normals) and inside octants of ``surface`` through the driver, its walk replaced by
-    ``walk`` where given."""
-    sub = Subdivider(surface, DEPTH, 2, surface.runtime, refine_leaves=refine, solid=True)
-    if walk is not None:
-        sub.walk = walk
+class BallWalk(WalkEvaluator):
+    """The driver's side of the ball's evaluator: its walk, and words it does not read."""
+
+    def __init__(self, walk):
+        self.walk = walk
+
+    def worker_words(self):
+        return np.zeros(1, dtype=np.int64), ()
+
+
+def voxelize_with(surface, evaluator, refine):
+    """Voxels (coords, normals) and inside octants of ``surface`` through the driver, with ``evaluator``
+    (None: the surface's own)."""
+    sub = Subdivider(surface, DEPTH, 2, surface.runtime, refine_leaves=refine, solid=True, evaluator=evaluator)
     coords, normals = [], []
     sub.run(lambda c, nrm: (coords.append(np.array(c)), normals.append(np.array(nrm))))
     return np.concatenate(coords), np.concatenate(normals), sub.inside
@@ -141,8 +150,8 @@ def voxelize_with(surface, walk, refine):
 @pytest.mark.parametrize("refine", [False, True])
 def test_a_third_evaluator_runs_through_the_one_walk(ball_walk, refine):
     _, walk = ball_walk
-    coords, normals, inside = voxelize_with(implc.compile(x**2 + y**2 + z**2 - Rational(1, 2), engine="jit"), walk,
-                                            refine)
+    coords, normals, inside = voxelize_with(implc.compile(x**2 + y**2 + z**2 - Rational(1, 2), engine="jit"),
+                                            BallWalk(walk), refine)
     # against exact arithmetic: every cell whose exact range contains 0, nothing else (refinement keeps a cell
     # one of whose eighths meets the surface: with exact ranges, every such cell)
     dense = np.zeros((1 << DEPTH,) * 3, bool)
