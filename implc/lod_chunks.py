@@ -149,8 +149,11 @@ class LodChunks:
         for level in range(self.max_chunk_level + 1):
             m = self.point_level(level)
             keys, coords, _ = self.levels[m]
-            cells = np.unique(coords >> np.uint32(m - level), axis=0) if len(coords) else np.zeros((1, 3), np.uint32)
-            cells = cells[np.argsort(morton_codes(cells), kind="stable")]
+            if len(coords):  # the distinct chunks, in Morton order (one sort of codes, not of rows)
+                shifted = coords >> np.uint32(m - level)
+                cells = shifted[np.unique(morton_codes(shifted), return_index=True)[1]]
+            else:
+                cells = np.zeros((1, 3), np.uint32)
             level_bytes = HEADER_BYTES * len(cells) + 5 * len(keys)
             if max_bytes is not None and total + level_bytes > max_bytes and level > 0:
                 return
