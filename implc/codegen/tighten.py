@@ -22,7 +22,7 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, Local, bump, const, define, for_range, if_, load_at, local_array, store_at
+from .control import I32, I64, Local, const, define, for_range, if_, load_at, local_array, store_at
 from .leaf_split import INSIDE, OUTSIDE, V8, Look, emit_second_look
 
 DOUBLE = ir.DoubleType()
@@ -115,29 +115,14 @@ def emit_drop_marked(module: ir.Module):
     marked leaves and drop the marked ones (see the module)."""
     fn, b = define(module, abi.DROP_MARKED)
     depth, coords, masks, normals, flags, n, inside, inside_count, stats = fn.args
-    _count_marked(b, flags, n, stats)
-    b.ret(_drop_marked(b, depth, coords, masks, normals, flags, n, inside, inside_count))
-
-
-def _count_marked(b: ir.IRBuilder, flags, n, stats):
-    """stats[0] += the flagged leaves, stats[1] += those marked proven."""
-    with for_range(b, n) as i:
-        flag = load_at(b, flags, i)
-        with if_(b, b.and_(b.icmp_unsigned(">=", flag, const(I8, abi.TIGHTEN_ABOVE)),
-                           b.icmp_unsigned("<=", flag, const(I8, abi.TIGHTEN_BELOW)))):
-            bump(b, stats, 0)
-        with if_(b, b.or_(b.icmp_unsigned("==", flag, const(I8, OUTSIDE)),
-                          b.icmp_unsigned("==", flag, const(I8, INSIDE)))):
-            bump(b, stats, 1)
-
-
-def _drop_marked(b: ir.IRBuilder, depth, coords, masks, normals, flags, n, inside, inside_count):
-    """The leaves marked proven dropped in place (a solid's proven-inside ones appended to ``inside``), the
-    survivors moved down in order; returns their count."""
     solid = b.icmp_unsigned("!=", inside, ir.Constant(inside.type, None))
     kept = Local(b, I64, 0, "kept")
+    flagged, marked = Local(b, I64, 0, "flagged"), Local(b, I64, 0, "marked")  # stats[0] and stats[1] add these
     with for_range(b, n) as i:
         flag = load_at(b, flags, i)
+        is_flagged = b.and_(b.icmp_unsigned(">=", flag, const(I8, abi.TIGHTEN_ABOVE)),
+                            b.icmp_unsigned("<=", flag, const(I8, abi.TIGHTEN_BELOW)))
+        flagged.set(b.add(flagged.get(), b.zext(is_flagged, I64)))
         with if_(b, b.and_(solid, b.icmp_unsigned("==", flag, const(I8, INSIDE)))):
             row = b.mul(b.load(inside_count), const(I64, abi.INSIDE_WORDS))
             for a in range(3):
@@ -146,6 +131,7 @@ def _drop_marked(b: ir.IRBuilder, depth, coords, masks, normals, flags, n, insid
             store_at(b, b.trunc(depth, I32), inside, b.add(row, const(I64, 3)))
             b.store(b.add(b.load(inside_count), const(I64, 1)), inside_count)
         dropped = b.or_(b.icmp_unsigned("==", flag, const(I8, OUTSIDE)), b.icmp_unsigned("==", flag, const(I8, INSIDE)))
+        marked.set(b.add(marked.get(), b.zext(dropped, I64)))
         with if_(b, b.not_(dropped)):
             k = kept.get()
             with if_(b, b.icmp_signed("!=", k, i)):
@@ -156,4 +142,7 @@ def _drop_marked(b: ir.IRBuilder, depth, coords, masks, normals, flags, n, insid
                              b.add(b.mul(k, const(I64, 3)), const(I64, a)))
                 store_at(b, load_at(b, masks, i), masks, k)
             kept.set(b.add(k, const(I64, 1)))
-    return kept.get()
+    for word, count in enumerate((flagged, marked)):
+        store_at(b, b.add(load_at(b, stats, word), count.get()), stats, word)
+    b.ret(kept.get())
+

@@ -164,11 +164,15 @@ def emit_walk(module: ir.Module, entry, evaluator: Evaluator) -> ir.Function:
     normals_level, look_level = walk.levels_above_leaves(2), walk.levels_above_leaves(3)
     ctpop, cttz = bit_intrinsic(module, "ctpop"), bit_intrinsic(module, "cttz")
 
-    with if_(b, b.icmp_signed("==", load_at(b, state, abi.WALK_PHASE), const(I64, 0))):  # a new task
+    # the walk's position in registers while it runs, written back to ``state`` when it returns
+    phase = Local(b, I64, load_at(b, state, abi.WALK_PHASE), "phase")
+    at_level = Local(b, I64, load_at(b, state, abi.WALK_LEVEL), "level")
+    needs_children = Local(b, I64, load_at(b, state, abi.WALK_PENDING), "pending")
+    with if_(b, b.icmp_signed("==", phase.get(), const(I64, 0))):  # a new task
         evaluator.start(walk, task_level, walk.cell(task_level))
-        store_at(b, task_level, state, abi.WALK_LEVEL)
-        store_at(b, const(I64, 1), state, abi.WALK_PENDING)
-        store_at(b, const(I64, 1), state, abi.WALK_PHASE)
+        at_level.set(task_level)
+        needs_children.set(const(I64, 1))
+        phase.set(const(I64, 1))
 
     def flush_normals(whole_blocks=False):
         """Normals of the voxels written since the last flush (``whole_blocks``: of a multiple of eight, and
@@ -244,45 +248,47 @@ def emit_walk(module: ir.Module, entry, evaluator: Evaluator) -> ir.Function:
                 b.store(kept, walk.frame(level, 3))
                 b.store(b.and_(decided, kept), walk.frame(level, 4))
 
-    with while_true(b) as loop:
-        loop.break_if(b.icmp_signed("==", load_at(b, state, abi.WALK_PHASE), const(I64, 2)))
+    with while_true(b) as loop:  # one octant per turn: its children enclosed, then the next octant entered
+        loop.break_if(b.icmp_signed("==", phase.get(), const(I64, 2)))
         loop.break_if(b.icmp_signed("!=", b.load_atomic(walk.cancel, "monotonic", 4), const(I32, 0)))
-        level = load_at(b, state, abi.WALK_LEVEL)
-        pending = b.icmp_signed("!=", load_at(b, state, abi.WALK_PENDING), const(I64, 0))
-        leaf_parent = b.icmp_signed("==", b.add(level, const(I64, 1)), depth)
-        no_room = b.icmp_signed(">", b.add(count.get(), const(I64, 8)), walk.capacity)
-        loop.break_if(b.and_(pending, b.and_(leaf_parent, no_room)))
-        no_inside_room = b.icmp_signed(">", b.add(inside_count.get(), const(I64, 8)), walk.inside_capacity)
-        loop.break_if(b.and_(pending, b.and_(solid, no_inside_room)))
-        with b.if_else(pending) as (expanding, stepping):
-            with expanding:
-                expand(level)
-                store_at(b, const(I64, 0), state, abi.WALK_PENDING)
-            with stepping:
-                remaining = b.load(walk.frame(level, 3))
-                with b.if_else(b.icmp_unsigned("==", remaining, const(I32, 0))) as (up, down):
-                    with up:  # every child visited: back to the parent, or the task is done
-                        if evaluator.octant_context:
-                            with if_(b, b.icmp_signed("==", level, normals_level)):
-                                leave_normals_octant()
-                            with if_(b, b.icmp_signed("==", level, look_level)):
-                                flush_normals()
-                                flush_look(normals_done.get(), look_level)
-                        done = b.icmp_signed("==", level, task_level)
-                        store_at(b, b.select(done, const(I64, 2), const(I64, 1)), state, abi.WALK_PHASE)
-                        store_at(b, b.select(done, level, b.sub(level, const(I64, 1))), state, abi.WALK_LEVEL)
-                    with down:  # into the next kept child, in Morton order, with its own context
-                        c = b.call(cttz, [remaining, const(ir.IntType(1), 1)])
-                        b.store(b.and_(remaining, b.sub(remaining, const(I32, 1))), walk.frame(level, 3))
-                        child = b.add(level, const(I64, 1))
-                        for a, coord in enumerate(walk.child_cell(level, c)):
-                            b.store(coord, walk.frame(child, a))
-                        evaluator.enter(walk, level, c, b.trunc(b.lshr(b.load(walk.frame(level, 4)), c),
-                                                                ir.IntType(1)))
-                        store_at(b, child, state, abi.WALK_LEVEL)
-                        store_at(b, const(I64, 1), state, abi.WALK_PENDING)
+        with if_(b, b.icmp_signed("!=", needs_children.get(), const(I64, 0))):
+            level = at_level.get()
+            leaf_parent = b.icmp_signed("==", b.add(level, const(I64, 1)), depth)
+            no_room = b.icmp_signed(">", b.add(count.get(), const(I64, 8)), walk.capacity)
+            loop.break_if(b.and_(leaf_parent, no_room))
+            no_inside_room = b.icmp_signed(">", b.add(inside_count.get(), const(I64, 8)), walk.inside_capacity)
+            loop.break_if(b.and_(solid, no_inside_room))
+            expand(level)
+            needs_children.set(const(I64, 0))
+        with while_true(b) as climb:  # every child of the octant in hand visited: back to its parent
+            level = at_level.get()
+            climb.break_if(b.icmp_unsigned("!=", b.load(walk.frame(level, 3)), const(I32, 0)))
+            if evaluator.octant_context:
+                with if_(b, b.icmp_signed("==", level, normals_level)):
+                    leave_normals_octant()
+                with if_(b, b.icmp_signed("==", level, look_level)):
+                    flush_normals()
+                    flush_look(normals_done.get(), look_level)
+            done = b.icmp_signed("==", level, task_level)  # the task is done
+            with if_(b, done):
+                phase.set(const(I64, 2))
+            climb.break_if(done)
+            at_level.set(b.sub(level, const(I64, 1)))
+        with if_(b, b.icmp_signed("!=", phase.get(), const(I64, 2))):  # into the next kept child, in Morton order
+            level = at_level.get()
+            remaining = b.load(walk.frame(level, 3))
+            c = b.call(cttz, [remaining, const(ir.IntType(1), 1)])
+            b.store(b.and_(remaining, b.sub(remaining, const(I32, 1))), walk.frame(level, 3))
+            child = b.add(level, const(I64, 1))
+            for a, coord in enumerate(walk.child_cell(level, c)):
+                b.store(coord, walk.frame(child, a))
+            evaluator.enter(walk, level, c, b.trunc(b.lshr(b.load(walk.frame(level, 4)), c), ir.IntType(1)))
+            at_level.set(child)
+            needs_children.set(const(I64, 1))
     flush_normals()  # leaving (done, output full or cancelled): every voxel written has its normal
     flush_look(normals_done.get(), look_level)
-    store_at(b, inside_count.get(), state, abi.WALK_INSIDE_COUNT)
+    for word, value in ((abi.WALK_PHASE, phase), (abi.WALK_LEVEL, at_level), (abi.WALK_PENDING, needs_children),
+                        (abi.WALK_INSIDE_COUNT, inside_count)):
+        store_at(b, value.get(), state, word)
     b.ret(count.get())
     return walk.fn
