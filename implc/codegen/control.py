@@ -148,6 +148,14 @@ def define(module: ir.Module, entry):
     return fn, ir.IRBuilder(fn.append_basic_block("entry"))
 
 
+def define_internal(module: ir.Module, name: str, returns, params):
+    """A function of the module's own (internal linkage: LLVM may inline it, and it is not exported), and a
+    builder at its entry block."""
+    fn = ir.Function(module, ir.FunctionType(returns, params), name=name)
+    fn.linkage = "internal"
+    return fn, ir.IRBuilder(fn.append_basic_block("entry"))
+
+
 def intrinsic(module: ir.Module, name: str, arity: int, type_=DOUBLE):
     """The LLVM intrinsic ``name`` taking ``arity`` values of ``type_`` and returning one (declared once)."""
     fn = module.globals.get(name)

@@ -17,7 +17,20 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, Local, at, const, for_range, if_, intrinsic, load_at, local_array, store_at
+from .control import (
+    I32,
+    I64,
+    Local,
+    at,
+    const,
+    define_internal,
+    for_range,
+    if_,
+    intrinsic,
+    load_at,
+    local_array,
+    store_at,
+)
 from .vector import broadcast
 
 DOUBLE = ir.DoubleType()
@@ -29,12 +42,10 @@ def emit_normals(module: ir.Module) -> ir.Function:
     normals of ``n`` voxels through a surface's compiled gradient (over the live terms of ``masks``, one
     per voxel) and point kernels; ``leaf_geom``: the origin, then the voxels' size."""
     p = ir.PointerType
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [p(ir.IntType(8)), p(ir.IntType(8)), p(DOUBLE), p(I32),
-                                                              p(I64), I64, p(FLOAT), p(ir.IntType(8))]),
-                     name="implc.kernel.normals")
-    fn.linkage = "internal"
+    fn, b = define_internal(module, "implc.kernel.normals", ir.VoidType(),
+                            [p(ir.IntType(8)), p(ir.IntType(8)), p(DOUBLE), p(I32), p(I64), I64, p(FLOAT),
+                             p(ir.IntType(8))])
     grad_ptr, point_ptr, geom, coords, masks, n, out, flags = fn.args
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
     grad_fn = b.bitcast(grad_ptr, ir.PointerType(abi.GRADIENT_LIVE.llvm_type()))
     point_fn = b.bitcast(point_ptr, ir.PointerType(abi.POINT.llvm_type()))
     emit_normals_body(b, geom, coords, masks, n, out,

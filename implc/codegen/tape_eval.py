@@ -36,7 +36,7 @@ from llvmlite import ir
 from .. import abi
 from ..tape_program import OPCODES
 from . import elementary
-from .control import I32, I64, Local, for_range, if_, load_at, store_at
+from .control import I32, I64, Local, define_internal, for_range, if_, load_at, store_at
 from .interval_rules import IntervalEmitter
 from .vector import DOUBLE, VectorBuilder, broadcast
 
@@ -81,10 +81,8 @@ def box_gradient_slots(b: ir.IRBuilder, header, slots):
 
 def emit_tape_prefill(module: ir.Module) -> ir.Function:
     """Define ``tape_prefill`` (see the module docstring) in ``module``."""
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(DOUBLE), _P(I32)]), name="implc.tape.prefill")
-    fn.linkage = "internal"
+    fn, b = define_internal(module, "implc.tape.prefill", ir.VoidType(), [_P(I64), _P(DOUBLE), _P(I32)])
     header, slots, remap = fn.args
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
     constants = b.inttoptr(_header(b, header, abi.PROGRAM_CONSTANTS), _P(DOUBLE))
     constant_slots = b.inttoptr(_header(b, header, abi.PROGRAM_CONSTANT_SLOTS), _P(I32))
     vslots, vdual = b.bitcast(slots, _P(V8)), b.bitcast(dual_slots(b, header, slots), _P(V8))
@@ -122,11 +120,9 @@ def _variables(b, header, store):
 
 def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
     """Define ``tape_interval`` (see the module docstring) in ``module``."""
-    fn = ir.Function(module, ir.FunctionType(I8, [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(I8), _P(DOUBLE),
-                                                  _P(DOUBLE)]), name="implc.tape.interval")
-    fn.linkage = "internal"
+    fn, b = define_internal(module, "implc.tape.interval", I8,
+                            [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(I8), _P(DOUBLE), _P(DOUBLE)])
     header, program, length, output, slots, choices, box, result = fn.args
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
     vb = VectorBuilder(b, LANES, directed, outline_elementary=True)  # their constants stay in their functions
     em = IntervalEmitter(vb)
     vslots, vbox = b.bitcast(slots, _P(V8)), b.bitcast(box, _P(V8))
@@ -196,12 +192,9 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
 def emit_tape_dual(module: ir.Module, partials: bool = True) -> ir.Function:
     """Define ``tape_dual`` (see the module docstring) in ``module``; with ``partials=False``, ``tape_point``:
     the same value rules without the partials (F alone at eight points into ``result``), for sampling."""
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE),
-                                                              _P(DOUBLE)]),
-                     name="implc.tape.dual" if partials else "implc.tape.point")
-    fn.linkage = "internal"
+    fn, b = define_internal(module, "implc.tape.dual" if partials else "implc.tape.point", ir.VoidType(),
+                            [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE), _P(DOUBLE)])
     header, program, length, output, slots, points, result = fn.args
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
     vb = VectorBuilder(b, LANES, outline_elementary=True)
     vslots, vpoints = b.bitcast(dual_slots(b, header, slots), _P(V8)), b.bitcast(points, _P(V8))
     zero, one = vb.splat(0.0), vb.splat(1.0)
@@ -303,11 +296,9 @@ def emit_tape_dual(module: ir.Module, partials: bool = True) -> ir.Function:
 
 def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
     """Define ``tape_box_gradient`` (see the module docstring) in ``module``."""
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE),
-                                                              _P(DOUBLE)]), name="implc.tape.box_gradient")
-    fn.linkage = "internal"
+    fn, b = define_internal(module, "implc.tape.box_gradient", ir.VoidType(),
+                            [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE), _P(DOUBLE)])
     header, program, length, output, slots, box, result = fn.args
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
     vb = VectorBuilder(b, LANES, directed, outline_elementary=True)
     em = IntervalEmitter(vb)
     vslots, vbox = b.bitcast(box_gradient_slots(b, header, slots), _P(V8)), b.bitcast(box, _P(V8))

@@ -22,7 +22,7 @@ from llvmlite import ir
 
 from .. import abi
 from ..tape_program import FIRST_BINARY, FIRST_TERNARY, OPCODES
-from .control import I32, I64, Local, const, for_range, if_, load_at, store_at
+from .control import I32, I64, Local, const, define_internal, for_range, if_, load_at, store_at
 from .tape_eval import I8, LANES
 
 DROP, KEEP, ALIAS_FIRST, ALIAS_SECOND = 0, 1, 2, 3
@@ -31,11 +31,9 @@ _P = ir.PointerType
 
 def emit_tape_simplify(module: ir.Module) -> ir.Function:
     """Define ``tape_simplify`` (see the module docstring) in ``module``."""
-    fn = ir.Function(module, ir.FunctionType(I64, [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I32), I32, _P(I8),
-                                                   _P(I32), _P(I64)]), name="implc.tape.simplify")
-    fn.linkage = "internal"
+    fn, b = define_internal(module, "implc.tape.simplify", I64,
+                            [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I32), I32, _P(I8), _P(I32), _P(I64)])
     program, length, output, choices, lane, out, need, stamp, mark, remap, out_output = fn.args
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
 
     def field(i, k):
         return b.zext(load_at(b, program, b.add(b.mul(i, const(I64, abi.INSTRUCTION_WORDS)), const(I64, k))), I64)

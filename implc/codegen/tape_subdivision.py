@@ -16,7 +16,7 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, at, const, for_range, if_, load_at, local_array, store_at
+from .control import I32, I64, at, const, define_internal, for_range, if_, load_at, local_array, store_at
 from .kernels import load_xyz, store_xyz
 from .normals import emit_normals_body
 from .tape_eval import I8, LANES, V8
@@ -31,12 +31,9 @@ def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
     """``tape_normals(header, program, length, output, slots, leaf_geom, coords, n, out, flags)`` (internal):
     unit normals of ``n`` voxels, the gradient from ``dual`` over the program given (and their flags for
     tightening where ``flags`` is not NULL)."""
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE),
-                                                              _P(I32), I64, _P(FLOAT), _P(I8)]),
-                     name="implc.tape.normals")
-    fn.linkage = "internal"
+    fn, b = define_internal(module, "implc.tape.normals", ir.VoidType(),
+                            [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE), _P(I32), I64, _P(FLOAT), _P(I8)])
     header, program, length, output, slots, leaf_geom, coords, n, out, flags = fn.args
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
     points = local_array(b, DOUBLE, 3 * LANES, "points")
     result = local_array(b, DOUBLE, 4 * LANES, "result")
     vpoints, vresult = b.bitcast(points, _P(V8)), b.bitcast(result, _P(V8))

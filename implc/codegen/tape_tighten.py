@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from llvmlite import ir
 
-from .control import I32, I64, Local, const, if_, load_at, local_array
+from .control import I32, I64, Local, const, define_internal, if_, load_at, local_array
 from .leaf_split import LEVELS_BELOW, Look, emit_second_look
 from .tape_eval import LANES, V8
 from .vector import DOUBLE, VectorBuilder, broadcast
@@ -42,12 +42,9 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
     the ``n`` voxels at ``coords`` (int32 cells at ``depth``) get :data:`~implc.codegen.leaf_split.OUTSIDE` or
     :data:`~implc.codegen.leaf_split.INSIDE` where F is proven on their side over the whole cell; ``choices``:
     scratch for ``tape_interval``'s choices. ``point``: ``tape_point`` (F alone at eight points)."""
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(I8),
-                                                              _P(DOUBLE), I64, _P(I32), _P(I8), I64]),
-                     name="implc.tape.tighten")
-    fn.linkage = "internal"
+    fn, b = define_internal(module, "implc.tape.tighten", ir.VoidType(),
+                            [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(I8), _P(DOUBLE), I64, _P(I32), _P(I8), I64])
     header, program, length, output, slots, choices, geom, depth, coords, flags, n = fn.args
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
     vb = VectorBuilder(b, LANES, directed)
     box = local_array(b, DOUBLE, 6 * LANES, "box")
     reduced = local_array(b, DOUBLE, 6 * LANES, "reduced")

@@ -22,7 +22,7 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, Local, const, define, for_range, if_, load_at, local_array, store_at
+from .control import I32, I64, Local, const, define, define_internal, for_range, if_, load_at, local_array, store_at
 from .leaf_split import INSIDE, OUTSIDE, V8, Look, emit_second_look
 
 DOUBLE = ir.DoubleType()
@@ -95,13 +95,10 @@ def emit_tighten(module: ir.Module) -> ir.Function:
     """``kernel.tighten(bound, point, geom, depth, coords, masks, flags, n)`` (internal): the second look
     (:func:`~implc.codegen.leaf_split.emit_second_look`) at the flagged ones of the ``n`` leaves at
     ``coords`` (cells at ``depth``, their live-term masks at ``masks``) with the monotonicity bound."""
-    fn = ir.Function(module, ir.FunctionType(ir.VoidType(), [ir.PointerType(I8), ir.PointerType(I8),
-                                                              ir.PointerType(DOUBLE), I64, ir.PointerType(I32),
-                                                              ir.PointerType(I64), ir.PointerType(I8), I64]),
-                     name="implc.kernel.tighten")
-    fn.linkage = "internal"
+    p = ir.PointerType
+    fn, b = define_internal(module, "implc.kernel.tighten", ir.VoidType(),
+                            [p(I8), p(I8), p(DOUBLE), I64, p(I32), p(I64), p(I8), I64])
     bound_ptr, point_ptr, geom, depth, coords, masks, flags, n = fn.args
-    b = ir.IRBuilder(fn.append_basic_block("entry"))
     bound = b.bitcast(bound_ptr, ir.PointerType(abi.BOUND_MONOTONE.llvm_type()))
     point = b.bitcast(point_ptr, ir.PointerType(abi.POINT.llvm_type()))
     cells = local_array(b, DOUBLE, 24, "cells")  # the boxes' cells, axis by axis (at the leaves, or below)
