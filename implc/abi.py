@@ -159,7 +159,7 @@ TIGHTEN_ABOVE, TIGHTEN_BELOW = 1, 4
 """The normals' flags for tightening (:data:`TIGHTEN_ABOVE`: F(c) above the linear model's reach over the
 cell, so the test is whether F > 0 on all of it; :data:`TIGHTEN_BELOW`: below, F < 0); 0: kept as is."""
 INSIDE_WORDS = 4
-"""An inside octant, as both subdividers write them where ``inside`` is not NULL (int32): its cell (i, j,
+"""An inside octant, as the walk writes them where ``inside`` is not NULL (int32): its cell (i, j,
 k) and its level. Its whole box lies where F < 0."""
 OCTANT_INSIDE_SHIFT = 8
 """The octant kernels return bit c set where child c may meet the surface, and bit 8 + c where child c's

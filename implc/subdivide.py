@@ -144,7 +144,7 @@ class _TaskResult:
         if self.count + free > len(self.coords):
             kept = [(name, getattr(self, name)[: self.count]) for name in ("coords", "masks", "normals", "flags")]
             self._allocate(max(self.count + free, 2 * len(self.coords)))
-            for name, rows in kept:  # flags too: the tape engine writes them, and its marks, during the walk
+            for name, rows in kept:  # flags too: the walk writes them, and the second look's marks
                 getattr(self, name)[: self.count] = rows
         return len(self.coords) - self.count
 
