@@ -40,11 +40,6 @@ class KernelEvaluator(Evaluator):
         self.point = b.inttoptr(load_at(b, words, abi.KERNEL_POINT), _P(I8))
         self.bound = b.inttoptr(load_at(b, words, abi.KERNEL_BOUND), _P(I8))
         self.sub_cell = local_array(b, I32, 3, "sub_cell")
-        self.leaf_geom = local_array(b, ir.DoubleType(), 6, "leaf_geom")
-        for a in range(3):
-            store_at(b, load_at(b, walk.geom, a), self.leaf_geom, a)
-            store_at(b, load_at(b, walk.geom, b.add(b.mul(walk.depth, const(I64, 3)), const(I64, 6 + a))),
-                     self.leaf_geom, 3 + a)
 
     def mask_at(self, b, level):
         return at(b, self.words, b.add(level, const(I64, abi.KERNEL_MASKS)))
@@ -92,10 +87,9 @@ class KernelEvaluator(Evaluator):
     def normals(self, walk: Walk, level, first, count) -> None:
         b = walk.b
         offset = b.mul(first, const(I64, 3))
-        has_flags = b.icmp_unsigned("!=", walk.out_flags, ir.Constant(walk.out_flags.type, None))
-        b.call(self.normals_fn, [self.gradient, self.point, self.leaf_geom, b.gep(walk.out, [offset]),
+        b.call(self.normals_fn, [self.gradient, self.point, walk.leaf_geom, b.gep(walk.out, [offset]),
                                  b.gep(walk.out_masks, [first]), count, b.gep(walk.out_normals, [offset]),
-                                 b.select(has_flags, b.gep(walk.out_flags, [first]), walk.out_flags)])
+                                 walk.flags_from(first)])
 
     def second_look(self, walk: Walk, level, first, count) -> None:
         b = walk.b

@@ -84,11 +84,6 @@ class TapeEvaluator(Evaluator):
         self.length = load_at(b, self.header, abi.PROGRAM_LENGTH)
         self.box = local_array(b, DOUBLE, 6 * LANES, "box")
         self.result = local_array(b, DOUBLE, 2 * LANES, "result")
-        self.leaf_geom = local_array(b, DOUBLE, 6, "leaf_geom")
-        for a in range(3):
-            store_at(b, load_at(b, walk.geom, a), self.leaf_geom, a)
-            store_at(b, load_at(b, walk.geom, b.add(b.mul(walk.depth, const(I64, 3)), const(I64, 6 + a))),
-                     self.leaf_geom, 3 + a)
 
     # -- each level's program and choices ------------------------------------------------------------
     def program_of(self, b, level):
@@ -203,10 +198,9 @@ class TapeEvaluator(Evaluator):
     def normals(self, walk: Walk, level, first, count) -> None:
         b = walk.b
         offset = b.mul(first, const(I64, 3))
-        has_flags = b.icmp_unsigned("!=", walk.out_flags, ir.Constant(walk.out_flags.type, None))
-        b.call(self.normals_fn, [self.header, *self.program(b, level), self.slots, self.leaf_geom,
+        b.call(self.normals_fn, [self.header, *self.program(b, level), self.slots, walk.leaf_geom,
                                  b.gep(walk.out, [offset]), count, b.gep(walk.out_normals, [offset]),
-                                 b.select(has_flags, b.gep(walk.out_flags, [first]), walk.out_flags)])
+                                 walk.flags_from(first)])
 
     def second_look(self, walk: Walk, level, first, count) -> None:
         b = walk.b

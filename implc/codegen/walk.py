@@ -37,9 +37,12 @@ from .control import (
     for_set_bits,
     if_,
     load_at,
+    local_array,
     store_at,
     while_true,
 )
+
+DOUBLE = ir.DoubleType()
 
 NORMALS_BATCH = 512
 """Voxels an evaluator whose context is per voxel gets normals for at once (or fewer, when the call ends):
@@ -98,7 +101,8 @@ class Evaluator:
 
 
 class Walk:
-    """The walk's function as the evaluator sees it: its builder, arguments and frames."""
+    """The walk's function as the evaluator sees it: its builder, arguments and frames, and the voxels'
+    geometry (``leaf_geom``: the origin, then their size)."""
 
     def __init__(self, module: ir.Module, entry):
         self.module = module
@@ -110,6 +114,12 @@ class Walk:
         self.pruning = b.icmp_signed("!=", self.prune, const(I64, 0))
         self.depth = load_at(b, self.state, abi.WALK_DEPTH)
         self.task_level = load_at(b, self.state, abi.WALK_TASK_LEVEL)
+        self.has_flags = b.icmp_unsigned("!=", self.out_flags, ir.Constant(self.out_flags.type, None))
+        self.leaf_geom = local_array(b, DOUBLE, 6, "leaf_geom")  # the origin, then the voxels' size
+        for a in range(3):
+            store_at(b, load_at(b, self.geom, a), self.leaf_geom, a)
+            store_at(b, load_at(b, self.geom, b.add(b.mul(self.depth, const(I64, 3)), const(I64, 6 + a))),
+                     self.leaf_geom, 3 + a)
 
     def frame(self, level, k):
         """&frame[level][k] (k: 0-2 the octant's cell, 3 the children still to visit, 4 those with a
@@ -126,6 +136,11 @@ class Walk:
         bits = [const(I32, (c >> a) & 1) if isinstance(c, int) else b.and_(b.lshr(c, const(I32, a)), const(I32, 1))
                 for a in range(3)]
         return [b.add(b.shl(p, const(I32, 1)), bit) for p, bit in zip(self.cell(level), bits)]
+
+    def flags_from(self, first):
+        """The voxels' flags from row ``first`` on (NULL where the walk gets none)."""
+        b = self.b
+        return b.select(self.has_flags, b.gep(self.out_flags, [first]), self.out_flags)
 
     def levels_above_leaves(self, k):
         """The level k above the leaves, or the task's where that lies below it."""
@@ -152,7 +167,6 @@ def emit_walk(module: ir.Module, entry, evaluator: Evaluator) -> ir.Function:
     """Define ``entry`` (with :data:`implc.abi.WALK_PARAMS`) in ``module``: the walk over ``evaluator``."""
     walk = Walk(module, entry)
     b, state, stats, depth, task_level = walk.b, walk.state, walk.stats, walk.depth, walk.task_level
-    has_flags = b.icmp_unsigned("!=", walk.out_flags, ir.Constant(walk.out_flags.type, None))
     solid = b.icmp_unsigned("!=", walk.inside, ir.Constant(walk.inside.type, None))
     refining = b.icmp_signed("!=", walk.refine, const(I64, 0))
     evaluator.begin(walk)
@@ -192,7 +206,7 @@ def emit_walk(module: ir.Module, entry, evaluator: Evaluator) -> ir.Function:
         ``level`` (all of them lie below its octant)."""
         first = looked.get()
         pending = b.sub(upto, first)
-        with if_(b, b.and_(has_flags, b.icmp_signed(">", pending, const(I64, 0)))):
+        with if_(b, b.and_(walk.has_flags, b.icmp_signed(">", pending, const(I64, 0)))):
             evaluator.second_look(walk, level, first, pending)
             looked.set(upto)
 
