@@ -15,7 +15,7 @@ from sympy import Rational
 
 import implc
 from implc import abi, x, y, z
-from implc.codegen.control import I32, I64, Local, const, for_range, load_at, local_array, store_at
+from implc.codegen.control import I32, I64, Local, const, for_range, load_at, store_at
 from implc.codegen.walk import Evaluator, Walk, emit_walk
 from implc.jit import NativeModule
 from implc.morton import morton_codes
@@ -30,9 +30,6 @@ BALL_WALK = abi.Entry("implc_ball_walk", abi.WALK_PARAMS, "i64")
 class BallEvaluator(Evaluator):
     """F = x² + y² + z² - RADIUS2, its children enclosed one by one, its normals the unit centres, no second
     look: nothing else of implc's."""
-
-    def begin(self, walk: Walk) -> None:
-        self.h = local_array(walk.b, DOUBLE, 3, "ball.h")
 
     def start(self, walk: Walk, level, cell) -> None:
         pass
@@ -85,12 +82,11 @@ class BallEvaluator(Evaluator):
     def normals(self, walk: Walk, level, first, count) -> None:
         """∇F = 2·(x, y, z): the unit centre of each voxel (no flags: nothing for a second look)."""
         b = walk.b
-        leaf_h = [load_at(b, walk.geom, b.add(b.mul(walk.depth, const(I64, 3)), const(I64, 6 + a))) for a in range(3)]
         with for_range(b, count) as k:
             row = b.mul(b.add(first, k), const(I64, 3))
-            centre = [b.fadd(load_at(b, walk.geom, a),
+            centre = [b.fadd(load_at(b, walk.leaf_geom, a),
                              b.fmul(b.fadd(b.uitofp(load_at(b, walk.out, b.add(row, const(I64, a))), DOUBLE),
-                                           const(DOUBLE, 0.5)), leaf_h[a])) for a in range(3)]
+                                           const(DOUBLE, 0.5)), load_at(b, walk.leaf_geom, 3 + a))) for a in range(3)]
             norm2 = Local(b, DOUBLE, const(DOUBLE, 0.0))
             for v in centre:
                 norm2.set(b.fadd(norm2.get(), b.fmul(v, v)))
