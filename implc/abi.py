@@ -103,6 +103,17 @@ HASH_INDEX = _entry("implc_hash_index", "table:i64* bits:i64 keys:i64* n:i64 ins
 KUHN_TRIANGLES = _entry("implc_kuhn_triangles", "lowest:i64* offsets:i64* inside:i8* n:i64 tables:i64* "
                                                 "table:i64* bits:i64 uniques:i64* limit:i64 state:i64* faces:i64* "
                                                 "owner:i64*", "i64")
+FAN_TRIANGLES = _entry("implc_fan_triangles", "lowest:i64* cellkey:i64* offsets:i64* inside:i8* cell_in:i8* "
+                                              "face_in:i8* split:i8* n:i64 tables:i64* table:i64* bits:i64 "
+                                              "uniques:i64* limit:i64 state:i64* faces:i64*", "i64")
+FAN_FACES, FAN_COUNTS, FAN_EDGES, FAN_SHAPES, FAN_SHAPE, FAN_SLOTS = 0, 12, 28, 124, 1 + 4 * 27, 102
+FAN_TABLES = (FAN_FACES, FAN_COUNTS, FAN_EDGES, FAN_SHAPES, FAN_SHAPE, FAN_SLOTS)
+"""``implc_fan_triangles``'s tables (int64): from FAN_FACES per face its axis and the local corner of its
+lowest corner (2 × 6); from FAN_COUNTS per sign case of a fan tetrahedron its triangle count (16); from
+FAN_EDGES per (case, triangle, vertex) the edge among its six keys (96); from FAN_SHAPES per (face, split)
+FAN_SHAPE words: the face's triangle count, then per triangle its three corners' inside flags (a local
+corner, or 8: the face point) and the six keys of the fan tetrahedron over it, each (kind, local, code,
+slot): the slot, below FAN_SLOTS, names the key among a cell's (its number is looked up once per cell)."""
 BENT_CELLS = _entry("implc_bent_cells", "faces:i64* owner:i64* n:i64 normals:f64* cells:i64 mean:f64* cosine:f64 "
                                         "bent:i8*")
 EDGE_ENDS = _entry("implc_edge_ends", "keys:i64* n:i64 geometry:f64* table:i64* bits:i64 values:f64* a:f64* b:f64* "
@@ -112,7 +123,7 @@ EDGE_ROOTS = _entry("implc_edge_roots", "phase:i64 n:i64 rows:i64* keys:i64* a:f
                                         "nudge:f64 tolerance:f64", "i64")
 CORNER_POINTS = _entry("implc_corner_points", "keys:i64* n:i64 geometry:f64* points:f64*")
 RUNTIME_ENTRIES = (DROP_MARKED, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS, SPLAT,
-                   HASH_INDEX, KUHN_TRIANGLES, BENT_CELLS, EDGE_ENDS, EDGE_ROOTS, CORNER_POINTS)
+                   HASH_INDEX, KUHN_TRIANGLES, FAN_TRIANGLES, BENT_CELLS, EDGE_ENDS, EDGE_ROOTS, CORNER_POINTS)
 FLAT_COLLAPSE = _entry("implc_flat_collapse", "faces:i64* vertices:f64* region:i64* planes:f64* inner:i8* movable:i8* "
                                               "head:i64* next:i64* dead:i8* order:i64* count:i64 passes:i64 "
                                               "min_sine:f64 stats:i64*", "i64")

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import abi
 from .mesh_simplify import SimplifyStats
 from .surface import Grouping
 
@@ -195,7 +196,7 @@ KUHN_PACKED = np.ascontiguousarray(np.concatenate([KUHN_TETS.ravel(), KUHN_COUNT
                                                    np.array(KUHN_EDGES).T.ravel()]), dtype=np.int64)
 """The tables as ``implc_kuhn_triangles`` reads them."""
 KUHN_CHUNK = 1 << 16
-"""Cells per call of the native marching tetrahedra (Ctrl-C is seen between calls)."""
+"""Cells per call of the native marching tetrahedra, Kuhn or fans (Ctrl-C is seen between calls)."""
 KUHN_NEW_KEYS = 64
 """Room past the index's limit: the keys one cell can add after the check."""
 FAN_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (2, 3), (1, 3))
@@ -251,7 +252,63 @@ def _reversed_face(axis: int, side: int) -> bool:
     return float(np.cross(np.eye(3)[b], np.eye(3)[c]) @ np.eye(3)[axis]) * (1 if side else -1) < 0
 
 
+def _face_shapes(axis: int, side: int, split: bool):
+    """The triangles of a cell's face on (axis, side), counter-clockwise seen from outside the cell: three
+    vertices each, ("c", square corner) or ("f", 0) for the face point; fanned from the face point where
+    ``split``, else cut by the diagonal 0-2."""
+    if split:
+        shapes = tuple((("f", 0), ("c", k), ("c", (k + 1) % 4)) for k in range(4))
+    else:
+        shapes = ((("c", 0), ("c", 1), ("c", 2)), (("c", 0), ("c", 2), ("c", 3)))
+    return [(shape[0], shape[2], shape[1]) if _reversed_face(axis, side) else shape for shape in shapes]
+
+
+def _fan_face_tables() -> np.ndarray:
+    """:func:`implc.codegen.contour_cells.emit_fan_triangles`'s tables (:data:`implc.abi.FAN_TABLES`): the
+    faces, :data:`FAN_COUNT`, :data:`FAN_EDGES`, then per (face, split) its triangles, each with its corners'
+    inside flags and the six keys of its fan tetrahedron in :data:`FAN_PAIRS` order (the spokes from the
+    cell point to its three vertices, then its edges 0-1, 1-2, 2-0), named as :func:`_face_triangles` and
+    :func:`_square_edge_key` name them."""
+    faces, shapes = [], []
+    for axis in range(3):
+        b, c = _face_axes(axis)
+        for side in (0, 1):
+            face = 2 * axis + side
+            faces += [axis, side << axis]
+            local = [(side << axis) | (du << b) | (dv << c) for du, dv in SQUARE]
+            for split in (False, True):
+                rows = []
+                for shape in _face_shapes(axis, side, split):
+                    # a key's slot among the cell's: grid edges 0-63, face corners 64-87, cell corners 88-95,
+                    # face cells 96-101
+                    flags = [local[k] if kind == "c" else 8 for kind, k in shape]
+                    keys = [(CELL_CORNER, local[k], 0, 88 + local[k]) if kind == "c"
+                            else (FACE_CELL, face, 0, 96 + face) for kind, k in shape]
+                    for v in range(3):
+                        (ka, i), (kb, j) = shape[v], shape[(v + 1) % 3]
+                        if ka == "c" and kb == "c":
+                            lo, hi = (i, j) if all(p <= q for p, q in zip(SQUARE[i], SQUARE[j])) else (j, i)
+                            du, dv = SQUARE[hi][0] - SQUARE[lo][0], SQUARE[hi][1] - SQUARE[lo][1]
+                            code = (du << b) | (dv << c)
+                            keys.append((GRID, local[lo], code, 8 * local[lo] + code))
+                        else:
+                            k = i if ka == "c" else j
+                            keys.append((FACE_CORNER, k, 0, 64 + 4 * face + k))
+                    rows += flags + [x for key in keys for x in key]
+                block = [len(rows) // (abi.FAN_SHAPE // 4)] + rows
+                shapes += block + [0] * (abi.FAN_SHAPE - len(block))
+    tables = np.concatenate([faces, FAN_COUNT.ravel(), FAN_EDGES.ravel(), shapes]).astype(np.int64)
+    assert len(faces) == abi.FAN_COUNTS and abi.FAN_SHAPES + 12 * abi.FAN_SHAPE == len(tables)
+    return tables
+
+
+FAN_PACKED = _fan_face_tables()
+"""The tables as ``implc_fan_triangles`` reads them."""
+
+
 # -- the grid ----------------------------------------------------------------------------------------
+
+
 class _Grid:
     """The 2^depth grid over the bounds: corner, cell and face keys, world positions, F's samples."""
 
@@ -589,6 +646,22 @@ class _KeyIndex:
             start = stop
         return numbers.reshape(keys.shape)
 
+    def _over_cells(self, n: int, chunk: int, call):
+        """Runs a native routine that numbers its cells' vertices here over ``n`` cells, ``chunk`` at a time:
+        ``call(start, count)`` returns the cells it did, fewer where the index filled up (it is grown, and
+        the rest done next; state[1] counts the triangles it wrote, from 0 each call)."""
+        start = 0
+        while start < n:
+            count = min(chunk, n - start)
+            self.state[1] = 0
+            done = call(start, count)
+            start += done
+            if done < count:
+                self._grow()
+
+    def _index_words(self):
+        return (self.table.ctypes.data, self.bits, self.uniques.ctypes.data, self.limit, self.state.ctypes.data)
+
     def kuhn_triangles(self, grid, cells: np.ndarray, inside: np.ndarray):
         """Marching tetrahedra over the Kuhn split of each cell (native), its vertices numbered here: the
         triangles (T, 3) and the row of ``cells`` each came from."""
@@ -598,21 +671,45 @@ class _KeyIndex:
         # room for the most a cell can give (6 tetrahedra, 2 triangles each): the pages never written cost nothing
         faces = np.empty((12 * len(cells), 3), np.int64)
         owners = np.empty(12 * len(cells), np.int64)
-        start = written = 0
-        while start < len(cells):
-            count = min(KUHN_CHUNK, len(cells) - start)
-            self.state[1] = 0
+        written = 0
+
+        def call(start, count):
+            nonlocal written
             done = self.runtime.kuhn_triangles(
                 lowest[start:].ctypes.data, offsets.ctypes.data, flags[start:].ctypes.data, count,
-                KUHN_PACKED.ctypes.data, self.table.ctypes.data, self.bits, self.uniques.ctypes.data, self.limit,
-                self.state.ctypes.data, faces[written:].ctypes.data, owners[written:].ctypes.data)
+                KUHN_PACKED.ctypes.data, *self._index_words(), faces[written:].ctypes.data,
+                owners[written:].ctypes.data)
             fresh = int(self.state[1])
             owners[written:written + fresh] += start
             written += fresh
-            start += done
-            if done < count:
-                self._grow()
+            return done
+
+        self._over_cells(len(cells), KUHN_CHUNK, call)
         return faces[:written], owners[:written]
+
+    def fan_triangles(self, grid, cells, inside, cell_in, face_in, split):
+        """Marching tetrahedra over the fans of cells (native; see :func:`_fan_triangles`), their vertices
+        numbered here: the triangles (T, 3)."""
+        lowest = np.ascontiguousarray(grid.key(cells), dtype=np.int64)
+        cell_keys = np.ascontiguousarray(grid.cell_key(cells), dtype=np.int64)
+        offsets = np.ascontiguousarray(grid.key(CORNERS), dtype=np.int64)
+        flags = [np.ascontiguousarray(a, dtype=np.uint8) for a in (inside, cell_in, face_in, split)]
+        # room for the most a cell can give (6 faces, 4 triangles each, 2 each): the pages never written cost nothing
+        faces = np.empty((48 * len(cells), 3), np.int64)
+        written = 0
+
+        def call(start, count):
+            nonlocal written
+            done = self.runtime.fan_triangles(
+                lowest[start:].ctypes.data, cell_keys[start:].ctypes.data, offsets.ctypes.data,
+                flags[0][start:].ctypes.data, flags[1][start:].ctypes.data, flags[2][start:].ctypes.data,
+                flags[3][start:].ctypes.data, count, FAN_PACKED.ctypes.data, *self._index_words(),
+                faces[written:].ctypes.data)
+            written += int(self.state[1])
+            return done
+
+        self._over_cells(len(cells), KUHN_CHUNK, call)
+        return faces[:written]
 
 
 def _face_ids(grid: _Grid, cells: np.ndarray, axis: int, side: int) -> np.ndarray:
@@ -645,18 +742,14 @@ def _face_triangles(grid, cells, axis, side, split4, face_points: _Points, insid
     0-1, 1-2, 2-0 (m, 3)). Faces with ``split4`` are fanned from their face point."""
     local, corner_keys = _face_corner_keys(grid, cells, axis, side)
     face_ids = _face_ids(grid, cells, axis, side)
-    flip = _reversed_face(axis, side)
     rows = np.arange(len(cells))
     corner_in = inside[:, local]
-    for fanned, shapes in ((False, ((("c", 0), ("c", 1), ("c", 2)), (("c", 0), ("c", 2), ("c", 3)))),
-                           (True, tuple((("f", 0), ("c", k), ("c", (k + 1) % 4)) for k in range(4)))):
+    for fanned in (False, True):
         sel = rows[split4 == fanned]
         if not len(sel):
             continue
         fp = face_points.find(face_ids[sel]) if fanned else None
-        for shape in shapes:
-            if flip:
-                shape = (shape[0], shape[2], shape[1])
+        for shape in _face_shapes(axis, side, fanned):
             flags, selves, edges = [], [], []
             for kind, k in shape:
                 if kind == "c":
@@ -675,38 +768,25 @@ def _face_triangles(grid, cells, axis, side, split4, face_points: _Points, insid
             yield sel, shape, np.stack(flags, 1), np.stack(selves, 1), np.stack(edges, 1)
 
 
-def _fan_triangles(grid: _Grid, cells, inside, feature, cell_points: _Points, face_points: _Points, is_feature):
-    """Marching tetrahedra over the fans of ``cells`` (each from its cell point over its faces' triangles):
-    the triangles' vertex keys (T, 3). ``is_feature(cells)`` says which cells are feature cells (their
-    faces, and their neighbours' faces toward them, fan from face points)."""
-    out = []
+def _fan_triangles(grid: _Grid, index: _KeyIndex, cells, inside, feature, cell_points: _Points,
+                   face_points: _Points, is_feature):
+    """Marching tetrahedra over the fans of ``cells`` (each from its cell point over its faces' triangles),
+    native (``implc_fan_triangles``): the triangles (T, 3), their vertices numbered in ``index``.
+    ``is_feature(cells)`` says which cells are feature cells (their faces, and their neighbours' faces
+    toward them, fan from face points)."""
     cell_keys = grid.cell_key(cells)
-    cp = cell_points.find(cell_keys)
+    cell_in = cell_points.inside[cell_points.find(cell_keys)]
+    split = np.zeros((len(cells), 6), bool)
+    face_in = np.zeros((len(cells), 6), bool)
     for axis in range(3):
         for side in (0, 1):
             neighbour = cells.copy()
             neighbour[:, axis] += 1 if side else -1
-            split4 = feature | is_feature(neighbour)
-            local, _ = _face_corner_keys(grid, cells, axis, side)
             face = 2 * axis + side
-            for sel, shape, flags, selves, edges in _face_triangles(grid, cells, axis, side, split4, face_points,
-                                                                    inside):
-                spokes = []  # edges from the cell point to p, q, r
-                for kind, k in shape:
-                    if kind == "c":
-                        spokes.append((cell_keys[sel] * 8 + local[k]) * 8 + CELL_CORNER)
-                    else:
-                        spokes.append((cell_keys[sel] * 6 + face) * 8 + FACE_CELL)
-                keys = np.stack(spokes + [edges[:, 0], edges[:, 1], edges[:, 2]], 1)  # FAN_PAIRS order
-                bits = flags.astype(np.int64)
-                case = (cell_points.inside[cp[sel]].astype(np.int64) | bits[:, 0] << 1 | bits[:, 1] << 2
-                        | bits[:, 2] << 3)
-                count = FAN_COUNT[case]
-                rows = np.arange(len(sel))
-                for slot in (0, 1):
-                    pick = rows[count > slot]
-                    out.append(keys[pick[:, None], FAN_EDGES[case[pick], slot]])
-    return np.concatenate(out) if out else np.zeros((0, 3), np.int64)
+            split[:, face] = feature | is_feature(neighbour)
+            sel = np.flatnonzero(split[:, face])
+            face_in[sel, face] = face_points.inside[face_points.find(_face_ids(grid, cells[sel], axis, side))]
+    return index.fan_triangles(grid, cells, inside, cell_in, face_in, split)
 
 
 def _cap_triangles(grid: _Grid, face_points: _Points, is_feature, faces=None):
@@ -834,21 +914,21 @@ def _block_fans(blocks, used: np.ndarray, keys: np.ndarray, flip: bool):
 def _qef(points, normals, mask, project_out=None):
     """Dual contouring's point per row: the least-squares meeting point of the tangent planes (points
     (m, k, 3), unit normals, ``mask`` which are present), solved around their mean with small singular
-    values dropped. ``project_out``: an axis whose normal component is removed first (a face's 2D QEF)."""
-    w = mask[..., None].astype(np.float64)
+    values dropped. ``project_out``: an axis whose normal component is removed first (a face's 2D QEF).
+    Batched 3 × 3 products (np.matmul): einsum over four operands took twice as long."""
     count = np.maximum(mask.sum(1), 1)[:, None]
-    mean = (points * w).sum(1) / count
-    n = normals * w
+    mean = np.einsum("mki,mk->mi", points, mask.astype(np.float64)) / count
+    n = normals * mask[..., None]
     if project_out is not None:
-        n = n.copy()
         n[..., project_out] = 0
-    a = np.einsum("mki,mkj->mij", n, n)
-    rhs = np.einsum("mki,mk->mi", n, np.einsum("mki,mki->mk", n, points - mean[:, None]))
+    nt = n.transpose(0, 2, 1)
+    a = np.matmul(nt, n)
+    rhs = np.matmul(nt, np.einsum("mki,mki->mk", n, points - mean[:, None])[..., None])
     values, vectors = np.linalg.eigh(a)
     keep = values > QEF_CUTOFF * values[:, -1:]
     inverse = np.where(keep, 1 / np.where(keep, values, 1), 0)
-    step = np.einsum("mij,mj,mkj,mk->mi", vectors, inverse, vectors, rhs)
-    return mean + step
+    along = np.matmul(vectors.transpose(0, 2, 1), rhs)[..., 0] * inverse
+    return mean + np.matmul(vectors, along[..., None])[..., 0]
 
 
 def _feature_cells(runtime, cells, faces, tri_owner, normals):
@@ -1368,8 +1448,8 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
     fresh = fresh[~fanned[fresh] & todo.crossed()[before:]]  # added by the signs: Kuhn
     kuhn, owner = index.kuhn_triangles(grid, todo.cells[fresh], todo.inside[fresh])
     rows = np.flatnonzero(fanned)
-    fan = index.number(_fan_triangles(grid, todo.cells[rows], todo.inside[rows], is_feature(todo.cells[rows]),
-                                      cell_points, face_points, is_feature))
+    fan = _fan_triangles(grid, index, todo.cells[rows], todo.inside[rows], is_feature(todo.cells[rows]),
+                         cell_points, face_points, is_feature)
     mesh.more = [kuhn, fan]
     # the caps again where a feature cell lies on a face of the bounds (its square fanned from a face point)
     redo = {(axis, side) for axis in range(3) for side in (0, 1)

@@ -46,9 +46,9 @@ class TapeEngine:
 class Runtime:
     """The runtime module's entry points: ``drop_marked``, ``octree_insert``, ``octree_traverse``,
     ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``, ``kuhn_triangles``,
-    ``bent_cells``, ``edge_ends``, ``edge_roots`` and ``corner_points``; the walk over compiled kernels,
-    ``subdivide``, from a module of its own compiled on first use, and
-    likewise ``flat_collapse`` (meshes' simplification; signatures in :mod:`implc.abi`)."""
+    ``fan_triangles``, ``bent_cells``, ``edge_ends``, ``edge_roots`` and ``corner_points``; the walk over
+    compiled kernels, ``subdivide``, from a module of its own compiled on first use, and likewise
+    ``flat_collapse`` (meshes' simplification; signatures in :mod:`implc.abi`)."""
 
     _shared: Runtime | None = None
     _lock = threading.Lock()
@@ -65,6 +65,7 @@ class Runtime:
         self.splat = self.native.bind(abi.SPLAT)
         self.hash_index = self.native.bind(abi.HASH_INDEX)
         self.kuhn_triangles = self.native.bind(abi.KUHN_TRIANGLES)
+        self.fan_triangles = self.native.bind(abi.FAN_TRIANGLES)
         self.bent_cells = self.native.bind(abi.BENT_CELLS)
         self.edge_ends = self.native.bind(abi.EDGE_ENDS)
         self.edge_roots = self.native.bind(abi.EDGE_ROOTS)

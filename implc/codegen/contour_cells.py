@@ -1,6 +1,7 @@
 """The contouring's per-cell work: a hash index of int64 keys (``implc_hash_index``), marching
 tetrahedra over the Kuhn split of each cell with its vertices numbered through that index
-(``implc_kuhn_triangles``), the cells whose normals disagree (``implc_bent_cells``), and the corners
+(``implc_kuhn_triangles``) and over the fans of feature cells and their neighbours
+(``implc_fan_triangles``), the cells whose normals disagree (``implc_bent_cells``), and the corners
 and sampled values at the ends of grid edges (``implc_edge_ends``).
 
 The index is open addressing with linear probing over ``2^bits`` slots of two words (key, number); an
@@ -179,6 +180,88 @@ def emit_kuhn_triangles(module: ir.Module):
     store_at(b, written.get(), state, 1)
     b.ret(done.get())
 
+
+
+def emit_fan_triangles(module: ir.Module):
+    """``implc_fan_triangles(lowest, cellkey, offsets, inside, cell_in, face_in, split, n, tables, table, bits,
+    uniques, limit, state, faces)``: marching tetrahedra over the fans of cells, each from its cell point
+    over its six faces' triangles (a face with ``split`` set fanned from its face point, else cut by its
+    diagonal). Per cell: ``lowest`` its lowest corner key, ``cellkey`` its cell key, ``inside`` 8 bytes (F < 0
+    at each corner), ``cell_in`` one (at the cell point), ``face_in`` and ``split`` six (per face: F < 0 at
+    its face point, whether it is fanned from it). ``offsets``: the 8 corners' key offsets. ``tables``: see
+    :data:`implc.abi.FAN_TABLES` (built by :func:`implc.contour._fan_face_tables`). A vertex key is one of
+    (kind, local, code): grid edge ((lowest + offsets[local]) × 8 + code) × 8; face corner (face id × 4 +
+    local) × 8 + 1, the face id (lowest + offsets[face's corner]) × 3 + axis; cell corner (cellkey × 8 +
+    local) × 8 + 2; face cell (cellkey × 6 + local) × 8 + 3. Each is numbered through the index once per
+    cell (as :func:`emit_kuhn_triangles`); faces get three numbers per triangle; state[0]: keys in the index,
+    state[1]: triangles written. Stops before a cell when the index holds ``limit`` keys or more; returns
+    the cells done."""
+    fn, b = define(module, abi.FAN_TRIANGLES)
+    (lowest, cellkey, offsets, inside, cell_in, face_in, split, n, tables, table, bits, uniques, limit, state,
+     faces) = fn.args
+    count = Local(b, I64, load_at(b, state, 0), "count")
+    written = Local(b, I64, load_at(b, state, 1), "written")
+    done = Local(b, I64, n, "done")
+    one, six, eight = const(I64, 1), const(I64, 6), const(I64, 8)
+    per_triangle = abi.FAN_SHAPE // 4
+    numbers = local_array(b, I64, abi.FAN_SLOTS, "numbers")  # the cell's keys' numbers, by slot
+    owner = local_array(b, I64, abi.FAN_SLOTS, "owner")  # the cell whose number the slot holds
+    with for_range(b, const(I64, abi.FAN_SLOTS)) as i:
+        store_at(b, const(I64, -1), owner, i)
+    insert = const(I64, 1)
+
+    def table_at(index):
+        return load_at(b, tables, index)
+
+    def byte(array, index):
+        return b.zext(load_at(b, array, index), I64)
+
+    with for_range(b, n) as c:
+        with if_(b, b.and_(b.icmp_signed(">=", count.get(), limit), b.icmp_signed("==", done.get(), n))):
+            done.set(c)  # the first cell not done; the rest are skipped
+        with if_(b, b.icmp_signed("==", done.get(), n)):
+            base = load_at(b, lowest, c)
+            cell = load_at(b, cellkey, c)
+            centre = b.and_(byte(cell_in, c), one)
+            with for_range(b, six) as f:
+                at_face = b.add(b.mul(c, six), f)
+                shape = b.add(const(I64, abi.FAN_SHAPES),
+                              b.mul(b.add(b.mul(f, const(I64, 2)), b.and_(byte(split, at_face), one)),
+                                    const(I64, abi.FAN_SHAPE)))
+                face_corner = table_at(b.add(const(I64, abi.FAN_FACES + 1), b.mul(f, const(I64, 2))))
+                face_axis = table_at(b.add(const(I64, abi.FAN_FACES), b.mul(f, const(I64, 2))))
+                face_id = b.add(b.mul(b.add(base, load_at(b, offsets, face_corner)), const(I64, 3)), face_axis)
+                point_in = b.and_(byte(face_in, at_face), one)
+                with for_range(b, table_at(shape)) as t:
+                    row = b.add(b.add(shape, one), b.mul(t, const(I64, per_triangle)))
+                    case = Local(b, I64, centre, "case")
+                    for v in range(3):
+                        local = table_at(b.add(row, const(I64, v)))
+                        corner = b.and_(byte(inside, b.add(b.mul(c, eight), b.and_(local, const(I64, 7)))), one)
+                        flag = b.select(b.icmp_signed("==", local, eight), point_in, corner)
+                        case.set(b.or_(case.get(), b.shl(flag, const(I64, v + 1))))
+                    with for_range(b, table_at(b.add(const(I64, abi.FAN_COUNTS), case.get()))) as s:
+                        with for_range(b, const(I64, 3)) as v:
+                            edge = table_at(b.add(const(I64, abi.FAN_EDGES),
+                                                  b.add(b.mul(case.get(), six), b.add(b.mul(s, const(I64, 3)), v))))
+                            key_at = b.add(b.add(row, const(I64, 3)), b.mul(edge, const(I64, 4)))
+                            kind, local, code, slot = (table_at(b.add(key_at, const(I64, i))) for i in range(4))
+                            with if_(b, b.icmp_signed("!=", load_at(b, owner, slot), c)):
+                                grid = b.mul(b.add(b.mul(b.add(base, load_at(b, offsets, local)), eight), code), eight)
+                                face = b.add(b.mul(b.add(b.mul(face_id, const(I64, 4)), local), eight), one)
+                                cell_corner = b.add(b.mul(b.add(b.mul(cell, eight), local), eight), const(I64, 2))
+                                face_cell = b.add(b.mul(b.add(b.mul(cell, six), local), eight), const(I64, 3))
+                                key = b.select(b.icmp_signed("==", kind, const(I64, 0)), grid,
+                                               b.select(b.icmp_signed("==", kind, one), face,
+                                                        b.select(b.icmp_signed("==", kind, const(I64, 2)),
+                                                                 cell_corner, face_cell)))
+                                store_at(b, _number(b, table, bits, key, insert, count, uniques), numbers, slot)
+                                store_at(b, c, owner, slot)
+                            store_at(b, load_at(b, numbers, slot), faces, b.add(b.mul(written.get(), const(I64, 3)), v))
+                        written.set(b.add(written.get(), one))
+    store_at(b, count.get(), state, 0)
+    store_at(b, written.get(), state, 1)
+    b.ret(done.get())
 
 
 def emit_bent_cells(module: ir.Module):

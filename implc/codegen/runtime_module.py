@@ -19,6 +19,7 @@ from .contour_cells import (
     emit_corner_points,
     emit_edge_ends,
     emit_edge_roots,
+    emit_fan_triangles,
     emit_hash_index,
     emit_kuhn_triangles,
 )
@@ -59,6 +60,7 @@ def build_runtime() -> str:
     emit_splat(module)
     emit_hash_index(module)
     emit_kuhn_triangles(module)
+    emit_fan_triangles(module)
     emit_bent_cells(module)
     emit_edge_ends(module)
     emit_edge_roots(module)
