@@ -100,10 +100,13 @@ OCTREE_MARK_INSIDE = _entry("implc_octree_mark_inside", "nodes:i32* node_capacit
 SPLAT = _entry("implc_splat", "px:i64* py:i64* sizes:i64* depth:f64* n:i64 size:i64 zbuf:f64* winner:i64*")
 HASH_INDEX = _entry("implc_hash_index", "table:i64* bits:i64 keys:i64* n:i64 insert:i64 numbers:i64* uniques:i64* "
                                         "state:i64*", "i64")
-KUHN_TRIANGLES = _entry("implc_kuhn_triangles", "lowest:i64* offsets:i64* inside:i8* n:i64 tables:i64* "
+CELL_CORNERS = _entry("implc_cell_corners", "lowest:i64* n:i64 offsets:i64* table:i64* bits:i64 uniques:i64* "
+                                            "limit:i64 state:i64* numbers:i64*", "i64")
+CORNER_SIGNS = _entry("implc_corner_signs", "numbers:i64* n:i64 values:f64* signs:i8*")
+KUHN_TRIANGLES = _entry("implc_kuhn_triangles", "lowest:i64* offsets:i64* signs:i8* n:i64 tables:i64* "
                                                 "table:i64* bits:i64 uniques:i64* limit:i64 state:i64* faces:i64* "
                                                 "owner:i64*", "i64")
-FAN_TRIANGLES = _entry("implc_fan_triangles", "lowest:i64* cellkey:i64* offsets:i64* inside:i8* cell_in:i8* "
+FAN_TRIANGLES = _entry("implc_fan_triangles", "lowest:i64* cellkey:i64* offsets:i64* signs:i8* cell_in:i8* "
                                               "face_in:i8* split:i8* n:i64 tables:i64* table:i64* bits:i64 "
                                               "uniques:i64* limit:i64 state:i64* faces:i64*", "i64")
 FAN_FACES, FAN_COUNTS, FAN_EDGES, FAN_SHAPES, FAN_SHAPE, FAN_SLOTS = 0, 12, 28, 124, 1 + 4 * 27, 102
@@ -123,7 +126,8 @@ EDGE_ROOTS = _entry("implc_edge_roots", "phase:i64 n:i64 rows:i64* keys:i64* a:f
                                         "nudge:f64 tolerance:f64", "i64")
 CORNER_POINTS = _entry("implc_corner_points", "keys:i64* n:i64 geometry:f64* points:f64*")
 RUNTIME_ENTRIES = (DROP_MARKED, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS, SPLAT,
-                   HASH_INDEX, KUHN_TRIANGLES, FAN_TRIANGLES, BENT_CELLS, EDGE_ENDS, EDGE_ROOTS, CORNER_POINTS)
+                   HASH_INDEX, CELL_CORNERS, CORNER_SIGNS, KUHN_TRIANGLES, FAN_TRIANGLES, BENT_CELLS, EDGE_ENDS,
+                   EDGE_ROOTS, CORNER_POINTS)
 FLAT_COLLAPSE = _entry("implc_flat_collapse", "faces:i64* vertices:f64* region:i64* planes:f64* inner:i8* movable:i8* "
                                               "head:i64* next:i64* dead:i8* order:i64* count:i64 passes:i64 "
                                               "min_sine:f64 stats:i64*", "i64")

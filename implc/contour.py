@@ -435,6 +435,21 @@ class _Grid:
             self._corner_values = np.concatenate([self._corner_values, fresh])
         return self._corner_values[numbers]
 
+    def corner_signs(self, cells: np.ndarray, expected: int) -> np.ndarray:
+        """Per cell a byte, bit c set where F < 0 at its corner c (NaN counts as outside): each distinct
+        corner sampled once for the whole contouring (and remembered), numbered and read natively
+        (``implc_cell_corners``, ``implc_corner_signs``); ``expected``: how many corners the contouring will
+        sample in all (the index's size)."""
+        index = self._corner_index(expected)
+        before = index.count
+        numbers = index.cell_corners(self.key(cells), self.key(CORNERS))
+        if index.count > before:
+            fresh = self.values(self.corner_points(index.keys()[before:]))
+            self._corner_values = np.ascontiguousarray(np.concatenate([self._corner_values, fresh]), dtype=np.float64)
+        signs = np.empty(len(cells), np.uint8)
+        self.runtime.corner_signs(numbers.ctypes.data, len(cells), self._corner_values.ctypes.data, signs.ctypes.data)
+        return signs
+
     def face_values(self, axis: int, side: int, keys: np.ndarray) -> np.ndarray:
         """F at the corners ``keys`` of a face of the bounds, sampled once (and remembered by the face): most
         faces are outside the solid everywhere, and their corners never enter the corner index."""
@@ -526,14 +541,13 @@ def _grid_edge_key(corner_keys, code):
 
 # -- which cells -------------------------------------------------------------------------------------
 class _Cells:
-    """The cells being contoured: their indices, F < 0 at their corners, and an index of their keys
-    (numbered by row)."""
+    """The cells being contoured: their indices, where F < 0 at their corners (a byte per cell, bit c for
+    corner c), and an index of their keys (numbered by row)."""
 
     def __init__(self, grid: _Grid, cells: np.ndarray):
         self.grid = grid
         self.cells = np.zeros((0, 3), np.int64)
-        self.inside = np.zeros((0, 8), bool)
-        self.signs = np.zeros(0, np.uint8)  # the same, bit c for corner c
+        self.signs = np.zeros(0, np.uint8)
         self.index = _KeyIndex(grid.runtime, len(cells) + len(cells) // 8 + 1024)  # room for the cells added
         self.add(cells)
 
@@ -553,9 +567,7 @@ class _Cells:
             return 0
         cells = self.grid.cell_unkey(fresh)
         self.cells = np.concatenate([self.cells, cells])
-        inside = _corner_signs(self.grid, cells)
-        self.inside = np.concatenate([self.inside, inside])
-        self.signs = np.concatenate([self.signs, np.packbits(inside, axis=1, bitorder="little").reshape(-1)])
+        self.signs = np.concatenate([self.signs, _corner_signs(self.grid, cells)])
         return len(fresh)
 
     def close(self, seeds: np.ndarray, start: int = 0) -> int:
@@ -662,11 +674,26 @@ class _KeyIndex:
     def _index_words(self):
         return (self.table.ctypes.data, self.bits, self.uniques.ctypes.data, self.limit, self.state.ctypes.data)
 
-    def kuhn_triangles(self, grid, cells: np.ndarray, inside: np.ndarray):
-        """Marching tetrahedra over the Kuhn split of each cell (native), its vertices numbered here: the
-        triangles (T, 3) and the row of ``cells`` each came from."""
+    def cell_corners(self, lowest: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """The numbers of the 8 corners of each cell (``lowest``: its lowest corner key; ``offsets``: the
+        corners' key offsets), absent ones inserted (native): (n * 8,)."""
+        lowest = np.ascontiguousarray(lowest, dtype=np.int64)
+        offsets = np.ascontiguousarray(offsets, dtype=np.int64)
+        numbers = np.empty(8 * len(lowest), np.int64)
+
+        def call(start, count):
+            return self.runtime.cell_corners(lowest[start:].ctypes.data, count, offsets.ctypes.data,
+                                             *self._index_words(), numbers[8 * start:].ctypes.data)
+
+        self._over_cells(len(lowest), KUHN_CHUNK, call)
+        return numbers
+
+    def kuhn_triangles(self, grid, cells: np.ndarray, signs: np.ndarray):
+        """Marching tetrahedra over the Kuhn split of each cell (native; ``signs``: a byte per cell, bit c
+        set where F < 0 at corner c), its vertices numbered here: the triangles (T, 3) and the row of
+        ``cells`` each came from."""
         lowest = np.ascontiguousarray(grid.key(cells), dtype=np.int64)
-        flags = np.ascontiguousarray(inside, dtype=np.uint8)
+        flags = np.ascontiguousarray(signs, dtype=np.uint8)
         offsets = np.ascontiguousarray(grid.key(CORNERS), dtype=np.int64)
         # room for the most a cell can give (6 tetrahedra, 2 triangles each): the pages never written cost nothing
         faces = np.empty((12 * len(cells), 3), np.int64)
@@ -687,13 +714,13 @@ class _KeyIndex:
         self._over_cells(len(cells), KUHN_CHUNK, call)
         return faces[:written], owners[:written]
 
-    def fan_triangles(self, grid, cells, inside, cell_in, face_in, split):
+    def fan_triangles(self, grid, cells, signs, cell_in, face_in, split):
         """Marching tetrahedra over the fans of cells (native; see :func:`_fan_triangles`), their vertices
         numbered here: the triangles (T, 3)."""
         lowest = np.ascontiguousarray(grid.key(cells), dtype=np.int64)
         cell_keys = np.ascontiguousarray(grid.cell_key(cells), dtype=np.int64)
         offsets = np.ascontiguousarray(grid.key(CORNERS), dtype=np.int64)
-        flags = [np.ascontiguousarray(a, dtype=np.uint8) for a in (inside, cell_in, face_in, split)]
+        flags = [np.ascontiguousarray(a, dtype=np.uint8) for a in (signs, cell_in, face_in, split)]
         # room for the most a cell can give (6 faces, 4 triangles each, 2 each): the pages never written cost nothing
         faces = np.empty((48 * len(cells), 3), np.int64)
         written = 0
@@ -768,10 +795,11 @@ def _face_triangles(grid, cells, axis, side, split4, face_points: _Points, insid
             yield sel, shape, np.stack(flags, 1), np.stack(selves, 1), np.stack(edges, 1)
 
 
-def _fan_triangles(grid: _Grid, index: _KeyIndex, cells, inside, feature, cell_points: _Points,
+def _fan_triangles(grid: _Grid, index: _KeyIndex, cells, signs, feature, cell_points: _Points,
                    face_points: _Points, is_feature):
-    """Marching tetrahedra over the fans of ``cells`` (each from its cell point over its faces' triangles),
-    native (``implc_fan_triangles``): the triangles (T, 3), their vertices numbered in ``index``.
+    """Marching tetrahedra over the fans of ``cells`` (each from its cell point over its faces' triangles;
+    ``signs``: a byte per cell, bit c set where F < 0 at corner c), native (``implc_fan_triangles``): the
+    triangles (T, 3), their vertices numbered in ``index``.
     ``is_feature(cells)`` says which cells are feature cells (their faces, and their neighbours' faces
     toward them, fan from face points)."""
     cell_keys = grid.cell_key(cells)
@@ -786,7 +814,7 @@ def _fan_triangles(grid: _Grid, index: _KeyIndex, cells, inside, feature, cell_p
             split[:, face] = feature | is_feature(neighbour)
             sel = np.flatnonzero(split[:, face])
             face_in[sel, face] = face_points.inside[face_points.find(_face_ids(grid, cells[sel], axis, side))]
-    return index.fan_triangles(grid, cells, inside, cell_in, face_in, split)
+    return index.fan_triangles(grid, cells, signs, cell_in, face_in, split)
 
 
 def _cap_triangles(grid: _Grid, face_points: _Points, is_feature, faces=None):
@@ -1001,10 +1029,10 @@ def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points:
     """The two ends of the edge each key names and F there, (a, b, fa, fb) (a point named by itself: both
     ends the same, its values not looked up). Rows are selected by index, not by boolean mask (several
     times faster on (N, 3) arrays)."""
+    if _all_grid_edges(keys):  # the first pass, where no cap reaches the bounds
+        return grid.edge_ends(keys)
     kind, payload = keys & 7, keys >> 3
     grid_edge = (kind == GRID) & (payload & 7 != 0)
-    if grid_edge.all():  # the first pass, where no cap reaches the bounds: every key a grid edge's
-        return grid.edge_ends(keys)
     a, b = np.empty((len(keys), 3)), np.empty((len(keys), 3))
     fa, fb = np.zeros(len(keys)), np.zeros(len(keys))
 
@@ -1053,6 +1081,11 @@ def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points:
     return a, b, fa, fb
 
 
+def _all_grid_edges(keys: np.ndarray) -> bool:
+    """Whether every vertex key names the crossing on a grid edge (kind GRID, a code that is not 0)."""
+    return not np.any((keys & 7 != GRID) | (keys & (7 << 3) == 0))
+
+
 def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points, witnesses: bool):
     """Positions of the vertices named by ``keys`` (unique): a point itself, or the root of F on its edge
     (:func:`_edge_roots`). Returns (positions, unit normals (NaN at a point named by itself, and where F's
@@ -1072,7 +1105,8 @@ def _vertices(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: 
 def _vertex_chunk(grid: _Grid, keys, cell_points: _Points, face_points: _Points, positions, normals, ends):
     """:func:`_vertices` for one chunk of keys, written into ``positions``, ``normals`` and ``ends`` (or None)."""
     a, b, fa, fb = _endpoints(grid, keys, cell_points, face_points)
-    on_edge = np.flatnonzero(np.any(a != b, axis=1))
+    every_edge = _all_grid_edges(keys)
+    on_edge = np.arange(len(keys)) if every_edge else np.flatnonzero(np.any(a != b, axis=1))
     if ends is not None:
         ends[:, 0], ends[:, 1] = a, b  # a point named by itself: both ends; an edge's are swapped below
     if len(on_edge) == len(keys):
@@ -1095,7 +1129,8 @@ def _edge_roots(grid: _Grid, keys, a, b, fa, fb, vertices: np.ndarray, normals: 
     a Newton step would leave it), F and its gradient sampled together. An edge is done where Newton's step
     moves less than :data:`ROOT_TOLERANCE` of the edge: its vertex is the Newton point, its normal F's
     gradient at the point sampled, that step away. After :data:`ROOT_STEPS` samples an edge still open
-    takes the secant through its bracket, and the gradient there. Every point is kept :data:`EDGE_MARGIN`
+    takes the secant through its bracket, and the gradient there (normals: unit vectors, NaN where F's
+    gradient is zero or not finite). Every point is kept :data:`EDGE_MARGIN`
     inside the edge and nudged by the hash of its key (native: ``implc_edge_roots``). Swaps the ends in
     place so that F(a) < 0. The points are grouped once (each stays on its edge): the edges still open at
     each step are a subset of that grouping. Writes the vertices and their unit normals into ``vertices``
@@ -1126,8 +1161,7 @@ def _edge_roots(grid: _Grid, keys, a, b, fa, fb, vertices: np.ndarray, normals: 
     if open_:
         run(2, open_, rows.ctypes.data, *ends, None, None, guesses.ctypes.data, vertices.ctypes.data,
             normals.ctypes.data, *tail)
-        normals[rows[:open_]] = grid.gradients(guesses[:open_], grouping)
-    _unit(normals)
+        normals[rows[:open_]] = _unit(grid.gradients(guesses[:open_], grouping))
 
 
 def _unit(normals: np.ndarray) -> np.ndarray:
@@ -1142,7 +1176,7 @@ def _fill_normals(grid: _Grid, normals, vertices, faces) -> np.ndarray:
     """Normals where the analytic one is not usable: a vertex on one face of the bounds (a cap's corner,
     whose triangles all lie in the face) gets that face's outward normal; one on an edge of the bounds, or
     elsewhere where F's gradient is zero or undefined, its triangles' area-weighted mean normal."""
-    bad = np.flatnonzero(~np.isfinite(normals).all(1))
+    bad = np.flatnonzero(np.isnan(normals[:, 0]))  # a normal not usable is NaN throughout (_edge_roots)
     if not len(bad) or not len(faces):
         return normals
     p = np.take(vertices, bad, axis=0)
@@ -1192,7 +1226,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     crossed = np.flatnonzero(todo.crossed())
     stats.crossed_cells = len(crossed)
     index = _KeyIndex(runtime, 4 * len(crossed))
-    kuhn, owner = index.kuhn_triangles(grid, todo.cells[crossed], todo.inside[crossed])
+    kuhn, owner = index.kuhn_triangles(grid, todo.cells[crossed], todo.signs[crossed])
     owner = crossed[owner]  # rows of todo.cells
     caps = {face: index.number(triangles) for face, triangles in caps.items()}
     t2 = time.perf_counter()
@@ -1400,16 +1434,14 @@ class _Pieces:
 
 
 def _corner_signs(grid: _Grid, cells: np.ndarray) -> np.ndarray:
-    """F < 0 at each corner of each cell, (n, 8): each distinct corner sampled once (NaN counts as outside).
-    :data:`VERTEX_CHUNK` cells at a time: the corners' keys and numbers take memory for a chunk."""
-    inside = np.empty((len(cells), 8), bool)
-    offsets = grid.key(CORNERS)
+    """Per cell a byte, bit c set where F < 0 at its corner c (:meth:`_Grid.corner_signs`).
+    :data:`VERTEX_CHUNK` cells at a time: the corners' numbers take memory for a chunk."""
+    signs = np.empty(len(cells), np.uint8)
     expected = CORNERS_PER_CELL * len(cells)  # the index sized once for all the chunks
     for start in range(0, len(cells), VERTEX_CHUNK):
         part = cells[start:start + VERTEX_CHUNK]
-        np.less(grid.corner_values(grid.key(part)[:, None] + offsets, expected), 0,
-                out=inside[start:start + len(part)])
-    return inside
+        signs[start:start + len(part)] = grid.corner_signs(part, expected)
+    return signs
 
 
 def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pieces) -> int:
@@ -1446,9 +1478,9 @@ def _with_features(grid, todo: _Cells, feature_rows, index: _KeyIndex, mesh: _Pi
     mesh.keep = ~fanned[mesh.owner]
     fresh = np.arange(before, len(todo.cells))
     fresh = fresh[~fanned[fresh] & todo.crossed()[before:]]  # added by the signs: Kuhn
-    kuhn, owner = index.kuhn_triangles(grid, todo.cells[fresh], todo.inside[fresh])
+    kuhn, owner = index.kuhn_triangles(grid, todo.cells[fresh], todo.signs[fresh])
     rows = np.flatnonzero(fanned)
-    fan = _fan_triangles(grid, index, todo.cells[rows], todo.inside[rows], is_feature(todo.cells[rows]),
+    fan = _fan_triangles(grid, index, todo.cells[rows], todo.signs[rows], is_feature(todo.cells[rows]),
                          cell_points, face_points, is_feature)
     mesh.more = [kuhn, fan]
     # the caps again where a feature cell lies on a face of the bounds (its square fanned from a face point)

@@ -45,10 +45,10 @@ class TapeEngine:
 
 class Runtime:
     """The runtime module's entry points: ``drop_marked``, ``octree_insert``, ``octree_traverse``,
-    ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``, ``kuhn_triangles``,
-    ``fan_triangles``, ``bent_cells``, ``edge_ends``, ``edge_roots`` and ``corner_points``; the walk over
-    compiled kernels, ``subdivide``, from a module of its own compiled on first use, and likewise
-    ``flat_collapse`` (meshes' simplification; signatures in :mod:`implc.abi`)."""
+    ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``, ``cell_corners``,
+    ``corner_signs``, ``kuhn_triangles``, ``fan_triangles``, ``bent_cells``, ``edge_ends``, ``edge_roots``
+    and ``corner_points``; the walk over compiled kernels, ``subdivide``, from a module of its own compiled
+    on first use, and likewise ``flat_collapse`` (meshes' simplification; signatures in :mod:`implc.abi`)."""
 
     _shared: Runtime | None = None
     _lock = threading.Lock()
@@ -64,6 +64,8 @@ class Runtime:
         self.octree_subtree_rows = self.native.bind(abi.OCTREE_SUBTREE_ROWS)
         self.splat = self.native.bind(abi.SPLAT)
         self.hash_index = self.native.bind(abi.HASH_INDEX)
+        self.cell_corners = self.native.bind(abi.CELL_CORNERS)
+        self.corner_signs = self.native.bind(abi.CORNER_SIGNS)
         self.kuhn_triangles = self.native.bind(abi.KUHN_TRIANGLES)
         self.fan_triangles = self.native.bind(abi.FAN_TRIANGLES)
         self.bent_cells = self.native.bind(abi.BENT_CELLS)

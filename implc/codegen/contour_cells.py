@@ -1,4 +1,5 @@
-"""The contouring's per-cell work: a hash index of int64 keys (``implc_hash_index``), marching
+"""The contouring's per-cell work: a hash index of int64 keys (``implc_hash_index``), the cells' corners
+numbered in it and their signs (``implc_cell_corners``, ``implc_corner_signs``), marching
 tetrahedra over the Kuhn split of each cell with its vertices numbered through that index
 (``implc_kuhn_triangles``) and over the fans of feature cells and their neighbours
 (``implc_fan_triangles``), the cells whose normals disagree (``implc_bent_cells``), and the corners
@@ -110,10 +111,58 @@ def emit_hash_index(module: ir.Module):
     b.ret(count.get())
 
 
+def emit_cell_corners(module: ir.Module):
+    """``implc_cell_corners(lowest, n, offsets, table, bits, uniques, limit, state, numbers)``: the numbers
+    of the 8 corners of each cell (``lowest``: its lowest corner key, ``offsets``: the corners' key offsets)
+    in the index, inserted where absent (:func:`_number`), 8 per cell into ``numbers``; state[0] counts the
+    keys in the index. Stops before a cell when the index holds ``limit`` keys or more; returns the cells
+    done."""
+    fn, b = define(module, abi.CELL_CORNERS)
+    lowest, n, offsets, table, bits, uniques, limit, state, numbers = fn.args
+    count = Local(b, I64, load_at(b, state, 0), "count")
+    done = Local(b, I64, n, "done")
+    eight = const(I64, 8)
+
+    def prefetch(cell):
+        base = load_at(b, lowest, cell)
+        for corner in (0, 2, 4, 6):  # each with corner + 1 (one step in z) in its block of 64 keys, mostly
+            _prefetch(b, table, bits, b.add(base, load_at(b, offsets, const(I64, corner))))
+
+    with for_range(b, n) as c:
+        _prefetch_ahead(b, c, n, prefetch)
+        with if_(b, b.and_(b.icmp_signed(">=", count.get(), limit), b.icmp_signed("==", done.get(), n))):
+            done.set(c)  # the first cell not done; the rest are skipped
+        with if_(b, b.icmp_signed("==", done.get(), n)):
+            base = load_at(b, lowest, c)
+            with for_range(b, eight) as corner:
+                key = b.add(base, load_at(b, offsets, corner))
+                store_at(b, _number(b, table, bits, key, const(I64, 1), count, uniques), numbers,
+                         b.add(b.mul(c, eight), corner))
+    store_at(b, count.get(), state, 0)
+    b.ret(done.get())
+
+
+def emit_corner_signs(module: ir.Module):
+    """``implc_corner_signs(numbers, n, values, signs)``: per cell a byte, bit c set where F < 0 at its
+    corner c (``numbers``: 8 per cell, rows of ``values``; NaN counts as outside)."""
+    fn, b = define(module, abi.CORNER_SIGNS)
+    numbers, n, values, signs = fn.args
+    eight = const(I64, 8)
+    zero = const(ir.DoubleType(), 0.0)
+    with for_range(b, n) as c:
+        bits = const(I64, 0)
+        for corner in range(8):
+            value = load_at(b, values, load_at(b, numbers, b.add(b.mul(c, eight), const(I64, corner))))
+            inside = b.zext(b.fcmp_ordered("<", value, zero), I64)  # false for NaN
+            bits = b.or_(bits, b.shl(inside, const(I64, corner)))
+        store_at(b, b.trunc(bits, ir.IntType(8)), signs, c)
+    b.ret_void()
+
+
 def emit_kuhn_triangles(module: ir.Module):
-    """``implc_kuhn_triangles(lowest, offsets, inside, n, tables, table, bits, uniques, limit, state, faces,
+    """``implc_kuhn_triangles(lowest, offsets, signs, n, tables, table, bits, uniques, limit, state, faces,
     owner)``: marching tetrahedra over the Kuhn split of cells (``lowest``: each cell's lowest corner key,
-    ``offsets``: the 8 corners' key offsets, ``inside``: 8 bytes per cell, F < 0 at each corner).
+    ``offsets``: the 8 corners' key offsets, ``signs``: a byte per cell, bit c set where F < 0 at corner c).
 
     ``tables``: the six tetrahedra's corners (6 × 4), then per (tetrahedron, case) the triangle count
     (96), then per (tetrahedron, case, triangle, vertex) the vertex's edge as a row of the cell's 19 edges
@@ -122,7 +171,7 @@ def emit_kuhn_triangles(module: ir.Module):
     three numbers per triangle, owner the cell's row. state[0]: keys in the index, state[1]: triangles
     written. Stops before a cell when the index holds ``limit`` keys or more; returns the cells done."""
     fn, b = define(module, abi.KUHN_TRIANGLES)
-    lowest, offsets, inside, n, tables, table, bits, uniques, limit, state, faces, owner = fn.args
+    lowest, offsets, sign_bytes, n, tables, table, bits, uniques, limit, state, faces, owner = fn.args
     count = Local(b, I64, load_at(b, state, 0), "count")
     written = Local(b, I64, load_at(b, state, 1), "written")
     done = Local(b, I64, n, "done")
@@ -143,10 +192,7 @@ def emit_kuhn_triangles(module: ir.Module):
         with if_(b, b.and_(full, b.icmp_signed("==", done.get(), n))):
             done.set(c)  # the first cell not done; the rest are skipped
         with if_(b, b.icmp_signed("==", done.get(), n)):
-            signs = Local(b, I64, 0, "signs")
-            with for_range(b, const(I64, 8)) as j:
-                bit = b.zext(load_at(b, inside, b.add(b.mul(c, const(I64, 8)), j)), I64)
-                signs.set(b.or_(signs.get(), b.shl(b.and_(bit, one), j)))
+            signs = Local(b, I64, b.zext(load_at(b, sign_bytes, c), I64), "signs")
             mixed = b.and_(b.icmp_signed("!=", signs.get(), const(I64, 0)),
                            b.icmp_signed("!=", signs.get(), const(I64, 255)))
             with if_(b, mixed):
@@ -183,11 +229,11 @@ def emit_kuhn_triangles(module: ir.Module):
 
 
 def emit_fan_triangles(module: ir.Module):
-    """``implc_fan_triangles(lowest, cellkey, offsets, inside, cell_in, face_in, split, n, tables, table, bits,
+    """``implc_fan_triangles(lowest, cellkey, offsets, signs, cell_in, face_in, split, n, tables, table, bits,
     uniques, limit, state, faces)``: marching tetrahedra over the fans of cells, each from its cell point
     over its six faces' triangles (a face with ``split`` set fanned from its face point, else cut by its
-    diagonal). Per cell: ``lowest`` its lowest corner key, ``cellkey`` its cell key, ``inside`` 8 bytes (F < 0
-    at each corner), ``cell_in`` one (at the cell point), ``face_in`` and ``split`` six (per face: F < 0 at
+    diagonal). Per cell: ``lowest`` its lowest corner key, ``cellkey`` its cell key, ``signs`` a byte (bit c
+    set where F < 0 at corner c), ``cell_in`` one (at the cell point), ``face_in`` and ``split`` six (per face: F < 0 at
     its face point, whether it is fanned from it). ``offsets``: the 8 corners' key offsets. ``tables``: see
     :data:`implc.abi.FAN_TABLES` (built by :func:`implc.contour._fan_face_tables`). A vertex key is one of
     (kind, local, code): grid edge ((lowest + offsets[local]) × 8 + code) × 8; face corner (face id × 4 +
@@ -197,7 +243,7 @@ def emit_fan_triangles(module: ir.Module):
     state[1]: triangles written. Stops before a cell when the index holds ``limit`` keys or more; returns
     the cells done."""
     fn, b = define(module, abi.FAN_TRIANGLES)
-    (lowest, cellkey, offsets, inside, cell_in, face_in, split, n, tables, table, bits, uniques, limit, state,
+    (lowest, cellkey, offsets, sign_bytes, cell_in, face_in, split, n, tables, table, bits, uniques, limit, state,
      faces) = fn.args
     count = Local(b, I64, load_at(b, state, 0), "count")
     written = Local(b, I64, load_at(b, state, 1), "written")
@@ -223,6 +269,7 @@ def emit_fan_triangles(module: ir.Module):
             base = load_at(b, lowest, c)
             cell = load_at(b, cellkey, c)
             centre = b.and_(byte(cell_in, c), one)
+            corners = byte(sign_bytes, c)
             with for_range(b, six) as f:
                 at_face = b.add(b.mul(c, six), f)
                 shape = b.add(const(I64, abi.FAN_SHAPES),
@@ -237,7 +284,7 @@ def emit_fan_triangles(module: ir.Module):
                     case = Local(b, I64, centre, "case")
                     for v in range(3):
                         local = table_at(b.add(row, const(I64, v)))
-                        corner = b.and_(byte(inside, b.add(b.mul(c, eight), b.and_(local, const(I64, 7)))), one)
+                        corner = b.and_(b.lshr(corners, b.and_(local, const(I64, 7))), one)
                         flag = b.select(b.icmp_signed("==", local, eight), point_in, corner)
                         case.set(b.or_(case.get(), b.shl(flag, const(I64, v + 1))))
                     with for_range(b, table_at(b.add(const(I64, abi.FAN_COUNTS), case.get()))) as s:
@@ -373,6 +420,21 @@ def emit_edge_ends(module: ir.Module):
     b.ret(missing.get())
 
 
+def _store_unit(b: ir.IRBuilder, vector, targets):
+    """Stores ``vector`` (three doubles) divided by its length into ``targets``, or NaN in all three where
+    that is not finite (a zero or undefined gradient)."""
+    double = ir.DoubleType()
+    length = b.call(intrinsic(b.module, "llvm.sqrt.f64", 1),
+                    [b.fadd(b.fadd(b.fmul(vector[0], vector[0]), b.fmul(vector[1], vector[1])),
+                            b.fmul(vector[2], vector[2]))])
+    unit = [b.fdiv(v, length) for v in vector]
+    infinity = const(double, float("inf"))
+    finite = [b.fcmp_ordered("<", b.call(intrinsic(b.module, "llvm.fabs.f64", 1), [u]), infinity) for u in unit]
+    ok = b.and_(b.and_(finite[0], finite[1]), finite[2])
+    for u, target in zip(unit, targets):
+        b.store(b.select(ok, u, const(double, float("nan"))), target)
+
+
 def emit_edge_roots(module: ir.Module):
     """``implc_edge_roots(phase, n, rows, keys, a, b, fa, fb, state, f, g, guesses, vertices, normals, margin,
     nudge, tolerance)``: the root of F on edges from a to b (three doubles per end) by Newton's method along
@@ -390,7 +452,8 @@ def emit_edge_roots(module: ir.Module):
       narrows each bracket by the sign of F at its guess. An edge is done where F is 0 there or its next
       guess (Newton's: F over its derivative ∇F·(b − a)) lies in the bracket within ``tolerance`` (a
       fraction of the edge) of the guess: its vertex is that Newton point (the guess where F is 0), its
-      normal the gradient at the guess (``vertices`` and ``normals``, rows by edge number). The others'
+      normal the gradient at the guess made a unit vector (NaN where that is not finite) (``vertices`` and
+      ``normals``, rows by edge number). The others'
       numbers and next guesses are packed to the front of ``rows`` and ``guesses``; returns how many;
     - phase 2 (``n``: the edges still open): each one's vertex is the secant through its bracket, written
       to ``vertices`` and, packed, to ``guesses`` (for the caller's gradients); returns 0."""
@@ -490,8 +553,8 @@ def emit_edge_roots(module: ir.Module):
                             with finished:  # at the Newton point (the guess itself where F is 0 there)
                                 write_point(i, b.select(b.fcmp_ordered("==", value, zero), t, following),
                                             [(vertices, i)])
-                                for axis in range(3):
-                                    b.store(b.load(slot(g, j, axis)), slot(normals, i, axis))
+                                _store_unit(b, [b.load(slot(g, j, axis)) for axis in range(3)],
+                                            [slot(normals, i, axis) for axis in range(3)])
                             with open_:  # packed: row w <= j, whose entry was read already
                                 w = counted.get()
                                 store_at(b, i, rows, w)

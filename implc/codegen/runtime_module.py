@@ -16,7 +16,9 @@ from llvmlite import ir
 
 from .contour_cells import (
     emit_bent_cells,
+    emit_cell_corners,
     emit_corner_points,
+    emit_corner_signs,
     emit_edge_ends,
     emit_edge_roots,
     emit_fan_triangles,
@@ -59,6 +61,8 @@ def build_runtime() -> str:
     emit_octree_subtree_rows(module)
     emit_splat(module)
     emit_hash_index(module)
+    emit_cell_corners(module)
+    emit_corner_signs(module)
     emit_kuhn_triangles(module)
     emit_fan_triangles(module)
     emit_bent_cells(module)
