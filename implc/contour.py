@@ -974,12 +974,16 @@ def _feature_cells(runtime, cells, faces, tri_owner, normals):
 
 
 def _edge_data(index: _KeyIndex, keys, positions, normals):
-    """Positions, normals and presence of the vertices on the grid edges ``keys`` (absent: no crossing)."""
+    """Positions, normals and presence of the vertices on the grid edges ``keys`` (absent: no crossing, or
+    a normal not usable: NaN throughout, :func:`_edge_roots`; its row's normal 0). Rows taken by np.take
+    (several times faster than fancy indexing of (N, 3) arrays)."""
     rows = index.number(keys, insert=False)
     present = rows >= 0
-    rows = np.maximum(rows, 0)
-    ok = present & np.isfinite(normals[rows]).all(-1)
-    return positions[rows], np.nan_to_num(normals[rows]), ok
+    np.maximum(rows, 0, out=rows)
+    found = np.take(normals, rows, axis=0)
+    ok = present & ~np.isnan(found[..., 0])
+    found[~ok] = 0
+    return np.take(positions, rows, axis=0), found, ok
 
 
 def _place_points(grid, feature_cells, fanned_cells, index: _KeyIndex, positions, normals):
