@@ -356,9 +356,12 @@ def edge_parameters(mesh):
 @pytest.mark.parametrize("depth", [5, 7])
 def test_vertices_lie_on_a_ball_and_their_normals_are_its_normals_near_them(depth):
     """A ball's distance and normal in closed form: every vertex on an edge lies on the sphere but for its
-    nudge (NUDGE of the edge) and a ten-millionth of the edge more (Newton's last step, quadratic), or, where
-    the root lies within EDGE_MARGIN of an edge's end, at that margin; its normal is the sphere's normal at
-    a point at most ROOT_TOLERANCE of the edge away (within that distance over r, in radians)."""
+    nudge (NUDGE of the edge) and Newton's last step's error, quadratic in that step (at most ROOT_TOLERANCE
+    of the edge): F = |p|² − r² is quadratic along an edge of length L, F'' = 2L² per unit of t, so after a
+    Newton step s, F = L²s² and the point lies L²s² / 2r from the sphere: within ROOT_TOLERANCE² · L / 2r of
+    the edge (measured: up to 0.49 of that); or, where the root
+    lies within EDGE_MARGIN of an edge's end, at that margin. Its normal is the sphere's normal at a point at
+    most ROOT_TOLERANCE of the edge away (within that distance over r, in radians)."""
     from implc.contour import EDGE_MARGIN, NUDGE, ROOT_TOLERANCE
     r = np.sqrt(0.5)
     mesh = implc.voxelize(implc.compile(x**2 + y**2 + z**2 - sympy.Rational(1, 2)), depth).mesh(witnesses=True)
@@ -367,7 +370,8 @@ def test_vertices_lie_on_a_ball_and_their_normals_are_its_normals_near_them(dept
     distance = np.abs(np.linalg.norm(v, axis=1) - r)
     at_margin = (t < EDGE_MARGIN + 2 * NUDGE) | (t > 1 - EDGE_MARGIN - 2 * NUDGE)
     assert at_margin.mean() < 0.01
-    assert np.all(distance[~at_margin] <= (NUDGE + 1e-7) * length[~at_margin])
+    newton = ROOT_TOLERANCE**2 * length[~at_margin] / (2 * r)
+    assert np.all(distance[~at_margin] <= (NUDGE + newton) * length[~at_margin])
     assert np.all(distance[at_margin] <= (EDGE_MARGIN + NUDGE) * length[at_margin])
     angle = np.arccos(np.clip(np.einsum("ij,ij->i", n, v / np.linalg.norm(v, axis=1)[:, None]), -1, 1))
     assert np.all(angle <= ROOT_TOLERANCE * length / r)

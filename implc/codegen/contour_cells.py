@@ -178,13 +178,18 @@ def emit_kuhn_triangles(module: ir.Module):
     one = const(I64, 1)
     insert = const(I64, 1)
     def prefetch(cell):
-        """The index's slots of the 19 edges of ``cell``, a few cells ahead."""
+        """The index's slots of the edges of ``cell`` that change sign (the others hold no vertex), a few
+        cells ahead."""
         base = load_at(b, lowest, cell)
+        ahead = b.zext(load_at(b, sign_bytes, cell), I64)
         with for_range(b, const(I64, 19)) as e:
             corner = load_at(b, tables, b.add(const(I64, 24 + 96 + 576), e))
             code = load_at(b, tables, b.add(const(I64, 24 + 96 + 576 + 19), e))
-            key = b.mul(b.add(b.mul(b.add(base, load_at(b, offsets, corner)), const(I64, 8)), code), const(I64, 8))
-            _prefetch(b, table, bits, key)
+            crosses = b.and_(b.xor(b.lshr(ahead, corner), b.lshr(ahead, b.or_(corner, code))), one)
+            with if_(b, b.icmp_signed("!=", crosses, const(I64, 0))):
+                key = b.mul(b.add(b.mul(b.add(base, load_at(b, offsets, corner)), const(I64, 8)), code),
+                            const(I64, 8))
+                _prefetch(b, table, bits, key)
 
     with for_range(b, n) as c:
         _prefetch_ahead(b, c, n, prefetch, PREFETCH_AHEAD // 4)  # 19 keys a cell
