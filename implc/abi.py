@@ -117,6 +117,7 @@ FAN_EDGES per (case, triangle, vertex) the edge among its six keys (96); from FA
 FAN_SHAPE words: the face's triangle count, then per triangle its three corners' inside flags (a local
 corner, or 8: the face point) and the six keys of the fan tetrahedron over it, each (kind, local, code,
 slot): the slot, below FAN_SLOTS, names the key among a cell's (its number is looked up once per cell)."""
+QEF = _entry("implc_qef", "points:f64* normals:f64* mask:i8* m:i64 k:i64 project:i64 cutoff:f64 out:f64*")
 BENT_CELLS = _entry("implc_bent_cells", "faces:i64* owner:i64* n:i64 normals:f64* cells:i64 mean:f64* cosine:f64 "
                                         "bent:i8*")
 EDGE_ENDS = _entry("implc_edge_ends", "keys:i64* n:i64 geometry:f64* table:i64* bits:i64 values:f64* a:f64* b:f64* "
@@ -126,7 +127,7 @@ EDGE_ROOTS = _entry("implc_edge_roots", "phase:i64 n:i64 rows:i64* keys:i64* a:f
                                         "nudge:f64 tolerance:f64", "i64")
 CORNER_POINTS = _entry("implc_corner_points", "keys:i64* n:i64 geometry:f64* points:f64*")
 RUNTIME_ENTRIES = (DROP_MARKED, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS, SPLAT,
-                   HASH_INDEX, CELL_CORNERS, CORNER_SIGNS, KUHN_TRIANGLES, FAN_TRIANGLES, BENT_CELLS, EDGE_ENDS,
+                   HASH_INDEX, CELL_CORNERS, CORNER_SIGNS, KUHN_TRIANGLES, FAN_TRIANGLES, QEF, BENT_CELLS, EDGE_ENDS,
                    EDGE_ROOTS, CORNER_POINTS)
 FLAT_COLLAPSE = _entry("implc_flat_collapse", "faces:i64* vertices:f64* region:i64* planes:f64* inner:i8* movable:i8* "
                                               "head:i64* next:i64* dead:i8* order:i64* count:i64 passes:i64 "

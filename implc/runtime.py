@@ -46,7 +46,7 @@ class TapeEngine:
 class Runtime:
     """The runtime module's entry points: ``drop_marked``, ``octree_insert``, ``octree_traverse``,
     ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``, ``cell_corners``,
-    ``corner_signs``, ``kuhn_triangles``, ``fan_triangles``, ``bent_cells``, ``edge_ends``, ``edge_roots``
+    ``corner_signs``, ``kuhn_triangles``, ``fan_triangles``, ``qef``, ``bent_cells``, ``edge_ends``, ``edge_roots``
     and ``corner_points``; the walk over compiled kernels, ``subdivide``, from a module of its own compiled
     on first use, and likewise ``flat_collapse`` (meshes' simplification; signatures in :mod:`implc.abi`)."""
 
@@ -68,6 +68,7 @@ class Runtime:
         self.corner_signs = self.native.bind(abi.CORNER_SIGNS)
         self.kuhn_triangles = self.native.bind(abi.KUHN_TRIANGLES)
         self.fan_triangles = self.native.bind(abi.FAN_TRIANGLES)
+        self.qef = self.native.bind(abi.QEF)
         self.bent_cells = self.native.bind(abi.BENT_CELLS)
         self.edge_ends = self.native.bind(abi.EDGE_ENDS)
         self.edge_roots = self.native.bind(abi.EDGE_ROOTS)

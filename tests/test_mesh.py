@@ -343,6 +343,59 @@ def test_creases_and_corners_of_csg_are_sharp():
     assert chamfered.max() > 0.3
 
 
+def _planes(rng, normals, per_plane=4):
+    """Points on planes through one random point c with the given normals (a few points each, spread along
+    the plane), the rows' normals, and c."""
+    c = rng.uniform(-1, 1, 3)
+    points, unit = [], []
+    for n in normals:
+        n = np.asarray(n, float) / np.linalg.norm(n)
+        a = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
+        a /= np.linalg.norm(a)
+        b = np.cross(n, a)
+        for u, v in rng.uniform(-0.5, 0.5, (per_plane, 2)):
+            points.append(c + u * a + v * b)
+            unit.append(n)
+    return np.array(points), np.array(unit), c
+
+
+def test_the_qef_point_is_where_the_planes_meet_and_the_mean_where_they_do_not_constrain():
+    """implc_qef against the geometry in closed form: three planes meet at their common point; two planes
+    (a crease) at the point of their line nearest the points' mean; one plane at the mean's projection on
+    it; a face's 2D QEF (an axis projected out) keeps the mean's coordinate on that axis. Masked-out rows
+    carry garbage that must not count."""
+    from implc.contour import _qef
+    from implc.runtime import Runtime
+
+    rng = np.random.default_rng(7)
+    runtime = Runtime.shared()
+    for trial in range(200):
+        count = trial % 3 + 1
+        normals = rng.normal(size=(count, 3))
+        if count == 2 and abs(np.dot(*normals) / np.prod(np.linalg.norm(normals, axis=1))) > 0.85:
+            continue  # planes within 30 degrees: their line is ill-conditioned, not a check of the solver
+        if count == 3 and abs(np.linalg.det(normals / np.linalg.norm(normals, axis=1)[:, None])) < 0.3:
+            continue
+        p, n, c = _planes(rng, normals)
+        points = np.concatenate([p, rng.normal(size=(3, 3)) * 100])[None]
+        unit = np.concatenate([n, rng.normal(size=(3, 3))])[None]
+        mask = np.r_[np.ones(len(p), bool), np.zeros(3, bool)][None]
+        got = _qef(runtime, points, unit, mask)[0]
+        mean = p.mean(0)
+        u = normals / np.linalg.norm(normals, axis=1)[:, None]
+        if count == 3:
+            want = c
+        elif count == 2:
+            d = np.cross(u[0], u[1])
+            want = np.linalg.solve(np.array([u[0], u[1], d]), [u[0] @ c, u[1] @ c, d @ mean])
+        else:
+            want = mean - u[0] * (u[0] @ (mean - c))
+        assert np.allclose(got, want, atol=1e-9), (count, got, want)
+        axis = trial % 3
+        flat = _qef(runtime, points, unit, mask, project_out=axis)[0]
+        assert flat[axis] == pytest.approx(mean[axis], abs=1e-12)
+
+
 def edge_parameters(mesh):
     """For the vertices found on an edge (witnesses apart): their rows, the edge's length and the vertex's
     place t along it (0 at the inside end)."""

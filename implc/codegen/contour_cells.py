@@ -2,7 +2,8 @@
 numbered in it and their signs (``implc_cell_corners``, ``implc_corner_signs``), marching
 tetrahedra over the Kuhn split of each cell with its vertices numbered through that index
 (``implc_kuhn_triangles``) and over the fans of feature cells and their neighbours
-(``implc_fan_triangles``), the cells whose normals disagree (``implc_bent_cells``), and the corners
+(``implc_fan_triangles``), the cells whose normals disagree (``implc_bent_cells``) and their
+points (``implc_qef``), and the corners
 and sampled values at the ends of grid edges (``implc_edge_ends``).
 
 The index is open addressing with linear probing over ``2^bits`` slots of two words (key, number); an
@@ -314,6 +315,123 @@ def emit_fan_triangles(module: ir.Module):
     store_at(b, count.get(), state, 0)
     store_at(b, written.get(), state, 1)
     b.ret(done.get())
+
+
+QEF_SWEEPS, QEF_CONVERGED = 8, 1e-32
+"""At most QEF_SWEEPS sweeps of Jacobi's rotations over a QEF's 3 × 3 matrix (each zeroes its three
+off-diagonal terms in turn; the sum of their squares falls quadratically, to rounding within four or five),
+none once that sum is below QEF_CONVERGED times the diagonal's."""
+
+
+def _jacobi_sweep(b: ir.IRBuilder, entry, v):
+    """One sweep of Jacobi's rotations over a symmetric 3 × 3 matrix (``entry(i, j)``: its Locals, the
+    upper triangle's), each zeroing one off-diagonal term, accumulated into ``v`` (Locals by (row, column))."""
+    double = ir.DoubleType()
+    zero, one = const(double, 0.0), const(double, 1.0)
+    sqrt = intrinsic(b.module, "llvm.sqrt.f64", 1)
+    fabs = intrinsic(b.module, "llvm.fabs.f64", 1)
+    for p_, q_ in ((0, 1), (0, 2), (1, 2)):
+        apq, app, aqq = entry(p_, q_).get(), entry(p_, p_).get(), entry(q_, q_).get()
+        off = b.fcmp_ordered("!=", apq, zero)
+        safe = b.select(off, apq, one)
+        theta = b.fdiv(b.fsub(aqq, app), b.fmul(const(double, 2.0), safe))
+        root = b.call(sqrt, [b.fadd(b.fmul(theta, theta), one)])
+        t = b.fdiv(one, b.fadd(b.call(fabs, [theta]), root))
+        t = b.select(b.fcmp_ordered("<", theta, zero), b.fneg(t), t)
+        t = b.select(off, t, zero)  # nothing to rotate (and theta's square may overflow: t is then 0)
+        t = b.select(b.fcmp_ordered("==", t, t), t, zero)
+        c = b.fdiv(one, b.call(sqrt, [b.fadd(b.fmul(t, t), one)]))
+        s = b.fmul(t, c)
+        entry(p_, p_).set(b.fsub(app, b.fmul(t, apq)))
+        entry(q_, q_).set(b.fadd(aqq, b.fmul(t, apq)))
+        entry(p_, q_).set(zero)
+        other = 3 - p_ - q_
+        arp, arq = entry(other, p_).get(), entry(other, q_).get()
+        entry(other, p_).set(b.fsub(b.fmul(c, arp), b.fmul(s, arq)))
+        entry(other, q_).set(b.fadd(b.fmul(s, arp), b.fmul(c, arq)))
+        for i in range(3):
+            vip, viq = v[i, p_].get(), v[i, q_].get()
+            v[i, p_].set(b.fsub(b.fmul(c, vip), b.fmul(s, viq)))
+            v[i, q_].set(b.fadd(b.fmul(s, vip), b.fmul(c, viq)))
+
+
+def emit_qef(module: ir.Module):
+    """``implc_qef(points, normals, mask, m, k, project, cutoff, out)``: dual contouring's point per row of
+    ``m``: the least-squares meeting point of the tangent planes through ``points`` (k points of three
+    doubles per row) with unit ``normals`` where ``mask`` (k bytes per row) is set, solved around their
+    mean: A = Σ n nᵀ, b = Σ n (n · (p − mean)), the point mean + A⁺b with A's eigenvalues below ``cutoff``
+    times the largest dropped (the point stays near the mean along those directions). ``project`` ≥ 0: that
+    axis's normal component is set to 0 first (a face's 2D QEF). A's eigenvectors by cyclic Jacobi
+    rotations (:data:`QEF_SWEEPS`); three doubles per row into ``out``."""
+    fn, b = define(module, abi.QEF)
+    points, normals, mask, m, k, project, cutoff, out = fn.args
+    double = ir.DoubleType()
+    zero, one = const(double, 0.0), const(double, 1.0)
+    three = const(I64, 3)
+
+    def vec(ptr, row, i):
+        return load_at(b, ptr, b.add(b.mul(row, three), const(I64, i)))
+
+    with for_range(b, m) as r:
+        count = Local(b, double, 0.0, "count")
+        mean = [Local(b, double, 0.0, f"mean{i}") for i in range(3)]
+        with for_range(b, k) as j:
+            at_ = b.add(b.mul(r, k), j)
+            on = b.icmp_signed("!=", b.zext(load_at(b, mask, at_), I64), const(I64, 0))
+            with if_(b, on):
+                count.set(b.fadd(count.get(), one))
+                for i in range(3):
+                    mean[i].set(b.fadd(mean[i].get(), vec(points, at_, i)))
+        n_points = b.select(b.fcmp_ordered(">", count.get(), zero), count.get(), one)
+        centre = [b.fdiv(mean[i].get(), n_points) for i in range(3)]
+        a = {(i, j): Local(b, double, 0.0, f"a{i}{j}") for i in range(3) for j in range(i, 3)}
+        rhs = [Local(b, double, 0.0, f"rhs{i}") for i in range(3)]
+        with for_range(b, k) as j:
+            at_ = b.add(b.mul(r, k), j)
+            on = b.icmp_signed("!=", b.zext(load_at(b, mask, at_), I64), const(I64, 0))
+            with if_(b, on):
+                n = [b.select(b.icmp_signed("==", project, const(I64, i)), zero, vec(normals, at_, i))
+                     for i in range(3)]
+                d = zero
+                for i in range(3):
+                    d = b.fadd(d, b.fmul(n[i], b.fsub(vec(points, at_, i), centre[i])))
+                for (i, jj), cell in a.items():
+                    cell.set(b.fadd(cell.get(), b.fmul(n[i], n[jj])))
+                for i in range(3):
+                    rhs[i].set(b.fadd(rhs[i].get(), b.fmul(n[i], d)))
+        # Jacobi: A = V diag(e) Vᵀ, A's entries rotated in place, V's columns the eigenvectors
+        v = {(i, j): Local(b, double, 1.0 if i == j else 0.0, f"v{i}{j}") for i in range(3) for j in range(3)}
+
+        def entry(i, j):
+            return a[min(i, j), max(i, j)]
+
+        def squares(pairs):
+            total = zero
+            for i, j in pairs:
+                value = entry(i, j).get()
+                total = b.fadd(total, b.fmul(value, value))
+            return total
+
+        with for_range(b, const(I64, QEF_SWEEPS)):
+            off = squares(((0, 1), (0, 2), (1, 2)))
+            diagonal = squares(((0, 0), (1, 1), (2, 2)))
+            # rotations smaller than rounding change nothing: done (the loop runs on, empty)
+            with if_(b, b.fcmp_ordered(">", off, b.fmul(const(double, QEF_CONVERGED), diagonal))):
+                _jacobi_sweep(b, entry, v)
+        e = [entry(i, i).get() for i in range(3)]
+        largest = b.select(b.fcmp_ordered(">", e[0], e[1]), e[0], e[1])
+        largest = b.select(b.fcmp_ordered(">", largest, e[2]), largest, e[2])
+        step = [centre[i] for i in range(3)]
+        for col in range(3):
+            keep = b.fcmp_ordered(">", e[col], b.fmul(cutoff, largest))
+            along = zero
+            for i in range(3):
+                along = b.fadd(along, b.fmul(v[i, col].get(), rhs[i].get()))
+            scale = b.select(keep, b.fdiv(along, b.select(keep, e[col], one)), zero)
+            step = [b.fadd(step[i], b.fmul(v[i, col].get(), scale)) for i in range(3)]
+        for i in range(3):
+            store_at(b, step[i], out, b.add(b.mul(r, three), const(I64, i)))
+    b.ret_void()
 
 
 def emit_bent_cells(module: ir.Module):

@@ -24,6 +24,7 @@ from .contour_cells import (
     emit_fan_triangles,
     emit_hash_index,
     emit_kuhn_triangles,
+    emit_qef,
 )
 from .flat_collapse import emit_flat_collapse
 from .octree_index import (
@@ -65,6 +66,7 @@ def build_runtime() -> str:
     emit_corner_signs(module)
     emit_kuhn_triangles(module)
     emit_fan_triangles(module)
+    emit_qef(module)
     emit_bent_cells(module)
     emit_edge_ends(module)
     emit_edge_roots(module)
