@@ -422,6 +422,11 @@ class _Grid:
         self.runtime.corner_points(keys.ctypes.data, len(keys), self.geometry.ctypes.data, points.ctypes.data)
         return points
 
+    def expect_corners(self, count: int):
+        """Size the corners' index for ``count`` corners (the cells' and the caps' faces'), before any is
+        sampled: growing it rehashes every key (Scene 2 at 256³, whose caps add 396,000 corners: 0.13 s)."""
+        self._corner_index(count)
+
     def _corner_index(self, expected: int) -> _KeyIndex:
         if self._corners is None:
             self._corners = _KeyIndex(self.runtime, max(1 << 16, expected))
@@ -1191,7 +1196,8 @@ def _fill_normals(grid: _Grid, normals, vertices, faces) -> np.ndarray:
     if len(bad):
         mask = np.zeros(len(vertices), bool)
         mask[bad] = True
-        faces = faces[mask[faces].any(1)]  # only the triangles around those vertices
+        # only the triangles around those vertices (column by column: a boolean mask of (F, 3) is 4x slower)
+        faces = np.take(faces, np.flatnonzero(mask[faces[:, 0]] | mask[faces[:, 1]] | mask[faces[:, 2]]), axis=0)
         p = np.take(vertices, faces, axis=0)
         area = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         corners = faces.reshape(-1)
@@ -1218,8 +1224,9 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     runtime = surface.runtime
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
     stats.cells = len(cells)
-    todo = _Cells(grid, cells)
     grid.find_outside_faces(cells)
+    grid.expect_corners(CORNERS_PER_CELL * len(cells) + (6 - len(grid.outside_faces)) * grid.k**2)
+    todo = _Cells(grid, cells)
     caps, seeds = _cap_triangles(grid, _NO_POINTS, _never)
     t1 = time.perf_counter()
     stats.added_cells = todo.close(seeds)
