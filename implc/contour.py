@@ -310,8 +310,6 @@ FAN_PACKED = _fan_face_tables()
 
 
 # -- the grid ----------------------------------------------------------------------------------------
-
-
 class _Grid:
     """The 2^depth grid over the bounds: corner, cell and face keys, world positions, F's samples."""
 

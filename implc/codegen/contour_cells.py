@@ -1,10 +1,9 @@
 """The contouring's per-cell work: a hash index of int64 keys (``implc_hash_index``), the cells' corners
-numbered in it and their signs (``implc_cell_corners``, ``implc_corner_signs``), marching
-tetrahedra over the Kuhn split of each cell with its vertices numbered through that index
-(``implc_kuhn_triangles``) and over the fans of feature cells and their neighbours
-(``implc_fan_triangles``), the cells whose normals disagree (``implc_bent_cells``) and their
-points (``implc_qef``), and the corners
-and sampled values at the ends of grid edges (``implc_edge_ends``).
+numbered in it and their signs (``implc_cell_corners``, ``implc_corner_signs``), marching tetrahedra over
+the Kuhn split of each cell with its vertices numbered through that index (``implc_kuhn_triangles``) and
+over the fans of feature cells and their neighbours (``implc_fan_triangles``), the cells whose normals
+disagree (``implc_bent_cells``) and their points (``implc_qef``), and the corners and sampled values at
+the ends of grid edges (``implc_edge_ends``).
 
 The index is open addressing with linear probing over ``2^bits`` slots of two words (key, number); an
 empty slot holds key −1. A key's first slot is the Fibonacci hash of its corner (the key without its low
