@@ -1033,9 +1033,9 @@ def _place_points(grid, feature_cells, fanned_cells, index: _KeyIndex, positions
 # -- vertices ----------------------------------------------------------------------------------------
 def _endpoints(grid: _Grid, keys: np.ndarray, cell_points: _Points, face_points: _Points):
     """The two ends of the edge each key names and F there, (a, b, fa, fb) (a point named by itself: both
-    ends the same, its values not looked up). Rows are selected by index, not by boolean mask (several
+    ends the same, its values not used). Rows are selected by index, not by boolean mask (several
     times faster on (N, 3) arrays)."""
-    if _all_grid_edges(keys):  # the first pass, where no cap reaches the bounds
+    if not np.any(keys & 7 != GRID):  # the first pass: grid edges, and the caps' corners (both ends)
         return grid.edge_ends(keys)
     kind, payload = keys & 7, keys >> 3
     grid_edge = (kind == GRID) & (payload & 7 != 0)

@@ -498,7 +498,8 @@ def emit_corner_points(module: ir.Module):
 
 def emit_edge_ends(module: ir.Module):
     """``implc_edge_ends(keys, n, geometry, table, bits, values, a, b, fa, fb)``: for n vertex keys of grid
-    edges ((corner key × 8 + code) × 8, code ≠ 0), the edge's two corners in world coordinates (three
+    edges ((corner key × 8 + code) × 8; code 0 names the corner itself, both ends), the edge's two corners
+    in world coordinates (three
     doubles each into ``a`` and ``b``) and F there (``fa``, ``fb``), looked up in the corner index
     (``table``, ``bits``) and its ``values``. ``geometry``: corners per axis, cells per axis (as doubles),
     then lo, step and hi per axis; a corner at index ``cells`` sits at hi exactly, any other at lo + i·step.
