@@ -195,9 +195,28 @@ KUHN_SLOT = np.array([KUHN_EDGES.index(edge) if edge[1] else 0  # (0, 0): past t
                       for edge in zip(KUHN_CORNER.ravel().tolist(), KUHN_CODE.ravel().tolist())])
 KUHN_SLOT = KUHN_SLOT.reshape(KUHN_CORNER.shape)
 """Each triangle vertex's edge as a row of :data:`KUHN_EDGES`."""
-KUHN_PACKED = np.ascontiguousarray(np.concatenate([KUHN_TETS.ravel(), KUHN_COUNT.ravel(), KUHN_SLOT.ravel(),
-                                                   np.array(KUHN_EDGES).T.ravel()]), dtype=np.int64)
-"""The tables as ``implc_kuhn_triangles`` reads them."""
+
+
+def _kuhn_cases() -> np.ndarray:
+    """Per sign case of a whole cell (bit c: F < 0 at corner c, 256 cases) its triangles, tetrahedron by
+    tetrahedron: (256, 1 + 12 × 3), the count, then each triangle's three edges as rows of
+    :data:`KUHN_EDGES` (six tetrahedra, at most two triangles each)."""
+    cases = np.zeros((256, 1 + 12 * 3), dtype=np.int64)
+    for signs in range(256):
+        edges = []
+        for t, tet in enumerate(KUHN_TETS):
+            case = sum(((signs >> int(corner)) & 1) << v for v, corner in enumerate(tet))
+            for s in range(KUHN_COUNT[t, case]):
+                edges.extend(KUHN_SLOT[t, case, s])
+        cases[signs, 0] = len(edges) // 3
+        cases[signs, 1:1 + len(edges)] = edges
+    return cases
+
+
+KUHN_PACKED = np.ascontiguousarray(np.concatenate([np.array(KUHN_EDGES).T.ravel(), _kuhn_cases().ravel()]),
+                                   dtype=np.int64)
+"""The tables as ``implc_kuhn_triangles`` reads them: the 19 edges' lower corners, their codes, then the
+triangles of each of the 256 sign cases of a cell (:func:`_kuhn_cases`)."""
 KUHN_CHUNK = 1 << 16
 """Cells per call of the native marching tetrahedra, Kuhn or fans (Ctrl-C is seen between calls)."""
 KUHN_NEW_KEYS = 64

@@ -159,37 +159,49 @@ def emit_corner_signs(module: ir.Module):
     b.ret_void()
 
 
+KUHN_CASE = 1 + 12 * 3
+"""Words per sign case in :func:`emit_kuhn_triangles`'s tables: the count, then three edges per triangle."""
+
+
 def emit_kuhn_triangles(module: ir.Module):
     """``implc_kuhn_triangles(lowest, offsets, signs, n, tables, table, bits, uniques, limit, state, faces,
     owner)``: marching tetrahedra over the Kuhn split of cells (``lowest``: each cell's lowest corner key,
     ``offsets``: the 8 corners' key offsets, ``signs``: a byte per cell, bit c set where F < 0 at corner c).
 
-    ``tables``: the six tetrahedra's corners (6 × 4), then per (tetrahedron, case) the triangle count
-    (96), then per (tetrahedron, case, triangle, vertex) the vertex's edge as a row of the cell's 19 edges
-    (576), then those edges' lower corners (19) and codes (19) (see :func:`implc.contour._kuhn_tables`).
-    Each vertex key ((corner key × 8 + code) × 8) is numbered through the index once per cell; faces get
-    three numbers per triangle, owner the cell's row. state[0]: keys in the index, state[1]: triangles
-    written. Stops before a cell when the index holds ``limit`` keys or more; returns the cells done."""
+    ``tables``: the cell's 19 edges' lower corners (19) and codes (19), then per sign case of the cell (256)
+    its triangles in the order of the six tetrahedra: their count, then each one's three edges as rows of
+    the 19 (see :func:`implc.contour._kuhn_cases`). Each vertex key ((corner key × 8 + code) × 8) is
+    numbered through the index once per cell; faces get three numbers per triangle, owner the cell's row.
+    state[0]: keys in the index, state[1]: triangles written. Stops before a cell when the index holds
+    ``limit`` keys or more; returns the cells done."""
     fn, b = define(module, abi.KUHN_TRIANGLES)
     lowest, offsets, sign_bytes, n, tables, table, bits, uniques, limit, state, faces, owner = fn.args
     count = Local(b, I64, load_at(b, state, 0), "count")
     written = Local(b, I64, load_at(b, state, 1), "written")
     done = Local(b, I64, n, "done")
-    one = const(I64, 1)
+    one, three, eight = const(I64, 1), const(I64, 3), const(I64, 8)
     insert = const(I64, 1)
+    numbers = local_array(b, I64, 19, "numbers")  # the cell's edges' vertex numbers
+    stamp = local_array(b, I64, 19, "stamp")  # the cell whose number each edge holds
+    with for_range(b, const(I64, 19)) as e:
+        store_at(b, const(I64, -1), stamp, e)
+
+    def edge_key(base, edge):
+        corner = load_at(b, tables, edge)
+        code = load_at(b, tables, b.add(const(I64, 19), edge))
+        return b.mul(b.add(b.mul(b.add(base, load_at(b, offsets, corner)), eight), code), eight)
+
     def prefetch(cell):
         """The index's slots of the edges of ``cell`` that change sign (the others hold no vertex), a few
         cells ahead."""
         base = load_at(b, lowest, cell)
         ahead = b.zext(load_at(b, sign_bytes, cell), I64)
         with for_range(b, const(I64, 19)) as e:
-            corner = load_at(b, tables, b.add(const(I64, 24 + 96 + 576), e))
-            code = load_at(b, tables, b.add(const(I64, 24 + 96 + 576 + 19), e))
+            corner = load_at(b, tables, e)
+            code = load_at(b, tables, b.add(const(I64, 19), e))
             crosses = b.and_(b.xor(b.lshr(ahead, corner), b.lshr(ahead, b.or_(corner, code))), one)
             with if_(b, b.icmp_signed("!=", crosses, const(I64, 0))):
-                key = b.mul(b.add(b.mul(b.add(base, load_at(b, offsets, corner)), const(I64, 8)), code),
-                            const(I64, 8))
-                _prefetch(b, table, bits, key)
+                _prefetch(b, table, bits, edge_key(base, e))
 
     with for_range(b, n) as c:
         _prefetch_ahead(b, c, n, prefetch, PREFETCH_AHEAD // 4)  # 19 keys a cell
@@ -197,40 +209,21 @@ def emit_kuhn_triangles(module: ir.Module):
         with if_(b, b.and_(full, b.icmp_signed("==", done.get(), n))):
             done.set(c)  # the first cell not done; the rest are skipped
         with if_(b, b.icmp_signed("==", done.get(), n)):
-            signs = Local(b, I64, b.zext(load_at(b, sign_bytes, c), I64), "signs")
-            mixed = b.and_(b.icmp_signed("!=", signs.get(), const(I64, 0)),
-                           b.icmp_signed("!=", signs.get(), const(I64, 255)))
-            with if_(b, mixed):
-                base = load_at(b, lowest, c)
-                numbers = local_array(b, I64, 19, "numbers")  # the cell's edges' vertex numbers, −1: not yet
-                with for_range(b, const(I64, 19)) as e:
-                    store_at(b, const(I64, -1), numbers, e)
-                with for_range(b, const(I64, 6)) as t:
-                    case = Local(b, I64, 0, "case")
-                    with for_range(b, const(I64, 4)) as v:
-                        corner = load_at(b, tables, b.add(b.mul(t, const(I64, 4)), v))
-                        bit = b.and_(b.lshr(signs.get(), corner), one)
-                        case.set(b.or_(case.get(), b.shl(bit, v)))
-                    row = b.add(b.mul(t, const(I64, 16)), case.get())
-                    triangles = load_at(b, tables, b.add(const(I64, 24), row))
-                    with for_range(b, triangles) as s:
-                        with for_range(b, const(I64, 3)) as v:
-                            vertex = b.add(b.mul(b.add(b.mul(row, const(I64, 2)), s), const(I64, 3)), v)
-                            edge = load_at(b, tables, b.add(const(I64, 24 + 96), vertex))
-                            with if_(b, b.icmp_signed("<", load_at(b, numbers, edge), const(I64, 0))):
-                                corner = load_at(b, tables, b.add(const(I64, 24 + 96 + 576), edge))
-                                code = load_at(b, tables, b.add(const(I64, 24 + 96 + 576 + 19), edge))
-                                key = b.add(b.mul(b.add(base, load_at(b, offsets, corner)), const(I64, 8)), code)
-                                key = b.mul(key, const(I64, 8))
-                                store_at(b, _number(b, table, bits, key, insert, count, uniques), numbers, edge)
-                            store_at(b, load_at(b, numbers, edge), faces,
-                                     b.add(b.mul(written.get(), const(I64, 3)), v))
-                        store_at(b, c, owner, written.get())
-                        written.set(b.add(written.get(), one))
+            base = load_at(b, lowest, c)
+            row = b.add(const(I64, 38), b.mul(b.zext(load_at(b, sign_bytes, c), I64), const(I64, KUHN_CASE)))
+            with for_range(b, load_at(b, tables, row)) as s:
+                with for_range(b, three) as v:
+                    edge = load_at(b, tables, b.add(b.add(row, one), b.add(b.mul(s, three), v)))
+                    with if_(b, b.icmp_signed("!=", load_at(b, stamp, edge), c)):
+                        store_at(b, _number(b, table, bits, edge_key(base, edge), insert, count, uniques), numbers,
+                                 edge)
+                        store_at(b, c, stamp, edge)
+                    store_at(b, load_at(b, numbers, edge), faces, b.add(b.mul(written.get(), three), v))
+                store_at(b, c, owner, written.get())
+                written.set(b.add(written.get(), one))
     store_at(b, count.get(), state, 0)
     store_at(b, written.get(), state, 1)
     b.ret(done.get())
-
 
 
 def emit_fan_triangles(module: ir.Module):
