@@ -578,6 +578,39 @@ def test_vertices_and_corners_done_in_chunks_keep_every_promise(name, monkeypatc
         assert np.array_equal(a, b)
 
 
+@pytest.mark.parametrize("name", ["box_minus_ball", "heightfield", "vm"])
+def test_key_indexes_grown_from_their_smallest_give_the_same_mesh(name, monkeypatch):
+    """Every key index (the cells', the corners', the vertices') starts at its smallest (2048 keys) and
+    grows as the native routines fill it (they stop before a cell when it is full, and go on after it is
+    rehashed: the corners' numbering, the Kuhn split, the fans): the mesh passes every check and is, bit for
+    bit, the mesh made with indexes sized in advance (keys keep the numbers they were first given)."""
+    from implc import contour
+
+    if name == "vm":
+        s, f = implc.compile(parse_vm(CSG, name="csg"), engine="tape"), vm_f(CSG)
+    else:
+        expr, bounds = SURFACES[name]
+        s, f = implc.compile(expr, bounds), numpy_f(expr)
+    sized = implc.voxelize(s, 5, solid=True).mesh(witnesses=True)
+    grows = []
+    original_init, original_grow = contour._KeyIndex.__init__, contour._KeyIndex._grow
+
+    def smallest(self, runtime, expected):
+        original_init(self, runtime, 1)
+
+    def grow(self):
+        grows.append(self.count)
+        original_grow(self)
+
+    monkeypatch.setattr(contour._KeyIndex, "__init__", smallest)
+    monkeypatch.setattr(contour._KeyIndex, "_grow", grow)
+    grown = check_mesh(s, 5, f)
+    assert len(grows) >= 3, grows
+    for a, b in ((sized.vertices, grown.vertices), (sized.faces, grown.faces), (sized.normals, grown.normals),
+                 (sized.witnesses, grown.witnesses)):
+        assert np.array_equal(a, b)
+
+
 @pytest.mark.parametrize("name", ["paper_blobs", "box_minus_ball", "vm"])
 def test_the_same_mesh_for_every_tightness(name):
     """A tighter voxelization drops only cells proven not to meet the surface (their sampled corners agree):
