@@ -554,6 +554,14 @@ def test_the_same_mesh_for_every_worker_count():
     assert np.array_equal(one.vertices, two.vertices) and np.array_equal(one.faces, two.faces)
 
 
+def surface_and_f(name):
+    """A test surface by name ("vm": the CSG tape on the tape engine) and F in numpy, not through implc."""
+    if name == "vm":
+        return implc.compile(parse_vm(CSG, name="csg"), engine="tape"), vm_f(CSG)
+    expr, bounds = SURFACES[name]
+    return implc.compile(expr, bounds), numpy_f(expr)
+
+
 @pytest.mark.parametrize("name", ["box_minus_ball", "heightfield", "vm"])
 def test_vertices_and_corners_done_in_chunks_keep_every_promise(name, monkeypatch):
     """The vertices are placed, and the cells' corners sampled, a chunk at a time (so that a big mesh's
@@ -562,11 +570,7 @@ def test_vertices_and_corners_done_in_chunks_keep_every_promise(name, monkeypatc
     the mesh made in one chunk."""
     from implc import contour
 
-    if name == "vm":
-        s, f = implc.compile(parse_vm(CSG, name="csg"), engine="tape"), vm_f(CSG)
-    else:
-        expr, bounds = SURFACES[name]
-        s, f = implc.compile(expr, bounds), numpy_f(expr)
+    s, f = surface_and_f(name)
     whole = implc.voxelize(s, 5, solid=True).mesh(witnesses=True)
     assert whole.stats.feature_cells > 0 or name == "heightfield"
     assert whole.stats.cap_triangles > 0 or name != "heightfield"
@@ -586,11 +590,7 @@ def test_key_indexes_grown_from_their_smallest_give_the_same_mesh(name, monkeypa
     bit, the mesh made with indexes sized in advance (keys keep the numbers they were first given)."""
     from implc import contour
 
-    if name == "vm":
-        s, f = implc.compile(parse_vm(CSG, name="csg"), engine="tape"), vm_f(CSG)
-    else:
-        expr, bounds = SURFACES[name]
-        s, f = implc.compile(expr, bounds), numpy_f(expr)
+    s, f = surface_and_f(name)
     sized = implc.voxelize(s, 5, solid=True).mesh(witnesses=True)
     grows = []
     original_init, original_grow = contour._KeyIndex.__init__, contour._KeyIndex._grow
