@@ -1254,7 +1254,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     stats.crossed_cells = len(crossed)
     index = _KeyIndex(runtime, 4 * len(crossed))
     kuhn, owner = index.kuhn_triangles(grid, todo.cells[crossed], todo.signs[crossed])
-    owner = crossed[owner]  # rows of todo.cells
+    np.take(crossed, owner, out=owner, mode="clip")  # rows of todo.cells, in place (no fresh memory)
     caps = {face: index.number(triangles) for face, triangles in caps.items()}
     t2 = time.perf_counter()
     vertices, normals, ends = _vertices(grid, index.keys(), _NO_POINTS, _NO_POINTS, witnesses)
