@@ -440,8 +440,9 @@ class _Grid:
         return points
 
     def expect_corners(self, count: int):
-        """Size the corners' index for ``count`` corners (the cells' and the caps' faces'), before any is
-        sampled: growing it rehashes every key (Scene 2 at 256³, whose caps add 396,000 corners: 0.13 s)."""
+        """Size the corners' index for ``count`` corners (the cells' and the caps' faces', :meth:`capped_faces`),
+        before any is sampled: growing it rehashes every key (Scene 2 at 256³, whose caps add 396,000 corners:
+        0.13 s)."""
         self._corner_index(count)
 
     def _corner_index(self, expected: int) -> _KeyIndex:
@@ -474,6 +475,20 @@ class _Grid:
         signs = np.empty(len(cells), np.uint8)
         self.runtime.corner_signs(numbers.ctypes.data, len(cells), self._corner_values.ctypes.data, signs.ctypes.data)
         return signs
+
+    def face_keys(self, axis: int, side: int) -> np.ndarray:
+        """The corner keys of a face of the bounds, (n + 1, n + 1) in the order of its two other axes."""
+        b, c = _face_axes(axis)
+        corners = np.zeros((self.k, self.k, 3), np.int64)
+        corners[..., axis] = side * self.n
+        corners[..., b], corners[..., c] = np.meshgrid(np.arange(self.k), np.arange(self.k), indexing="ij")
+        return self.key(corners)
+
+    def capped_faces(self) -> int:
+        """How many faces of the bounds not taken as outside have a corner where F < 0 (sampled here, once):
+        their corners enter the corners' index with the caps."""
+        faces = [(axis, side) for axis in range(3) for side in (0, 1) if (axis, side) not in self.outside_faces]
+        return sum(bool(np.any(self.face_values(*face, self.face_keys(*face)) < 0)) for face in faces)
 
     def face_values(self, axis: int, side: int, keys: np.ndarray) -> np.ndarray:
         """F at the corners ``keys`` of a face of the bounds, sampled once (and remembered by the face): most
@@ -860,10 +875,7 @@ def _cap_triangles(grid: _Grid, face_points: _Points, is_feature, faces=None):
             grid_of_cells[..., b], grid_of_cells[..., c] = u, v
             cells = grid_of_cells.reshape(-1, 3)
             local, corner_keys = _face_corner_keys(grid, cells, axis, side)
-            corners = np.zeros((n + 1, n + 1, 3), np.int64)
-            corners[..., axis] = side * n
-            corners[..., b], corners[..., c] = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-            keys = grid.key(corners)
+            keys = grid.face_keys(axis, side)
             values = grid.face_values(axis, side, keys)
             signs = values < 0
             split4 = is_feature(cells)  # squares fanned from a face point, which may be inside where no corner is
@@ -1242,7 +1254,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
     stats.cells = len(cells)
     grid.find_outside_faces(cells)
-    grid.expect_corners(CORNERS_PER_CELL * len(cells) + (6 - len(grid.outside_faces)) * grid.k**2)
+    grid.expect_corners(CORNERS_PER_CELL * len(cells) + grid.capped_faces() * grid.k**2)
     todo = _Cells(grid, cells)
     caps, seeds = _cap_triangles(grid, _NO_POINTS, _never)
     t1 = time.perf_counter()
