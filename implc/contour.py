@@ -274,6 +274,15 @@ def _reversed_face(axis: int, side: int) -> bool:
     return float(np.cross(np.eye(3)[b], np.eye(3)[c]) @ np.eye(3)[axis]) * (1 if side else -1) < 0
 
 
+def _square_edge(axis: int, i: int, j: int) -> tuple[int, int]:
+    """The edge between square corners i and j of a face on ``axis`` (adjacent, or the diagonal 0-2) as a
+    grid edge: its lower square corner and its code (a bit per axis it steps along)."""
+    b, c = _face_axes(axis)
+    lo, hi = (i, j) if all(p <= q for p, q in zip(SQUARE[i], SQUARE[j])) else (j, i)
+    du, dv = SQUARE[hi][0] - SQUARE[lo][0], SQUARE[hi][1] - SQUARE[lo][1]
+    return lo, (du << b) | (dv << c)
+
+
 def _face_shapes(axis: int, side: int, split: bool):
     """The triangles of a cell's face on (axis, side), counter-clockwise seen from outside the cell: three
     vertices each, ("c", square corner) or ("f", 0) for the face point; fanned from the face point where
@@ -309,9 +318,7 @@ def _fan_face_tables() -> np.ndarray:
                     for v in range(3):
                         (ka, i), (kb, j) = shape[v], shape[(v + 1) % 3]
                         if ka == "c" and kb == "c":
-                            lo, hi = (i, j) if all(p <= q for p, q in zip(SQUARE[i], SQUARE[j])) else (j, i)
-                            du, dv = SQUARE[hi][0] - SQUARE[lo][0], SQUARE[hi][1] - SQUARE[lo][1]
-                            code = (du << b) | (dv << c)
+                            lo, code = _square_edge(axis, i, j)
                             keys.append((GRID, local[lo], code, 8 * local[lo] + code))
                         else:
                             k = i if ka == "c" else j
@@ -456,10 +463,14 @@ class _Grid:
         index = self._corner_index(expected or keys.size // 6)  # a band of cells: one to two corners per cell
         before = index.count
         numbers = index.number(keys)
+        self._sample_since(index, before)
+        return self._corner_values[numbers]
+
+    def _sample_since(self, index: _KeyIndex, before: int):
+        """Sample F at the corners numbered from ``before`` on, and keep it with the others."""
         if index.count > before:
             fresh = self.values(self.corner_points(index.keys()[before:]))
-            self._corner_values = np.concatenate([self._corner_values, fresh])
-        return self._corner_values[numbers]
+            self._corner_values = np.ascontiguousarray(np.concatenate([self._corner_values, fresh]), dtype=np.float64)
 
     def corner_signs(self, cells: np.ndarray, expected: int) -> np.ndarray:
         """Per cell a byte, bit c set where F < 0 at its corner c (NaN counts as outside): each distinct
@@ -469,9 +480,7 @@ class _Grid:
         index = self._corner_index(expected)
         before = index.count
         numbers = index.cell_corners(self.key(cells), self.key(CORNERS))
-        if index.count > before:
-            fresh = self.values(self.corner_points(index.keys()[before:]))
-            self._corner_values = np.ascontiguousarray(np.concatenate([self._corner_values, fresh]), dtype=np.float64)
+        self._sample_since(index, before)
         signs = np.empty(len(cells), np.uint8)
         self.runtime.corner_signs(numbers.ctypes.data, len(cells), self._corner_values.ctypes.data, signs.ctypes.data)
         return signs
@@ -796,10 +805,8 @@ def _face_corner_keys(grid: _Grid, cells: np.ndarray, axis: int, side: int):
 
 def _square_edge_key(corner_keys, axis: int, i: int, j: int):
     """The grid edge key of the edge between square corners i and j (adjacent, or the diagonal 0-2)."""
-    b, c = _face_axes(axis)
-    lo, hi = (i, j) if all(p <= q for p, q in zip(SQUARE[i], SQUARE[j])) else (j, i)
-    du, dv = SQUARE[hi][0] - SQUARE[lo][0], SQUARE[hi][1] - SQUARE[lo][1]
-    return _grid_edge_key(corner_keys[:, lo], (du << b) | (dv << c))
+    lo, code = _square_edge(axis, i, j)
+    return _grid_edge_key(corner_keys[:, lo], code)
 
 
 def _face_triangles(grid, cells, axis, side, split4, face_points: _Points, inside):

@@ -19,6 +19,8 @@ lookup, and independent misses overlap.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 from llvmlite import ir
 
 from .. import abi
@@ -72,6 +74,21 @@ def _prefetch_ahead(b: ir.IRBuilder, i, n, keys_of, distance=PREFETCH_AHEAD):
         keys_of(ahead)
 
 
+@contextmanager
+def _cells_while_room(b: ir.IRBuilder, n, count: Local, limit, prefetch=None, ahead=PREFETCH_AHEAD):
+    """A loop over ``n`` cells that stops before a cell once the index holds ``limit`` keys or more (its
+    caller grows it and calls again from that cell): yields (the cell, a Local of the cells done: n unless
+    it stopped). Where ``prefetch`` is given, ``prefetch(cell)`` runs ``ahead`` cells ahead."""
+    done = Local(b, I64, n, "done")
+    with for_range(b, n) as c:
+        if prefetch is not None:
+            _prefetch_ahead(b, c, n, prefetch, ahead)
+        with if_(b, b.and_(b.icmp_signed(">=", count.get(), limit), b.icmp_signed("==", done.get(), n))):
+            done.set(c)  # the first cell not done; the rest are skipped
+        with if_(b, b.icmp_signed("==", done.get(), n)):
+            yield c, done
+
+
 def _number(b: ir.IRBuilder, table, bits, key, insert, count: Local, uniques):
     """The number of ``key`` in the index (inserted with the next number when absent and ``insert`` is
     non-zero; −1 when absent otherwise)."""
@@ -120,7 +137,6 @@ def emit_cell_corners(module: ir.Module):
     fn, b = define(module, abi.CELL_CORNERS)
     lowest, n, offsets, table, bits, uniques, limit, state, numbers = fn.args
     count = Local(b, I64, load_at(b, state, 0), "count")
-    done = Local(b, I64, n, "done")
     eight = const(I64, 8)
 
     def prefetch(cell):
@@ -128,16 +144,12 @@ def emit_cell_corners(module: ir.Module):
         for corner in (0, 2, 4, 6):  # each with corner + 1 (one step in z) in its block of 64 keys, mostly
             _prefetch(b, table, bits, b.add(base, load_at(b, offsets, const(I64, corner))))
 
-    with for_range(b, n) as c:
-        _prefetch_ahead(b, c, n, prefetch)
-        with if_(b, b.and_(b.icmp_signed(">=", count.get(), limit), b.icmp_signed("==", done.get(), n))):
-            done.set(c)  # the first cell not done; the rest are skipped
-        with if_(b, b.icmp_signed("==", done.get(), n)):
-            base = load_at(b, lowest, c)
-            with for_range(b, eight) as corner:
-                key = b.add(base, load_at(b, offsets, corner))
-                store_at(b, _number(b, table, bits, key, const(I64, 1), count, uniques), numbers,
-                         b.add(b.mul(c, eight), corner))
+    with _cells_while_room(b, n, count, limit, prefetch) as (c, done):
+        base = load_at(b, lowest, c)
+        with for_range(b, eight) as corner:
+            key = b.add(base, load_at(b, offsets, corner))
+            store_at(b, _number(b, table, bits, key, const(I64, 1), count, uniques), numbers,
+                     b.add(b.mul(c, eight), corner))
     store_at(b, count.get(), state, 0)
     b.ret(done.get())
 
@@ -178,7 +190,6 @@ def emit_kuhn_triangles(module: ir.Module):
     lowest, offsets, sign_bytes, n, tables, table, bits, uniques, limit, state, faces, owner = fn.args
     count = Local(b, I64, load_at(b, state, 0), "count")
     written = Local(b, I64, load_at(b, state, 1), "written")
-    done = Local(b, I64, n, "done")
     one, three, eight = const(I64, 1), const(I64, 3), const(I64, 8)
     insert = const(I64, 1)
     numbers = local_array(b, I64, 19, "numbers")  # the cell's edges' vertex numbers
@@ -186,9 +197,11 @@ def emit_kuhn_triangles(module: ir.Module):
     with for_range(b, const(I64, 19)) as e:
         store_at(b, const(I64, -1), stamp, e)
 
-    def edge_key(base, edge):
-        corner = load_at(b, tables, edge)
-        code = load_at(b, tables, b.add(const(I64, 19), edge))
+    def edge(e):
+        """Edge ``e``'s lower corner and code."""
+        return load_at(b, tables, e), load_at(b, tables, b.add(const(I64, 19), e))
+
+    def edge_key(base, corner, code):
         return b.mul(b.add(b.mul(b.add(base, load_at(b, offsets, corner)), eight), code), eight)
 
     def prefetch(cell):
@@ -197,30 +210,23 @@ def emit_kuhn_triangles(module: ir.Module):
         base = load_at(b, lowest, cell)
         ahead = b.zext(load_at(b, sign_bytes, cell), I64)
         with for_range(b, const(I64, 19)) as e:
-            corner = load_at(b, tables, e)
-            code = load_at(b, tables, b.add(const(I64, 19), e))
+            corner, code = edge(e)
             crosses = b.and_(b.xor(b.lshr(ahead, corner), b.lshr(ahead, b.or_(corner, code))), one)
             with if_(b, b.icmp_signed("!=", crosses, const(I64, 0))):
-                _prefetch(b, table, bits, edge_key(base, e))
+                _prefetch(b, table, bits, edge_key(base, corner, code))
 
-    with for_range(b, n) as c:
-        _prefetch_ahead(b, c, n, prefetch, PREFETCH_AHEAD // 4)  # 19 keys a cell
-        full = b.icmp_signed(">=", count.get(), limit)
-        with if_(b, b.and_(full, b.icmp_signed("==", done.get(), n))):
-            done.set(c)  # the first cell not done; the rest are skipped
-        with if_(b, b.icmp_signed("==", done.get(), n)):
-            base = load_at(b, lowest, c)
-            row = b.add(const(I64, 38), b.mul(b.zext(load_at(b, sign_bytes, c), I64), const(I64, KUHN_CASE)))
-            with for_range(b, load_at(b, tables, row)) as s:
-                with for_range(b, three) as v:
-                    edge = load_at(b, tables, b.add(b.add(row, one), b.add(b.mul(s, three), v)))
-                    with if_(b, b.icmp_signed("!=", load_at(b, stamp, edge), c)):
-                        store_at(b, _number(b, table, bits, edge_key(base, edge), insert, count, uniques), numbers,
-                                 edge)
-                        store_at(b, c, stamp, edge)
-                    store_at(b, load_at(b, numbers, edge), faces, b.add(b.mul(written.get(), three), v))
-                store_at(b, c, owner, written.get())
-                written.set(b.add(written.get(), one))
+    with _cells_while_room(b, n, count, limit, prefetch, PREFETCH_AHEAD // 4) as (c, done):  # 19 keys a cell
+        base = load_at(b, lowest, c)
+        row = b.add(const(I64, 38), b.mul(b.zext(load_at(b, sign_bytes, c), I64), const(I64, KUHN_CASE)))
+        with for_range(b, load_at(b, tables, row)) as s:
+            with for_range(b, three) as v:
+                e = load_at(b, tables, b.add(b.add(row, one), b.add(b.mul(s, three), v)))
+                with if_(b, b.icmp_signed("!=", load_at(b, stamp, e), c)):
+                    store_at(b, _number(b, table, bits, edge_key(base, *edge(e)), insert, count, uniques), numbers, e)
+                    store_at(b, c, stamp, e)
+                store_at(b, load_at(b, numbers, e), faces, b.add(b.mul(written.get(), three), v))
+            store_at(b, c, owner, written.get())
+            written.set(b.add(written.get(), one))
     store_at(b, count.get(), state, 0)
     store_at(b, written.get(), state, 1)
     b.ret(done.get())
@@ -245,7 +251,6 @@ def emit_fan_triangles(module: ir.Module):
      faces) = fn.args
     count = Local(b, I64, load_at(b, state, 0), "count")
     written = Local(b, I64, load_at(b, state, 1), "written")
-    done = Local(b, I64, n, "done")
     one, six, eight = const(I64, 1), const(I64, 6), const(I64, 8)
     per_triangle = abi.FAN_SHAPE // 4
     numbers = local_array(b, I64, abi.FAN_SLOTS, "numbers")  # the cell's keys' numbers, by slot
@@ -260,50 +265,47 @@ def emit_fan_triangles(module: ir.Module):
     def byte(array, index):
         return b.zext(load_at(b, array, index), I64)
 
-    with for_range(b, n) as c:
-        with if_(b, b.and_(b.icmp_signed(">=", count.get(), limit), b.icmp_signed("==", done.get(), n))):
-            done.set(c)  # the first cell not done; the rest are skipped
-        with if_(b, b.icmp_signed("==", done.get(), n)):
-            base = load_at(b, lowest, c)
-            cell = load_at(b, cellkey, c)
-            centre = b.and_(byte(cell_in, c), one)
-            corners = byte(sign_bytes, c)
-            with for_range(b, six) as f:
-                at_face = b.add(b.mul(c, six), f)
-                shape = b.add(const(I64, abi.FAN_SHAPES),
-                              b.mul(b.add(b.mul(f, const(I64, 2)), b.and_(byte(split, at_face), one)),
-                                    const(I64, abi.FAN_SHAPE)))
-                face_corner = table_at(b.add(const(I64, abi.FAN_FACES + 1), b.mul(f, const(I64, 2))))
-                face_axis = table_at(b.add(const(I64, abi.FAN_FACES), b.mul(f, const(I64, 2))))
-                face_id = b.add(b.mul(b.add(base, load_at(b, offsets, face_corner)), const(I64, 3)), face_axis)
-                point_in = b.and_(byte(face_in, at_face), one)
-                with for_range(b, table_at(shape)) as t:
-                    row = b.add(b.add(shape, one), b.mul(t, const(I64, per_triangle)))
-                    case = Local(b, I64, centre, "case")
-                    for v in range(3):
-                        local = table_at(b.add(row, const(I64, v)))
-                        corner = b.and_(b.lshr(corners, b.and_(local, const(I64, 7))), one)
-                        flag = b.select(b.icmp_signed("==", local, eight), point_in, corner)
-                        case.set(b.or_(case.get(), b.shl(flag, const(I64, v + 1))))
-                    with for_range(b, table_at(b.add(const(I64, abi.FAN_COUNTS), case.get()))) as s:
-                        with for_range(b, const(I64, 3)) as v:
-                            edge = table_at(b.add(const(I64, abi.FAN_EDGES),
-                                                  b.add(b.mul(case.get(), six), b.add(b.mul(s, const(I64, 3)), v))))
-                            key_at = b.add(b.add(row, const(I64, 3)), b.mul(edge, const(I64, 4)))
-                            kind, local, code, slot = (table_at(b.add(key_at, const(I64, i))) for i in range(4))
-                            with if_(b, b.icmp_signed("!=", load_at(b, owner, slot), c)):
-                                grid = b.mul(b.add(b.mul(b.add(base, load_at(b, offsets, local)), eight), code), eight)
-                                face = b.add(b.mul(b.add(b.mul(face_id, const(I64, 4)), local), eight), one)
-                                cell_corner = b.add(b.mul(b.add(b.mul(cell, eight), local), eight), const(I64, 2))
-                                face_cell = b.add(b.mul(b.add(b.mul(cell, six), local), eight), const(I64, 3))
-                                key = b.select(b.icmp_signed("==", kind, const(I64, 0)), grid,
-                                               b.select(b.icmp_signed("==", kind, one), face,
-                                                        b.select(b.icmp_signed("==", kind, const(I64, 2)),
-                                                                 cell_corner, face_cell)))
-                                store_at(b, _number(b, table, bits, key, insert, count, uniques), numbers, slot)
-                                store_at(b, c, owner, slot)
-                            store_at(b, load_at(b, numbers, slot), faces, b.add(b.mul(written.get(), const(I64, 3)), v))
-                        written.set(b.add(written.get(), one))
+    with _cells_while_room(b, n, count, limit) as (c, done):
+        base = load_at(b, lowest, c)
+        cell = load_at(b, cellkey, c)
+        centre = b.and_(byte(cell_in, c), one)
+        corners = byte(sign_bytes, c)
+        with for_range(b, six) as f:
+            at_face = b.add(b.mul(c, six), f)
+            shape = b.add(const(I64, abi.FAN_SHAPES),
+                          b.mul(b.add(b.mul(f, const(I64, 2)), b.and_(byte(split, at_face), one)),
+                                const(I64, abi.FAN_SHAPE)))
+            face_corner = table_at(b.add(const(I64, abi.FAN_FACES + 1), b.mul(f, const(I64, 2))))
+            face_axis = table_at(b.add(const(I64, abi.FAN_FACES), b.mul(f, const(I64, 2))))
+            face_id = b.add(b.mul(b.add(base, load_at(b, offsets, face_corner)), const(I64, 3)), face_axis)
+            point_in = b.and_(byte(face_in, at_face), one)
+            with for_range(b, table_at(shape)) as t:
+                row = b.add(b.add(shape, one), b.mul(t, const(I64, per_triangle)))
+                case = Local(b, I64, centre, "case")
+                for v in range(3):
+                    local = table_at(b.add(row, const(I64, v)))
+                    corner = b.and_(b.lshr(corners, b.and_(local, const(I64, 7))), one)
+                    flag = b.select(b.icmp_signed("==", local, eight), point_in, corner)
+                    case.set(b.or_(case.get(), b.shl(flag, const(I64, v + 1))))
+                with for_range(b, table_at(b.add(const(I64, abi.FAN_COUNTS), case.get()))) as s:
+                    with for_range(b, const(I64, 3)) as v:
+                        edge = table_at(b.add(const(I64, abi.FAN_EDGES),
+                                              b.add(b.mul(case.get(), six), b.add(b.mul(s, const(I64, 3)), v))))
+                        key_at = b.add(b.add(row, const(I64, 3)), b.mul(edge, const(I64, 4)))
+                        kind, local, code, slot = (table_at(b.add(key_at, const(I64, i))) for i in range(4))
+                        with if_(b, b.icmp_signed("!=", load_at(b, owner, slot), c)):
+                            grid = b.mul(b.add(b.mul(b.add(base, load_at(b, offsets, local)), eight), code), eight)
+                            face = b.add(b.mul(b.add(b.mul(face_id, const(I64, 4)), local), eight), one)
+                            cell_corner = b.add(b.mul(b.add(b.mul(cell, eight), local), eight), const(I64, 2))
+                            face_cell = b.add(b.mul(b.add(b.mul(cell, six), local), eight), const(I64, 3))
+                            key = b.select(b.icmp_signed("==", kind, const(I64, 0)), grid,
+                                           b.select(b.icmp_signed("==", kind, one), face,
+                                                    b.select(b.icmp_signed("==", kind, const(I64, 2)),
+                                                             cell_corner, face_cell)))
+                            store_at(b, _number(b, table, bits, key, insert, count, uniques), numbers, slot)
+                            store_at(b, c, owner, slot)
+                        store_at(b, load_at(b, numbers, slot), faces, b.add(b.mul(written.get(), const(I64, 3)), v))
+                    written.set(b.add(written.get(), one))
     store_at(b, count.get(), state, 0)
     store_at(b, written.get(), state, 1)
     b.ret(done.get())
@@ -492,10 +494,10 @@ def emit_corner_points(module: ir.Module):
 def emit_edge_ends(module: ir.Module):
     """``implc_edge_ends(keys, n, geometry, table, bits, values, a, b, fa, fb)``: for n vertex keys of grid
     edges ((corner key × 8 + code) × 8; code 0 names the corner itself, both ends), the edge's two corners
-    in world coordinates (three
-    doubles each into ``a`` and ``b``) and F there (``fa``, ``fb``), looked up in the corner index
-    (``table``, ``bits``) and its ``values``. ``geometry``: corners per axis, cells per axis (as doubles),
-    then lo, step and hi per axis; a corner at index ``cells`` sits at hi exactly, any other at lo + i·step.
+    in world coordinates (three doubles each into ``a`` and ``b``) and F there (``fa``, ``fb``), looked up
+    in the corner index (``table``, ``bits``) and its ``values``. ``geometry``: corners per axis, cells per
+    axis (as doubles), then lo, step and hi per axis; a corner at index ``cells`` sits at hi exactly, any
+    other at lo + i·step.
     Returns how many corners were not in the index (their values left NaN)."""
     fn, b = define(module, abi.EDGE_ENDS)
     keys, n, geometry, table, bits, values, out_a, out_b, out_fa, out_fb = fn.args
