@@ -405,6 +405,8 @@ class _Lowerer:
             # condition d² <= R² and its value (d² - R²)⁴ then share one d² - R² node)
             g_expr = cond.lhs - cond.rhs
             g = self.lower(g_expr)
+            if _cancels(cond.lhs, cond.rhs, g_expr):  # SymPy cancelled terms that may be undefined
+                g = t.node("sub", (self.lower(cond.lhs), self.lower(cond.rhs)))  # NaN where they are
             kind = "continuous" if branches and _meets_on_boundary(branches[0], branches[1], g_expr) else None
             if isinstance(cond, sympy.StrictLessThan):
                 return t.node("select_lt", (g, then, otherwise), kind)
@@ -420,6 +422,14 @@ class _Lowerer:
             if isinstance(cond, sympy.Unequality):
                 return t.node("select_le", (gap, otherwise, then))
         raise CompileError(f"unsupported Piecewise condition {cond}")
+
+
+def _cancels(lhs, rhs, difference) -> bool:
+    """Whether ``difference`` (SymPy's lhs − rhs) lost a function or power of lhs or rhs (as cbrt(u) −
+    cbrt(u) = 0): where that term is undefined the comparison is too, and the difference no longer says so."""
+    def terms(e):
+        return e.atoms(sympy.Function, sympy.Pow) if isinstance(e, sympy.Basic) else set()
+    return not (terms(lhs) | terms(rhs)) <= terms(difference)
 
 
 def lower(expr: sympy.Expr) -> Tape:

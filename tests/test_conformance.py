@@ -649,3 +649,16 @@ def test_an_undefined_condition_makes_the_piecewise_undefined():
     assert r_lo[0] == -np.inf and r_hi[0] == np.inf
     assert np.isnan(s.eval(np.array([[-1.0, 0, 0]]))[0])
     assert np.isnan(reference.eval_point(s.tape, np.array([[-1.0, 0, 0]]))[0][0])
+
+
+def test_a_condition_whose_sides_cancel_keeps_their_undefinedness():
+    """Found by the property test: in cbrt(x + y) <= cbrt(x + y) SymPy's lhs − rhs is 0, which would make
+    the condition always true; it is undefined where x + y < 0, and so is the Piecewise there."""
+    u = cbrt(x + y)
+    s = implc.compile(Piecewise((x + y, u <= u), (8 * x + 8 * y, True)))
+    lo, hi = np.array([[-2.0, -1, 0], [0.25, 0.25, 0]]), np.array([[1.0, 1, 1], [0.5, 0.5, 1]])
+    f_lo, f_hi = s.interval(lo, hi)
+    assert f_lo[0] == -np.inf and f_hi[0] == np.inf
+    assert f_lo[1] <= 0.5 and f_hi[1] >= 1.0 and np.isfinite(f_hi[1])
+    values = s.eval(np.array([[-1.0, 0.5, 0], [0.5, 0.25, 0]]))
+    assert np.isnan(values[0]) and values[1] == 0.75
