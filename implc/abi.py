@@ -60,11 +60,12 @@ def _entry(name, params: str, returns=None) -> Entry:
 
 # -- a surface's kernels (implc.codegen.kernels); n is a multiple of the vector width -------------------
 POINT = _entry("implc_point", "pts:f64* out:f64* n:i64")
+POINT_FAST = Entry("implc_point_fast", POINT.params)
 GRADIENT = _entry("implc_gradient", "pts:f64* out_value:f64* out_grad:f64* n:i64")
 GRADIENT_LIVE = _entry("implc_gradient_live", "pts:f64* out_value:f64* out_grad:f64* n:i64 live:i64")
 INTERVAL = _entry("implc_interval", "lo:f64* hi:f64* out_lo:f64* out_hi:f64* n:i64 live_in:i64* live_out:i64*")
 OCTANT = _entry("implc_octant", "geom:f64* cell:i32* level:i64 live_in:i64 live_out:i64*", "i32")
-SURFACE_ENTRIES = (POINT, GRADIENT, GRADIENT_LIVE, INTERVAL, OCTANT)
+SURFACE_ENTRIES = (POINT, POINT_FAST, GRADIENT, GRADIENT_LIVE, INTERVAL, OCTANT)
 
 # ... and the mean-value module, compiled on first use
 INTERVAL_MVF = Entry("implc_interval_mvf", INTERVAL.params)
@@ -212,7 +213,7 @@ octant's level) and octants expanded per level."""
 KERNEL_OCTANT, KERNEL_FINE_OCTANT, KERNEL_FINE_LEVEL, KERNEL_GRADIENT, KERNEL_POINT, KERNEL_BOUND = range(6)
 """The compiled kernels' evaluator words (int64): the addresses of the octant kernel, of the one from
 ``fine_level`` on (the mean-value form's, or the same), that level, of the gradient (live terms), point
-and monotonicity-bound kernels (0: no second look)..."""
+(``implc_point_fast``) and monotonicity-bound kernels (0: no second look)..."""
 KERNEL_MASKS = 6
 """... then each level's live-term mask (WALK_LEVELS words), then each level's children's (8 per level)."""
 KERNEL_EVALUATOR_WORDS = KERNEL_MASKS + 9 * WALK_LEVELS

@@ -190,7 +190,7 @@ class KernelWalk(WalkEvaluator):
         box = surface.kernel_address(abi.OCTANT)
         self.words[:abi.KERNEL_MASKS] = (
             box, surface.kernel_address(abi.OCTANT_MVF) if mean_value_levels > 0 else box, fine_level,
-            surface.kernel_address(abi.GRADIENT_LIVE), surface.kernel_address(abi.POINT),
+            surface.kernel_address(abi.GRADIENT_LIVE), surface.kernel_address(abi.POINT_FAST),
             surface.kernel_address(abi.BOUND_MONOTONE) if tightens else 0)
 
     def worker_words(self) -> tuple[np.ndarray, tuple]:

@@ -230,6 +230,13 @@ def _gradient_live(s, pts):
     return value[:n], grad[:n]
 
 
+def _point_fast(s, pts):
+    (p,), n = _padded([pts], s.width)
+    value = np.empty(len(p))
+    s.kernel(abi.POINT_FAST)(p.ctypes.data, value.ctypes.data, len(p))
+    return value[:n]
+
+
 INTERVAL_EVALUATORS = {
     "kernel": lambda s, lo, hi: s.interval(lo, hi),
     "pruned kernel, every term live": lambda s, lo, hi: _interval_with_all_live(s, lo, hi, abi.INTERVAL),
@@ -376,6 +383,7 @@ def test_point_and_gradient_evaluators_conform(name, width, compiled):
     live_budget = case_budget(s.gradient_tape, VECTOR_POINT_BUDGET) * AMPLIFICATION.get(name, 1)
     assert_conforms(value, ref_value, live_budget, scale, f"{name} gradient over live terms' value width {width}")
     assert_conforms(grad, ref_grad, live_budget, scale, f"{name} gradient over live terms width {width}")
+    assert_conforms(_point_fast(s, pts), ref_value, live_budget, scale, f"{name} fast point width {width}")
     if width == 8 and name in TAPE_CASES:  # dual numbers in the tape engine (sin and cos in vector registers)
         value, grad = compiled(name, engine="tape").value_and_gradient(pts)
         assert_conforms(value, ref_value, live_budget, scale, f"{name} tape engine's value")

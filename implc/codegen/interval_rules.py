@@ -19,6 +19,13 @@ from .point import powi
 from .vector import VectorBuilder
 
 INF = math.inf
+NARROWED = frozenset({"sin", "cos", "tan", "asin", "acos", "atan", "atan2", "atan2_wrapped", "exp", "log",
+                      "sinh", "cosh", "tanh", "cbrt", "powf"})
+"""The ops computed once per distinct child box where lanes hold an octant's children (a few dozen
+instructions or a C library call each); a cheaper op costs less at full width than the shuffles that
+would narrow its arguments and spread its result."""
+PAIRED_WIDTH = 8
+"""The widest vector :meth:`IntervalEmitter.paired` makes of two (the kernels' width)."""
 NAN = math.nan
 
 
@@ -35,18 +42,22 @@ class IntervalEmitter:
         return v.widen_down(f(lo_arg), c), v.widen_up(f(hi_arg), c)
 
     def paired(self, function, lo, hi):
-        """``function`` (an elementary function of :mod:`implc.codegen.elementary`) at ``lo`` and at ``hi``:
-        where the elementary functions are outlined, in one call of twice the width (two independent
-        chains that the CPU interleaves; the same operations lane by lane, so the same values)."""
+        """``function`` (an elementary function of :mod:`implc.codegen.elementary`) at ``lo`` and at ``hi``
+        (each a vector, or a tuple of the function's arguments): in one call of twice the width where the
+        elementary functions are outlined, or where twice the width is no wider than :data:`PAIRED_WIDTH`
+        (a narrow builder's, :meth:`~implc.codegen.vector.VectorBuilder.distinct_children`): two
+        independent chains that the CPU interleaves, or one vector for two; the same operations lane by
+        lane, so the same values."""
         v = self.v
-        if not v.outline_elementary:
-            return function(v, lo), function(v, hi)
+        lo, hi = (lo if isinstance(lo, tuple) else (lo,)), (hi if isinstance(hi, tuple) else (hi,))
         width = v.width
+        if not v.outline_elementary and 2 * width > PAIRED_WIDTH:
+            return function(v, *lo), function(v, *hi)
 
         def lanes(indices):
             return ir.Constant(ir.VectorType(ir.IntType(32), len(indices)), list(indices))
-        wide = VectorBuilder(v.b, 2 * width, outline_elementary=True)
-        both = function(wide, v.b.shuffle_vector(lo, hi, lanes(range(2 * width))))
+        wide = VectorBuilder(v.b, 2 * width, outline_elementary=v.outline_elementary)
+        both = function(wide, *(v.b.shuffle_vector(a, b, lanes(range(2 * width))) for a, b in zip(lo, hi)))
         return (v.b.shuffle_vector(both, both, lanes(range(width))),
                 v.b.shuffle_vector(both, both, lanes(range(width, 2 * width))))
 
@@ -244,7 +255,7 @@ class IntervalEmitter:
         v = self.v
         lo0, hi0 = a[0]
         function = getattr(elementary, name)  # in vector registers; the C library beyond its range
-        fa, fb = function(v, lo0), function(v, hi0)
+        fa, fb = self.paired(function, lo0, hi0)
         error = v.splat(R.SIN_ERROR)  # covers both
         lo = v.sub_down(v.minimum(fa, fb), error)
         hi = v.add_up(v.maximum(fa, fb), error)
@@ -382,7 +393,8 @@ class IntervalEmitter:
         y0, y1 = v.add(y0, zero), v.add(y1, zero)
         (lx, ly), (gx, gy) = self.extreme_corners(x0, x1, y0, y1)
         error = v.splat(R.ATAN2_ERROR)  # covers the vector atan2 and the C library's alike
-        least, greatest = v.sub_down(elementary.atan2(v, ly, lx), error), v.add_up(elementary.atan2(v, gy, gx), error)
+        least, greatest = self.paired(elementary.atan2, (ly, lx), (gy, gx))
+        least, greatest = v.sub_down(least, error), v.add_up(greatest, error)
         pi_hi = v.splat(R.PI_HI)
         lo = v.maximum(least, v.neg(pi_hi))
         hi = v.minimum(greatest, pi_hi)
@@ -422,8 +434,15 @@ def emit_node(em, vb, tape, vals, i, lo_coords, hi_coords):
     elif op == "var":
         vals[i] = (lo_coords[attr], hi_coords[attr])
     else:
-        vb.depends_on(tape.axes()[i])
-        vals[i] = getattr(em, f"i_{op}")([vals[a] for a in args], attr)
+        axes = tape.axes()[i]
+        distinct = vb.distinct_children(axes) if op in NARROWED else None
+        if distinct is None:
+            vb.depends_on(axes)
+            vals[i] = getattr(em, f"i_{op}")([vals[a] for a in args], attr)
+        else:  # once per distinct child box (see VectorBuilder.distinct_children)
+            narrow = getattr(distinct.emitter(type(em)), f"i_{op}")(
+                [(distinct.take(vals[a][0]), distinct.take(vals[a][1])) for a in args], attr)
+            vals[i] = (distinct.spread(narrow[0]), distinct.spread(narrow[1]))
 
 
 def whole_line_if_undefined(vb: VectorBuilder, lo, hi):

@@ -3,7 +3,9 @@
 Signatures are declared in :mod:`implc.abi`. Every batched kernel walks ``n`` items (``n`` a multiple of
 :data:`WIDTH`) in vectors of WIDTH lanes, reading points and boxes as row-major (n, 3) float64 arrays:
 
-- ``implc_point(pts, out, n)``: F at each point.
+- ``implc_point(pts, out, n)``: F at each point (sin, cos, exp, log and atan2 from the C library).
+- ``implc_point_fast(pts, out, n)``: the same with them from :mod:`implc.codegen.elementary` (every lane
+  at once, within the bounds proven there): the walk's samples, which decide nothing a bound has to.
 - ``implc_gradient(pts, out_value, out_grad, n)``: F and its analytic gradient (n, 3).
 - ``implc_gradient_live(pts, out_value, out_grad, n, live)``: the same over the terms live in ``live`` (an
   i64 live-term mask valid at every point, :mod:`implc.codegen.pruned_gradient`); the gradient equals
@@ -202,6 +204,14 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     pts, out, _ = fn.args
     with for_range(b, blocks) as i:
         (value,) = emit_point(VectorBuilder(b, width), value_tape, load_xyz(b, pts, i, width))
+        store_lanes(b, out, i, value, width)
+    b.ret_void()
+
+    fn, b, blocks = _kernel(module, abi.POINT_FAST, width)
+    pts, out, _ = fn.args
+    with for_range(b, blocks) as i:
+        vb = VectorBuilder(b, width, outline_elementary=elementary.outlines(value_tape))
+        (value,) = emit_point(vb, value_tape, load_xyz(b, pts, i, width), vector_elementary=True)
         store_lanes(b, out, i, value, width)
     b.ret_void()
 

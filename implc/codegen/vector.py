@@ -38,8 +38,9 @@ class VectorBuilder:
         self.width = width
         self.directed = directed
         self.outline_elementary = outline_elementary
-        self.octant_lanes = False  # lane c holds child c of one octant (see depends_on)
+        self.octant_lanes = False  # lane c holds child c of one octant (see depends_on, distinct_children)
         self.lane_sources = list(range(width))
+        self._distinct: dict[int, DistinctChildren | None] = {}
         self.vtype = ir.VectorType(DOUBLE, width)
         self.module = builder.module
 
@@ -141,6 +142,18 @@ class VectorBuilder:
             same = ~axes & (self.width - 1)  # child-index bits that vary across the lanes but not the values
             self.lane_sources = [lane & ~same for lane in range(self.width)]
 
+    def distinct_children(self, axes: int) -> DistinctChildren | None:
+        """Where lane c holds child c of one octant (``octant_lanes``), the lanes a value that depends only
+        on ``axes`` (bit a: axis a) takes distinct values in, with a builder as wide as they are; None where
+        every lane may differ."""
+        if not self.octant_lanes:
+            return None
+        kept = axes & (self.width - 1)
+        if kept not in self._distinct:
+            lanes = [c for c in range(self.width) if c & ~kept == 0]
+            self._distinct[kept] = DistinctChildren(self, lanes) if len(lanes) < self.width else None
+        return self._distinct[kept]
+
     def libm(self, name: str, *args):
         fn = self._function(name, DOUBLE, [DOUBLE] * len(args))
         out = ir.Constant(self.vtype, ir.Undefined)
@@ -209,3 +222,31 @@ class VectorBuilder:
 
     def widen_up(self, v, c: float, tiny: float = TINY):
         return self.add(self.add(v, self.mul(self.fabs(v), self.splat(c))), self.splat(tiny))
+
+
+class DistinctChildren:
+    """The lanes of an octant's children in which a value differs: children that differ only along axes it
+    does not depend on hold equal values, so it is computed once for each (on a vector as wide as there
+    are such lanes, ``vb``) and spread back to every lane."""
+
+    def __init__(self, full: VectorBuilder, lanes: list[int]):
+        self.vb = VectorBuilder(full.b, len(lanes), full.directed, full.outline_elementary)
+        self.emitters: dict[type, object] = {}  # an emitter class's instance over ``vb``, made once
+        i32 = ir.IntType(32)
+        self._take = ir.Constant(ir.VectorType(i32, len(lanes)), lanes)
+        kept = max(lanes)  # the child-index bits the value depends on
+        self._spread = ir.Constant(ir.VectorType(i32, full.width), [lanes.index(c & kept) for c in range(full.width)])
+
+    def emitter(self, kind):
+        """The emitter ``kind(vb)`` over the narrow builder (one per kind)."""
+        if kind not in self.emitters:
+            self.emitters[kind] = kind(self.vb)
+        return self.emitters[kind]
+
+    def take(self, value):
+        """The distinct lanes of a full-width vector."""
+        return self.vb.b.shuffle_vector(value, ir.Constant(value.type, ir.Undefined), self._take)
+
+    def spread(self, value):
+        """A narrow vector back at full width, each child's lane from its distinct one."""
+        return self.vb.b.shuffle_vector(value, ir.Constant(value.type, ir.Undefined), self._spread)
