@@ -72,6 +72,12 @@ class VectorBuilder:
     def div(self, a, b):
         return self.b.fdiv(a, b)
 
+    def horner_step(self, x, p, c):
+        """x·p + c, fused into one rounding where the CPU has a fused multiply-add (LLVM's fmuladd: two
+        roundings elsewhere): a step of Horner's rule, whose error bound with two roundings a step holds
+        for either."""
+        return self.b.call(self._intrinsic("fmuladd", 3), [x, p, c])
+
     def neg(self, a):
         return self.b.fneg(a)
 
