@@ -47,22 +47,54 @@ _P = ir.PointerType
 
 
 def _instruction_loop(b: ir.IRBuilder, program, length, cases):
-    """``for each instruction: switch (opcode) { case op: cases[op](i, out, a, b, c) }``; every case's
-    emitter runs with the builder in its own block."""
-    with for_range(b, length) as i:
-        row = b.gep(program, [b.mul(i, ir.Constant(I64, abi.INSTRUCTION_WORDS))], inbounds=True)
+    """``for each instruction: cases[op](i, out, a, b, c)``, dispatched threaded: every case ends with its
+    own jump to the next instruction's case (an indirect branch through a table of the cases' addresses),
+    so the branch predictor learns which opcode follows which (a program's sequence repeats at every
+    octant) instead of guessing every opcode at one shared switch. Every case's emitter runs with the
+    builder in its own block; an opcode without a case is skipped."""
+    fn = b.function
+    pc = Local(b, I64, 0, "pc")
+    finished = fn.append_basic_block("ops.finished")
+    skip = fn.append_basic_block("op.skip")
+    blocks = {name: fn.append_basic_block(f"op.{name}") for name in cases}
+    codes = max(OPCODES.values()) + 1
+    targets = [skip] * (codes + 1)  # the last: any code beyond the opcodes
+    for name, block in blocks.items():
+        targets[OPCODES[name]] = block
+    address = ir.PointerType(I8)
+    table = ir.GlobalVariable(b.module, ir.ArrayType(address, codes + 1), name=f"{fn.name}.dispatch")
+    table.initializer = ir.Constant(ir.ArrayType(address, codes + 1), [ir.BlockAddress(fn, t) for t in targets])
+    table.global_constant, table.linkage = True, "internal"
+
+    def row_of(i):
+        return b.gep(program, [b.mul(i, ir.Constant(I64, abi.INSTRUCTION_WORDS))], inbounds=True)
+
+    def dispatch():
+        i = pc.get()
+        go = fn.append_basic_block("op.next")
+        b.cbranch(b.icmp_signed("<", i, length), go, finished)
+        b.position_at_end(go)
+        code = b.zext(b.load(row_of(i)), I64)
+        code = b.select(b.icmp_unsigned("<", code, ir.Constant(I64, codes)), code, ir.Constant(I64, codes))
+        jump = b.branch_indirect(b.load(b.gep(table, [ir.Constant(I64, 0), code], inbounds=True)))
+        for target in (*blocks.values(), skip):
+            jump.add_destination(target)
+
+    dispatch()
+    for name, emit in cases.items():
+        b.position_at_end(blocks[name])
+        i = pc.get()
+        row = row_of(i)
         fields = b.load(b.bitcast(row, _P(ir.VectorType(I32, 4))), align=4)
-        code, out, a, c = [b.zext(b.extract_element(fields, ir.Constant(I32, k)), I64) for k in range(4)]
+        _, out, a, c = [b.zext(b.extract_element(fields, ir.Constant(I32, k)), I64) for k in range(4)]
         d = b.zext(b.load(b.gep(row, [ir.Constant(I64, 4)])), I64)
-        done = b.append_basic_block("op.done")
-        switch = b.switch(b.trunc(code, I32), done)
-        for name, emit in cases.items():
-            block = b.append_basic_block(f"op.{name}")
-            switch.add_case(ir.Constant(I32, OPCODES[name]), block)
-            b.position_at_end(block)
-            emit(i, out, a, c, d)
-            b.branch(done)
-        b.position_at_end(done)
+        emit(i, out, a, c, d)
+        pc.set(b.add(i, ir.Constant(I64, 1)))
+        dispatch()
+    b.position_at_end(skip)
+    pc.set(b.add(pc.get(), ir.Constant(I64, 1)))
+    dispatch()
+    b.position_at_end(finished)
 
 
 def _header(b, header, word):
