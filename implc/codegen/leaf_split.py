@@ -40,6 +40,11 @@ class Look:
     cells (``cells``: three rows of eight doubles, axis by axis) and their sides (+1.0: prove F > 0, -1.0:
     prove F < 0)."""
 
+    batches_once = False
+    """Whether the batches' tests are emitted once (see :func:`for_flagged_batches`): half the code, for an
+    evaluator whose tests cost enough that knowing a full batch's count gains nothing (the tape engine's,
+    whose module's first compile it shortens)."""
+
     def first(self, cells, sides):
         """The first test over the batch's eight boxes (the leaves'; unused lanes repeat the first): the
         lanes proven on their side (an i8 mask)."""
@@ -108,7 +113,7 @@ def emit_second_look(b: ir.IRBuilder, coords, flags, n, look: Look, cells) -> No
                                     mark(index, side)
         look.batch_done()
 
-    for_flagged_batches(b, flags, n, slots, test, look.flagged)
+    for_flagged_batches(b, flags, n, slots, test, look.flagged, once=look.batches_once)
 
 
 def emit_split(b: ir.IRBuilder, leaf, cells, prove, descend=None):
@@ -187,27 +192,47 @@ def load_batch(b: ir.IRBuilder, coords, flags, slots, count, cells, sides):
         store_at(b, b.select(above, const(DOUBLE, 1.0), const(DOUBLE, -1.0)), sides, j)
 
 
-def for_flagged_batches(b: ir.IRBuilder, flags, n, slots, test, on_flagged=None):
+def for_flagged_batches(b: ir.IRBuilder, flags, n, slots, test, on_flagged=None, once=False):
     """Gather the leaves flagged for a second look (:data:`implc.abi.TIGHTEN_ABOVE` or
     :data:`~implc.abi.TIGHTEN_BELOW`) among the ``n`` at ``flags`` into ``slots`` (eight i64 indices) and
     call ``test(count)`` (an i64, 1 to 8) for each batch, the last maybe partial; ``on_flagged(i)`` runs for
-    each flagged leaf as it joins its batch."""
+    each flagged leaf as it joins its batch. ``test``'s code is emitted twice, for full batches (count 8,
+    known to the optimiser) and for the last, or with ``once`` a single time: both branch to it, and it
+    returns to the loop or past it."""
+    fn = b.function
     lanes = Local(b, I64, const(I64, 0), "flagged.lanes")
-
-    def run():
-        test(lanes.get())
+    index = Local(b, I64, const(I64, 0), "flagged.index")
+    final = Local(b, ir.IntType(1), ir.Constant(ir.IntType(1), 0), "flagged.final")
+    header, body, latch, tail, run, done = (fn.append_basic_block(f"flagged.{name}")
+                                            for name in ("header", "body", "latch", "tail", "run", "done"))
+    run_full = run if once else fn.append_basic_block("flagged.full")
+    b.branch(header)
+    b.position_at_end(header)
+    i = index.get()
+    b.cbranch(b.icmp_signed("<", i, n), body, tail)
+    b.position_at_end(body)
+    flag = load_at(b, flags, i)
+    flagged = b.or_(b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_ABOVE)),
+                    b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_BELOW)))
+    with if_(b, flagged):
+        store_at(b, i, slots, lanes.get())
+        lanes.set(b.add(lanes.get(), const(I64, 1)))
+        if on_flagged is not None:
+            on_flagged(i)
+    b.cbranch(b.icmp_signed("==", lanes.get(), const(I64, LANES)), run_full, latch)
+    if not once:
+        b.position_at_end(run_full)
+        test(const(I64, LANES))
         lanes.set(const(I64, 0))
-
-    with for_range(b, n) as i:
-        flag = load_at(b, flags, i)
-        flagged = b.or_(b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_ABOVE)),
-                        b.icmp_unsigned("==", flag, const(I8, abi.TIGHTEN_BELOW)))
-        with if_(b, flagged):
-            store_at(b, i, slots, lanes.get())
-            lanes.set(b.add(lanes.get(), const(I64, 1)))
-            if on_flagged is not None:
-                on_flagged(i)
-            with if_(b, b.icmp_signed("==", lanes.get(), const(I64, LANES))):
-                run()
-    with if_(b, b.icmp_signed(">", lanes.get(), const(I64, 0))):
-        run()
+        b.branch(latch)
+    b.position_at_end(latch)
+    index.set(b.add(index.get(), const(I64, 1)))
+    b.branch(header)
+    b.position_at_end(tail)
+    final.set(ir.Constant(ir.IntType(1), 1))
+    b.cbranch(b.icmp_signed(">", lanes.get(), const(I64, 0)), run, done)
+    b.position_at_end(run)
+    test(lanes.get())
+    lanes.set(const(I64, 0))
+    b.cbranch(final.get(), done, latch)
+    b.position_at_end(done)

@@ -210,6 +210,8 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
         return b.icmp_unsigned("!=", b.bitcast(across, I8), const(I8, 0))
 
     class TapeLook(Look):
+        batches_once = True
+
         def first(self, cells, first_sides):
             return prove(const(DOUBLE, 1.0), box_sides=first_sides)
 
