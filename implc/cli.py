@@ -619,18 +619,25 @@ def _attach_negative_values(argv: list[str]) -> list[str]:
     return out
 
 
-def _on_sigterm(signum, frame):
-    raise _Terminated
-
-
 _signalled: list[int] = []
 """The signals main() saw: an import that an interrupt broke (numpy wraps it in an ImportError) is then
 reported as the interrupt, not as a broken installation."""
 
+_settled = threading.Event()
+"""Set while main() restores the signal handlers: the outcome is decided, and a signal then is only noted
+(raised there, it would escape main() as a traceback)."""
+
+
+def _on_sigterm(signum, frame):
+    _signalled.append(signum)
+    if not _settled.is_set():
+        raise _Terminated
+
 
 def _on_sigint(signum, frame):
     _signalled.append(signum)
-    raise KeyboardInterrupt
+    if not _settled.is_set():
+        raise KeyboardInterrupt
 
 
 def _run(argv) -> int:
@@ -674,11 +681,25 @@ def _check_no_empty_values(parser, args):
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     in_main_thread = threading.current_thread() is threading.main_thread()
+    _settled.clear()
     previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main_thread else None
     previous_int = signal.signal(signal.SIGINT, _on_sigint) if in_main_thread else None
     _signalled.clear()
     atomic_file = sys.modules.get("implc.atomic_file")
     done_before = len(atomic_file.COMPLETED) if atomic_file else 0
+    try:
+        return _outcome(argv, done_before)
+    except (KeyboardInterrupt, _Terminated) as exc:  # the signal came while an outcome was being reported
+        return _interrupted(exc, done_before)
+    finally:
+        _settled.set()
+        if in_main_thread:
+            signal.signal(signal.SIGTERM, previous)
+            signal.signal(signal.SIGINT, previous_int)
+
+
+def _outcome(argv, done_before: int) -> int:
+    """Run the command; an error is one line on stderr and exit status 2, a signal 130 (SIGINT) or 143."""
     try:
         return _run(argv)
     except (UsageError, ValueError, MemoryError, OSError, RecursionError) as exc:
@@ -695,19 +716,22 @@ def main(argv=None) -> int:
     except ImportError:
         if not _signalled:
             raise
-        print("implc: interrupted", file=sys.stderr)  # Ctrl-C during an import, wrapped by the importer
-        return 130
+        # a signal during an import, wrapped by the importer
+        terminated = _signalled[0] == signal.SIGTERM
+        print(f"implc: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
+        return 143 if terminated else 130
     except (KeyboardInterrupt, _Terminated) as exc:
-        complete = _output_complete(done_before)
-        if complete is not None:  # the save finished first: the output is whole, the command succeeded
-            print(f"implc: {complete} was written in full before the signal", file=sys.stderr)
-            return 0
-        print(f"implc: {'interrupted' if isinstance(exc, KeyboardInterrupt) else 'terminated'}", file=sys.stderr)
-        return 130 if isinstance(exc, KeyboardInterrupt) else 143
-    finally:
-        if in_main_thread:
-            signal.signal(signal.SIGTERM, previous)
-            signal.signal(signal.SIGINT, previous_int)
+        return _interrupted(exc, done_before)
+
+
+def _interrupted(exc: BaseException, done_before: int) -> int:
+    """The exit status after a signal: 0 where the output was written in full first, else 130 or 143."""
+    complete = _output_complete(done_before)
+    if complete is not None:  # the save finished first: the output is whole, the command succeeded
+        print(f"implc: {complete} was written in full before the signal", file=sys.stderr)
+        return 0
+    print(f"implc: {'interrupted' if isinstance(exc, KeyboardInterrupt) else 'terminated'}", file=sys.stderr)
+    return 130 if isinstance(exc, KeyboardInterrupt) else 143
 
 
 if __name__ == "__main__":
