@@ -4,8 +4,10 @@ import sys
 
 try:
     from .cli import main
-except KeyboardInterrupt:
-    sys.stderr.write("implc: interrupted\n")
-    sys.exit(130)
 
-sys.exit(main())
+    status = main(restore_handlers=False)  # the process ends here: a late signal is only noted
+except KeyboardInterrupt:  # before main() had its handlers in place
+    sys.stderr.write("implc: interrupted\n")
+    status = 130
+
+sys.exit(status)

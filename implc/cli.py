@@ -623,20 +623,21 @@ _signalled: list[int] = []
 """The signals main() saw: an import that an interrupt broke (numpy wraps it in an ImportError) is then
 reported as the interrupt, not as a broken installation."""
 
-_settled = threading.Event()
-"""Set while main() restores the signal handlers: the outcome is decided, and a signal then is only noted
-(raised there, it would escape main() as a traceback)."""
+_settled = False
+"""True once main()'s outcome is decided: a signal then is only noted (raised there, it would escape main()
+as a traceback). A plain global, set by one store that runs no Python code, so no signal handler can run
+half-way through setting it (a CI run's SIGINT once landed inside threading.Event.set)."""
 
 
 def _on_sigterm(signum, frame):
     _signalled.append(signum)
-    if not _settled.is_set():
+    if not _settled:
         raise _Terminated
 
 
 def _on_sigint(signum, frame):
     _signalled.append(signum)
-    if not _settled.is_set():
+    if not _settled:
         raise KeyboardInterrupt
 
 
@@ -678,24 +679,30 @@ def _check_no_empty_values(parser, args):
             raise UsageError(f"{max(action.option_strings, key=len)} is empty: give it a value or leave it out")
 
 
-def main(argv=None) -> int:
+def main(argv=None, *, restore_handlers: bool = True) -> int:
+    """Run one command line; returns its exit status. ``python -m implc`` passes ``restore_handlers=False``:
+    the process ends right after, and with main()'s handlers still in place a signal that lands then is
+    noted, not raised as a traceback on the way out."""
+    global _settled
     argv = sys.argv[1:] if argv is None else list(argv)
     in_main_thread = threading.current_thread() is threading.main_thread()
-    _settled.clear()
-    previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main_thread else None
-    previous_int = signal.signal(signal.SIGINT, _on_sigint) if in_main_thread else None
+    _settled = False
     _signalled.clear()
     atomic_file = sys.modules.get("implc.atomic_file")
     done_before = len(atomic_file.COMPLETED) if atomic_file else 0
+    previous: dict[signal.Signals, typing.Any] = {}
     try:
+        if in_main_thread:
+            previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, _on_sigterm)
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, _on_sigint)
         return _outcome(argv, done_before)
     except (KeyboardInterrupt, _Terminated) as exc:  # the signal came while an outcome was being reported
         return _interrupted(exc, done_before)
     finally:
-        _settled.set()
-        if in_main_thread:
-            signal.signal(signal.SIGTERM, previous)
-            signal.signal(signal.SIGINT, previous_int)
+        _settled = True  # first: the handlers below run with the outcome decided
+        if restore_handlers:
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
 
 
 def _outcome(argv, done_before: int) -> int:
@@ -734,5 +741,10 @@ def _interrupted(exc: BaseException, done_before: int) -> int:
     return 130 if isinstance(exc, KeyboardInterrupt) else 143
 
 
+def console() -> int:
+    """The ``implc`` script: main() for a process that ends when it returns."""
+    return main(restore_handlers=False)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(console())

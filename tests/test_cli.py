@@ -125,7 +125,7 @@ def test_demo_writes_the_three_renders(tmp_path, capsys):
 
 def test_console_script_is_declared():
     text = (Path(__file__).parent.parent / "pyproject.toml").read_text()
-    assert 'implc = "implc.cli:main"' in text
+    assert 'implc = "implc.cli:console"' in text  # main() for a process that ends when it returns
 
 
 def test_tightness_option_spells_the_presets_and_changes_the_leaves(tmp_path):

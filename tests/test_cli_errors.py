@@ -225,3 +225,23 @@ def test_a_signal_while_main_restores_its_handlers_is_no_traceback(tmp_path, mon
     assert len(voxel_files.load_npz(out)) > 0
     assert signal.getsignal(signal.SIGINT) is not cli._on_sigint  # put back
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_after_the_command_of_a_process_is_only_noted(tmp_path, sig):
+    """``python -m implc`` and the ``implc`` script keep main()'s handlers (restore_handlers=False): a
+    signal that lands after the outcome is decided, on the way out of the process, is noted, not raised."""
+    import os
+
+    from implc import cli
+    before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    try:
+        out = tmp_path / "a.npz"
+        assert cli.main(["voxelize", "--expr", "x - 0.25", "--depth", "3", "--quiet", "-o", str(out)],
+                        restore_handlers=False) == 0
+        assert signal.getsignal(sig) in (cli._on_sigint, cli._on_sigterm)  # still in place
+        os.kill(os.getpid(), sig)  # the handler runs right after this call returns
+        assert cli._signalled == [sig]
+    finally:
+        signal.signal(signal.SIGINT, before[0])
+        signal.signal(signal.SIGTERM, before[1])
