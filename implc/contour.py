@@ -352,6 +352,11 @@ class _Grid:
         self.hi = np.array([float(hi) for _, hi in bounds])
         self.step = (self.hi - self.lo) / self.n
         self.groups_per_axis = max(1, self.n // GROUP_CELLS)
+        self.geometry = np.concatenate([[self.k, self.n], self.lo, self.step, self.hi]).astype(np.float64)
+        """The grid as the native corner routines read it: corners and cells per axis, lo, step, hi. Held
+        here: an address taken from a temporary array points at freed memory, which the allocator may hand
+        to someone else before the native routine reads it (Scene 1's meshes at 512³ came out with 0 to 6,387
+        spurious crease cells when its vertices were placed on two threads)."""
         # the compiled kernels have no use for groups, and a short program gains less than sorting costs
         self.grouped = surface.engine == "tape" and len(surface.program) >= GROUPED_PROGRAM
 
@@ -433,11 +438,6 @@ class _Grid:
         lo = np.maximum(self.lo + (g * GROUP_CELLS - 1) * self.step, self.lo)
         hi = np.minimum(self.lo + ((g + 1) * GROUP_CELLS + 1) * self.step, self.hi)
         return lo, hi
-
-    @property
-    def geometry(self) -> np.ndarray:
-        """The grid as the native corner routines read it: corners and cells per axis, lo, step, hi."""
-        return np.concatenate([[self.k, self.n], self.lo, self.step, self.hi]).astype(np.float64)
 
     def corner_points(self, keys: np.ndarray) -> np.ndarray:
         """World coordinates of corner keys (native: ``implc_corner_points``)."""

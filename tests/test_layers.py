@@ -96,3 +96,54 @@ def test_nothing_is_mounted_into_the_package_from_outside():
     assert all(p == "implc" or p.startswith("implc.") for p in setuptools.get("packages", []))
     for p in setuptools.get("packages", []):
         assert (ROOT / p.replace(".", "/") / "__init__.py").is_file(), p
+
+
+def temporary_addresses(source: str) -> list[int]:
+    """Lines where ``.ctypes.data`` is taken of an array that nothing holds: a call's result, or a property
+    of the class read through ``self`` (a fresh array each time). Such an array is freed as soon as the
+    address is taken, before the native routine reads it, and the allocator may hand its memory to someone
+    else first. A slice, or an element of a list or tuple, of something held is held."""
+    lines = []
+
+    def visit(node, properties):
+        if isinstance(node, ast.ClassDef):
+            properties = {f.name for f in node.body if isinstance(f, ast.FunctionDef)
+                          and any(isinstance(d, ast.Name) and d.id == "property" for d in f.decorator_list)}
+        if (isinstance(node, ast.Attribute) and node.attr == "data" and isinstance(node.value, ast.Attribute)
+                and node.value.attr == "ctypes"):
+            held = node.value.value
+            while isinstance(held, ast.Subscript) and isinstance(held.slice, (ast.Slice, ast.Constant)):
+                held = held.value
+            through_self = (isinstance(held, ast.Attribute) and isinstance(held.value, ast.Name)
+                            and held.value.id == "self")
+            if not (isinstance(held, ast.Name)
+                    or (isinstance(held, ast.Attribute) and not (through_self and held.attr in properties))):
+                lines.append(node.lineno)
+        for child in ast.iter_child_nodes(node):
+            visit(child, properties)
+
+    visit(ast.parse(source), set())
+    return sorted(lines)
+
+
+def test_no_native_routine_is_handed_the_address_of_a_temporary_array():
+    """Every ``.ctypes.data`` handed to a native routine is of an array something holds for the call: the
+    mesher once passed its grid's geometry from a property, and meshes came out wrong at random where
+    another thread's allocations took the freed memory first."""
+    found = {path.relative_to(ROOT).as_posix(): temporary_addresses(path.read_text())
+             for path in sorted(PACKAGE.rglob("*.py"))}
+    assert not {path: lines for path, lines in found.items() if lines}
+
+
+def test_the_checker_sees_a_temporary_address():
+    source = ("import numpy as np\n"
+              "class Grid:\n"
+              "    @property\n"
+              "    def geometry(self):\n"
+              "        return np.zeros(4)\n"
+              "    def run(self, native, a, parts):\n"
+              "        native(a.ctypes.data, a[1:].ctypes.data, parts[0].ctypes.data, self.table.ctypes.data)\n"
+              "        native(self.geometry.ctypes.data)\n"
+              "        native(np.ascontiguousarray(a).ctypes.data)\n"
+              "        native(a[a > 0].ctypes.data)\n")
+    assert temporary_addresses(source) == [8, 9, 10]

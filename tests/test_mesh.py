@@ -582,6 +582,26 @@ def test_vertices_and_corners_done_in_chunks_keep_every_promise(name, monkeypatc
         assert np.array_equal(a, b)
 
 
+def test_meshes_made_at_once_in_several_threads_are_each_the_mesh_made_alone():
+    """Meshing releases the GIL in its native routines, so several threads may mesh at once (a server, a
+    notebook's background jobs): each mesh, vertices, normals and triangles, is the mesh made alone, bit
+    for bit (test_layers checks that no native routine reads an array freed before the call)."""
+    import threading
+
+    s = implc.compile(x**2 + y**2 + z**2 - sympy.Rational(1, 2) + sympy.sin(4 * x) / 8)
+    voxels = implc.voxelize(s, 6, **implc.NATURAL)
+    alone = voxels.mesh()
+    meshes: list = [None] * 3
+    threads = [threading.Thread(target=lambda k=k: meshes.__setitem__(k, voxels.mesh())) for k in range(3)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    for mesh in meshes:
+        for a, b in ((alone.vertices, mesh.vertices), (alone.faces, mesh.faces), (alone.normals, mesh.normals)):
+            assert np.array_equal(a, b)
+
+
 @pytest.mark.parametrize("name", ["box_minus_ball", "heightfield", "vm"])
 def test_key_indexes_grown_from_their_smallest_give_the_same_mesh(name, monkeypatch):
     """Every key index (the cells', the corners', the vertices') starts at its smallest (2048 keys) and
