@@ -1,0 +1,173 @@
+"""Mesh files written with numpy: binary STL, binary PLY and OBJ, the formats a mesh most often goes to
+(:meth:`implc.Mesh.save`; GLB and 3MF go through trimesh).
+
+Why not trimesh for these three: for Scene 1 at 512³ (3.1 million triangles) its writers took 1.75 s
+(STL), 0.52 s (PLY) and 11.8 s (OBJ), and importing it 0.5 s more, against 0.5 s for the mesh itself.
+Here the rows are laid out in fixed-width records, a chunk of :data:`ROWS` at a time (memory for a
+chunk, not for the mesh), and written as they are.
+
+- **STL** (binary): an 80-byte header, the count, then per triangle its unit normal (from its corners:
+  outward, as the faces wind counter-clockwise seen from outside; 0 for a degenerate one), its three
+  corners and a zero attribute, all float32 as the format has them.
+- **PLY** (binary little-endian): vertices as doubles (every bit of ``Mesh.vertices``), their analytic
+  normals as floats, faces as a list of three int32.
+- **OBJ** (text): ``v`` and ``vn`` lines (nine significant digits: finer than float32, within 10⁻⁸ of
+  each value relatively), faces ``f a//a b//b c//c`` (1-based, the vertex's own normal). A normal that is
+  not finite is written 0 0 0.
+"""
+
+from __future__ import annotations
+
+from typing import BinaryIO
+
+import numpy as np
+
+ROWS = 1 << 18
+"""Vertices or faces laid out at a time."""
+
+DIGITS = 9
+"""Significant digits of the numbers in an OBJ file."""
+
+_STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
+_PLY_VERTEX = np.dtype([("position", "<f8", 3), ("normal", "<f4", 3)])
+_PLY_FACE = np.dtype([("count", "u1"), ("corners", "<i4", 3)])
+
+
+def write_stl(f: BinaryIO, vertices: np.ndarray, faces: np.ndarray) -> None:
+    """A binary STL of the triangles ``faces`` (rows of ``vertices``) to the open file ``f``."""
+    f.write(b"binary STL written by implc".ljust(80))  # never starting with "solid" (ASCII STL's mark)
+    f.write(np.array(len(faces), "<u4").tobytes())
+    for start in range(0, len(faces), ROWS):
+        corners = np.take(vertices, faces[start:start + ROWS], axis=0)  # (n, 3, 3)
+        normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        length = np.sqrt(np.einsum("ij,ij->i", normal, normal))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            normal /= length[:, None]
+        normal[~(length > 0)] = 0.0
+        records = np.zeros(len(corners), _STL_RECORD)
+        records["normal"], records["corners"] = normal, corners
+        f.write(records.tobytes())
+
+
+def write_ply(f: BinaryIO, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None) -> None:
+    """A binary little-endian PLY of the mesh (vertex normals where given) to the open file ``f``."""
+    if len(vertices) >= 2**31:
+        raise ValueError(f"{len(vertices)} vertices: more than PLY's int32 indices can name")
+    lines = ["ply", "format binary_little_endian 1.0", "comment written by implc",
+             f"element vertex {len(vertices)}", "property double x", "property double y", "property double z"]
+    if normals is not None:
+        lines += ["property float nx", "property float ny", "property float nz"]
+    lines += [f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]
+    f.write(("\n".join(lines) + "\n").encode("ascii"))
+    for start in range(0, len(vertices), ROWS):
+        part = vertices[start:start + ROWS]
+        if normals is None:
+            f.write(np.ascontiguousarray(part, dtype="<f8").tobytes())
+            continue
+        records = np.empty(len(part), _PLY_VERTEX)
+        records["position"], records["normal"] = part, normals[start:start + ROWS]
+        f.write(records.tobytes())
+    for start in range(0, len(faces), ROWS):
+        part = faces[start:start + ROWS]
+        records = np.empty(len(part), _PLY_FACE)
+        records["count"], records["corners"] = 3, part
+        f.write(records.tobytes())
+
+
+def write_obj(f: BinaryIO, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None) -> None:
+    """An OBJ of the mesh (``vn`` lines and ``a//a`` corners where normals are given) to the open file
+    ``f`` (opened in binary mode: the text is ASCII)."""
+    f.write(b"# written by implc\n")
+    for start in range(0, len(vertices), ROWS):
+        f.write(_lines(b"v", _decimals(vertices[start:start + ROWS])))
+    if normals is not None:
+        for start in range(0, len(normals), ROWS):
+            part = np.where(np.isfinite(normals[start:start + ROWS]), normals[start:start + ROWS], 0.0)
+            f.write(_lines(b"vn", _decimals(part)))
+    width = len(str(len(vertices)))
+    for start in range(0, len(faces), ROWS):
+        index = _integers(faces[start:start + ROWS] + 1, width, fill="\0")  # (n, 3, width): NULs, then digits
+        if normals is not None:  # "a//a": the vertex's own normal
+            slashes = np.full((*index.shape[:2], 2), ord("/"), np.uint8)
+            index = np.concatenate([index, slashes, index], axis=2)
+        text = np.frombuffer(_lines(b"f", index), np.uint8)
+        f.write(text[text != 0].tobytes())  # the padding taken out: "f 1//1 22//22 333//333"
+
+
+def _lines(tag: bytes, fields: np.ndarray) -> bytes:
+    """Lines of ``tag`` followed by each row's fields ((n, k, w) ASCII codes), one space before each."""
+    n, k, w = fields.shape
+    out = np.empty((n, len(tag) + k * (w + 1) + 1), np.uint8)
+    out[:, : len(tag)] = np.frombuffer(tag, np.uint8)
+    body = out[:, len(tag): -1].reshape(n, k, w + 1)
+    body[:, :, 0] = ord(" ")
+    body[:, :, 1:] = fields
+    out[:, -1] = ord("\n")
+    return out.tobytes()
+
+
+def _integers(values: np.ndarray, width: int, fill: str = " ") -> np.ndarray:
+    """Non-negative integers (below 10^15) as ASCII, right-aligned in ``width`` characters (``fill``
+    before them; "0" for leading zeros): (..., width)."""
+    return np.moveaxis(_integer_columns(values, width, fill), 0, -1)
+
+
+def _integer_columns(values: np.ndarray, width: int, fill: str = " ") -> np.ndarray:
+    """:func:`_integers` column by column: (width, ...), each column contiguous (built fast, moved once).
+    The digits come from doubles, which divide in vectors: floor(q / 10) is exact for an integer q below
+    10^15 (the quotient's fractional part, a tenth or more, is far wider than its rounding)."""
+    if np.any(np.asarray(values) >= 10**15):
+        raise ValueError("an integer of 16 digits or more")
+    whole = np.asarray(values, dtype=np.float64)
+    out = np.empty((width, *whole.shape), np.uint8)
+    for k in range(width):  # column width - 1 - k holds the digit of 10^k
+        above = np.floor(whole / 10.0)
+        digit = (whole - 10.0 * above).astype(np.uint8) + np.uint8(ord("0"))
+        blank = k > 0 and fill != "0"  # no leading zeros: fill before the number
+        out[width - 1 - k] = np.where(whole > 0, digit, np.uint8(ord(fill))) if blank else digit
+        whole = above
+    return out
+
+
+def _decimals(values: np.ndarray) -> np.ndarray:
+    """Finite doubles as ASCII in scientific notation with :data:`DIGITS` significant digits, each in 16
+    characters (``-1.23456789e+000``; a positive number starts with a space): (..., 16)."""
+    values = np.asarray(values, dtype=np.float64)
+    magnitude = np.abs(values)
+    zero = magnitude == 0
+    with np.errstate(divide="ignore"):
+        exponent = np.floor(np.log10(np.where(zero, 1.0, magnitude))).astype(np.int64)
+    # the mantissa's digits as one integer: |v| x 10^(DIGITS - 1 - exponent), rounded
+    mantissa = _scaled(magnitude, DIGITS - 1 - exponent)
+    low, high = 10 ** (DIGITS - 1), 10**DIGITS
+    for wrong, step in ((mantissa >= high, 1), ((mantissa < low) & ~zero, -1)):
+        # log10 rounded the wrong way, or the rounding carried: one digit too many (too few)
+        rows = np.flatnonzero(wrong)
+        if len(rows):
+            exponent.flat[rows] += step
+            mantissa.flat[rows] = _scaled(magnitude.flat[rows], DIGITS - 1 - exponent.flat[rows])
+    mantissa = np.minimum(np.where(zero, 0, mantissa), high - 1)
+    columns = np.empty((16, *values.shape), np.uint8)
+    columns[0] = np.where(np.signbit(values) & ~zero, np.uint8(ord("-")), np.uint8(ord(" ")))
+    digits = _integer_columns(mantissa, DIGITS, fill="0")
+    columns[1] = digits[0]
+    columns[2] = ord(".")
+    columns[3: 2 + DIGITS] = digits[1:]
+    columns[2 + DIGITS] = ord("e")
+    columns[3 + DIGITS] = np.where(exponent < 0, np.uint8(ord("-")), np.uint8(ord("+")))
+    columns[4 + DIGITS:] = _integer_columns(np.abs(exponent), 3, fill="0")
+    return np.moveaxis(columns, 0, -1)
+
+
+def _scaled(magnitude: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """round(magnitude x 10^power) as int64, the power applied in two halves (each a double of the table)."""
+    first = power // 2
+    with np.errstate(over="ignore", under="ignore"):
+        scaled = magnitude * _TENS[first + _TENS_ZERO] * _TENS[power - first + _TENS_ZERO]
+    return np.rint(scaled).astype(np.int64)
+
+
+_TENS_ZERO = 200
+_TENS = 10.0 ** np.arange(-_TENS_ZERO, _TENS_ZERO + 1, dtype=np.float64)
+"""10^k for k in [-200, 200] as doubles (the nearest), indexed by k + _TENS_ZERO: a half of any power the
+numbers need (doubles reach 10^±308, the mantissa's scaling at most 10^332)."""
