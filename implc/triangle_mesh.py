@@ -1,9 +1,9 @@
 """Triangle meshes: :class:`Mesh` (vertices, faces, analytic normals), its counted checks, and mesh files.
 
 Files are read through trimesh (one well-kept library for every format, where each format's quirks are
-already handled). They are written under a temporary name renamed into place: binary STL, binary PLY and
-OBJ by :mod:`implc.mesh_formats` (trimesh's writers took 3-8x as long, OBJ's most), glTF binary and 3MF
-through trimesh.
+already handled). They are written under a temporary name renamed into place: binary STL, binary PLY, OBJ
+and 3MF by :mod:`implc.mesh_formats` (trimesh's writers took 3-8x as long, OBJ's and 3MF's most), glTF
+binary through trimesh.
 """
 
 from __future__ import annotations
@@ -127,21 +127,23 @@ class Mesh:
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write ``path`` (.stl, .obj, .ply, .glb or .3mf, by its suffix) under a temporary name renamed into
-        place: STL, PLY and OBJ by :mod:`implc.mesh_formats` (binary STL and PLY; the vertex normals in PLY
-        and OBJ), GLB and 3MF through trimesh."""
+        place: STL, PLY, OBJ and 3MF by :mod:`implc.mesh_formats` (binary STL and PLY; the vertex normals in
+        PLY and OBJ), GLB through trimesh."""
         path = Path(path)
         suffix = path.suffix.lower()
         if suffix not in MESH_SUFFIXES:
             raise MeshFileError(f"unknown mesh format {path.suffix or '(none)'!r} for {path}: use "
                                 f"{', '.join(MESH_SUFFIXES)}")
         with replacing(path) as tmp:
-            if suffix in (".stl", ".ply", ".obj"):
+            if suffix in (".stl", ".ply", ".obj", ".3mf"):
                 from . import mesh_formats
                 with open(tmp, "wb") as f:
                     if suffix == ".stl":
                         mesh_formats.write_stl(f, self.vertices, self.faces)
                     elif suffix == ".ply":
                         mesh_formats.write_ply(f, self.vertices, self.faces, self.normals)
+                    elif suffix == ".3mf":
+                        mesh_formats.write_3mf(f, self.vertices, self.faces)
                     else:
                         mesh_formats.write_obj(f, self.vertices, self.faces, self.normals)
             else:
