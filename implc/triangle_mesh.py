@@ -1,9 +1,8 @@
 """Triangle meshes: :class:`Mesh` (vertices, faces, analytic normals), its counted checks, and mesh files.
 
 Files are read through trimesh (one well-kept library for every format, where each format's quirks are
-already handled). They are written under a temporary name renamed into place: binary STL, binary PLY, OBJ
-and 3MF by :mod:`implc.mesh_formats` (trimesh's writers took 3-8x as long, OBJ's and 3MF's most), glTF
-binary through trimesh.
+already handled). They are written by :mod:`implc.mesh_formats` (trimesh's writers took 2-8x as long,
+OBJ's and 3MF's most), under a temporary name renamed into place.
 """
 
 from __future__ import annotations
@@ -127,27 +126,21 @@ class Mesh:
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write ``path`` (.stl, .obj, .ply, .glb or .3mf, by its suffix) under a temporary name renamed into
-        place: STL, PLY, OBJ and 3MF by :mod:`implc.mesh_formats` (binary STL and PLY; the vertex normals in
-        PLY and OBJ), GLB through trimesh."""
+        place, by :mod:`implc.mesh_formats` (binary STL and PLY; the vertex normals in PLY, OBJ and GLB)."""
         path = Path(path)
         suffix = path.suffix.lower()
         if suffix not in MESH_SUFFIXES:
             raise MeshFileError(f"unknown mesh format {path.suffix or '(none)'!r} for {path}: use "
                                 f"{', '.join(MESH_SUFFIXES)}")
-        with replacing(path) as tmp:
-            if suffix in (".stl", ".ply", ".obj", ".3mf"):
-                from . import mesh_formats
-                with open(tmp, "wb") as f:
-                    if suffix == ".stl":
-                        mesh_formats.write_stl(f, self.vertices, self.faces)
-                    elif suffix == ".ply":
-                        mesh_formats.write_ply(f, self.vertices, self.faces, self.normals)
-                    elif suffix == ".3mf":
-                        mesh_formats.write_3mf(f, self.vertices, self.faces)
-                    else:
-                        mesh_formats.write_obj(f, self.vertices, self.faces, self.normals)
+        from . import mesh_formats
+        with replacing(path) as tmp, open(tmp, "wb") as f:
+            if suffix == ".stl":
+                mesh_formats.write_stl(f, self.vertices, self.faces)
+            elif suffix == ".3mf":
+                mesh_formats.write_3mf(f, self.vertices, self.faces)
             else:
-                self.to_trimesh().export(str(tmp), file_type=suffix[1:])
+                write = {".ply": mesh_formats.write_ply, ".obj": mesh_formats.write_obj, ".glb": mesh_formats.write_glb}
+                write[suffix](f, self.vertices, self.faces, self.normals)
         return path
 
 

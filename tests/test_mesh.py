@@ -845,6 +845,46 @@ def test_stl_ply_and_obj_as_pymeshlab_reads_them(tmp_path, name):
     assert np.all(np.einsum("ij,ij->i", records["normal"], winding) > 0)
 
 
+def test_glb_as_trimesh_and_the_format_read_it(tmp_path):
+    """implc writes glTF binary itself: trimesh reads the triangles as written and the positions to float32;
+    parsed here by the format's own layout (the header, a JSON chunk, a BIN chunk, each 4-byte aligned),
+    its accessors hold the positions (with their bounds), the unit normals and the indices."""
+    import json
+
+    import trimesh
+    expr, bounds = SURFACES["box_minus_ball"]
+    mesh = implc.mesh(implc.compile(expr, bounds), 5)
+    path = mesh.save(tmp_path / "m.glb")
+    back = trimesh.load(str(path), force="mesh", process=False)
+    assert np.array_equal(back.faces, mesh.faces)
+    assert np.array_equal(back.vertices, mesh.vertices.astype(np.float32).astype(np.float64))
+    data = path.read_bytes()
+    magic, version, length = np.frombuffer(data[:12], "<u4")
+    assert (magic, version, length) == (0x46546C67, 2, len(data)) and length % 4 == 0
+    json_length, json_type = np.frombuffer(data[12:20], "<u4")
+    assert json_type == 0x4E4F534A and json_length % 4 == 0
+    document = json.loads(data[20:20 + json_length])
+    bin_length, bin_type = np.frombuffer(data[20 + json_length:28 + json_length], "<u4")
+    assert bin_type == 0x004E4942 and 28 + json_length + bin_length == len(data)
+    body = data[28 + json_length:]
+    primitive = document["meshes"][0]["primitives"][0]
+
+    def accessor(k, dtype, width):
+        a = document["accessors"][k]
+        view = document["bufferViews"][a["bufferView"]]
+        raw = np.frombuffer(body[view["byteOffset"]:view["byteOffset"] + view["byteLength"]], dtype)
+        return a, raw.reshape(-1, width) if width > 1 else raw
+
+    position, positions = accessor(primitive["attributes"]["POSITION"], "<f4", 3)
+    assert np.array_equal(positions, mesh.vertices.astype(np.float32))
+    assert position["min"] == positions.min(axis=0).tolist() and position["max"] == positions.max(axis=0).tolist()
+    _, normals = accessor(primitive["attributes"]["NORMAL"], "<f4", 3)
+    assert np.array_equal(normals, mesh.normals.astype(np.float32))
+    assert np.allclose(np.linalg.norm(normals, axis=1), 1, atol=1e-6)
+    _, indices = accessor(primitive["indices"], "<u4", 1)
+    assert primitive["mode"] == 4 and np.array_equal(indices.reshape(-1, 3), mesh.faces)
+
+
 @pytest.mark.parametrize("name", ["ball", "box_minus_ball"])
 def test_3mf_as_lib3mf_reads_it(tmp_path, name):
     """implc writes 3MF itself (trimesh took 10.3 s for 3 million triangles): lib3mf, the 3MF Consortium's
