@@ -7,6 +7,7 @@ OBJ's and 3MF's most), under a temporary name renamed into place.
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -17,6 +18,8 @@ from .atomic_file import replacing
 from .untrusted import ply_elements, ply_header, printable, regular_file
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb", ".3mf")
+MEASURE_ROWS = 1 << 18
+"""Triangles measured at a time (area, volume)."""
 
 
 class MeshFileError(ValueError):
@@ -48,21 +51,33 @@ class Mesh:
         return len(self.faces)
 
     # -- measures ---------------------------------------------------------------------------------
-    def _corners(self):
-        p = self.vertices[self.faces]
-        return p[:, 0], p[:, 1], p[:, 2]
+    def _corner_columns(self):
+        """Per chunk of :data:`MEASURE_ROWS` triangles, their corners' coordinates as nine contiguous columns
+        ((ax, ay, az), (bx, by, bz), (cx, cy, cz)): gathered from the vertices' columns, no (F, 3, 3) array
+        (np.cross on those took 1.2 s of a 3-million-triangle mesh's volume)."""
+        columns = [np.ascontiguousarray(self.vertices[:, axis]) for axis in range(3)]
+        for start in range(0, len(self.faces), MEASURE_ROWS):
+            part = self.faces[start:start + MEASURE_ROWS]
+            yield [[np.take(column, part[:, k]) for column in columns] for k in range(3)]
 
     @property
     def area(self) -> float:
         """The surface area: the sum of the triangles' areas."""
-        a, b, c = self._corners()
-        return float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum() / 2)
+        total = []
+        for a, b, c in self._corner_columns():
+            u, v = [b[i] - a[i] for i in range(3)], [c[i] - a[i] for i in range(3)]
+            n = _cross(u, v)
+            total.append(float(np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sum()))
+        return math.fsum(total) / 2
 
     @property
     def volume(self) -> float:
         """The signed volume enclosed (divergence theorem): positive for a closed mesh oriented outward."""
-        a, b, c = self._corners()
-        return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6)
+        total = []
+        for a, b, c in self._corner_columns():
+            n = _cross(b, c)
+            total.append(float((a[0] * n[0] + a[1] * n[1] + a[2] * n[2]).sum()))
+        return math.fsum(total) / 6
 
     def check(self) -> dict:
         """Counted facts about the mesh, each 0 for a closed, oriented, edge-manifold mesh without
@@ -78,8 +93,10 @@ class Mesh:
         _, dcount = np.unique(dkey, return_counts=True)
         ukey = np.minimum(directed[:, 0], directed[:, 1]) * nv + np.maximum(directed[:, 0], directed[:, 1])
         _, ucount = np.unique(ukey, return_counts=True)
-        a, b, c = self._corners()
-        area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        area2 = np.zeros(0)
+        for a, b, c in self._corner_columns():
+            n = _cross([b[i] - a[i] for i in range(3)], [c[i] - a[i] for i in range(3)])
+            area2 = np.concatenate([area2, n[0] * n[0] + n[1] * n[1] + n[2] * n[2]])
         repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
         return {"open_edges": int(np.sum(ucount < 2)), "overused_edges": int(np.sum(ucount > 2)),
                 "repeated_directed_edges": int(np.sum(dcount > 1)),
@@ -142,6 +159,11 @@ class Mesh:
                 write = {".ply": mesh_formats.write_ply, ".obj": mesh_formats.write_obj, ".glb": mesh_formats.write_glb}
                 write[suffix](f, self.vertices, self.faces, self.normals)
         return path
+
+
+def _cross(u, v):
+    """The cross product of two vectors given as three columns each."""
+    return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
 
 
 def _split_vertices(faces: np.ndarray, count: int) -> int | None:
