@@ -629,16 +629,43 @@ as a traceback). A plain global, set by one store that runs no Python code, so n
 half-way through setting it (a CI run's SIGINT once landed inside threading.Event.set)."""
 
 
+REDELIVER_SECONDS = 0.01
+"""How soon a signal that landed in a callback is sent again (:func:`_deliver`)."""
+
+
 def _on_sigterm(signum, frame):
-    _signalled.append(signum)
-    if not _settled:
-        raise _Terminated
+    _deliver(signum, frame, _Terminated)
 
 
 def _on_sigint(signum, frame):
+    _deliver(signum, frame, KeyboardInterrupt)
+
+
+def _deliver(signum, frame, exception: type[BaseException]) -> None:
+    """Raise ``exception`` where the signal landed, unless the outcome is decided (:data:`_settled`: only
+    noted) or it landed in a callback whose exceptions Python prints and drops (:func:`_in_a_callback`):
+    raised there, it would be lost, printed as a traceback, and the command would go on. Then the signal
+    is sent again a moment later, once the callback is done (a CI run's SIGTERM landed in an import lock's
+    weakref callback)."""
+    if not _settled and _in_a_callback(frame):
+        timer = threading.Timer(REDELIVER_SECONDS, os.kill, (os.getpid(), signum))
+        timer.daemon = True
+        timer.start()
+        return
     _signalled.append(signum)
     if not _settled:
-        raise KeyboardInterrupt
+        raise exception
+
+
+def _in_a_callback(frame) -> bool:
+    """Whether a frame on the stack runs a callback whose exceptions Python prints and drops instead of
+    raising them: a finalizer (``__del__``) or importlib's module-lock weakref callback."""
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "__del__" or (code.co_name == "cb" and code.co_filename.startswith("<frozen importlib")):
+            return True
+        frame = frame.f_back
+    return False
 
 
 def _run(argv) -> int:
