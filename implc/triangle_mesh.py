@@ -63,12 +63,8 @@ class Mesh:
     @property
     def area(self) -> float:
         """The surface area: the sum of the triangles' areas."""
-        total = []
-        for a, b, c in self._corner_columns():
-            u, v = [b[i] - a[i] for i in range(3)], [c[i] - a[i] for i in range(3)]
-            n = _cross(u, v)
-            total.append(float(np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sum()))
-        return math.fsum(total) / 2
+        return math.fsum(float(np.sqrt(_doubled_area_squared(a, b, c)).sum())
+                         for a, b, c in self._corner_columns()) / 2
 
     @property
     def volume(self) -> float:
@@ -93,10 +89,7 @@ class Mesh:
         _, dcount = np.unique(dkey, return_counts=True)
         ukey = np.minimum(directed[:, 0], directed[:, 1]) * nv + np.maximum(directed[:, 0], directed[:, 1])
         _, ucount = np.unique(ukey, return_counts=True)
-        area2 = np.zeros(0)
-        for a, b, c in self._corner_columns():
-            n = _cross([b[i] - a[i] for i in range(3)], [c[i] - a[i] for i in range(3)])
-            area2 = np.concatenate([area2, n[0] * n[0] + n[1] * n[1] + n[2] * n[2]])
+        area2 = np.concatenate([np.zeros(0)] + [_doubled_area_squared(a, b, c) for a, b, c in self._corner_columns()])
         repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
         return {"open_edges": int(np.sum(ucount < 2)), "overused_edges": int(np.sum(ucount > 2)),
                 "repeated_directed_edges": int(np.sum(dcount > 1)),
@@ -164,6 +157,12 @@ class Mesh:
 def _cross(u, v):
     """The cross product of two vectors given as three columns each."""
     return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+
+def _doubled_area_squared(a, b, c) -> np.ndarray:
+    """|(b - a) x (c - a)|² per triangle (corners as three columns each): twice its area, squared."""
+    n = _cross([b[i] - a[i] for i in range(3)], [c[i] - a[i] for i in range(3)])
+    return n[0] * n[0] + n[1] * n[1] + n[2] * n[2]
 
 
 def _split_vertices(faces: np.ndarray, count: int) -> int | None:
