@@ -127,9 +127,11 @@ EDGE_ROOTS = _entry("implc_edge_roots", "phase:i64 n:i64 rows:i64* keys:i64* a:f
                                         "f:f64* g:f64* guesses:f64* vertices:f64* normals:f64* margin:f64 "
                                         "nudge:f64 tolerance:f64", "i64")
 CORNER_POINTS = _entry("implc_corner_points", "keys:i64* n:i64 geometry:f64* points:f64*")
-RUNTIME_ENTRIES = (DROP_MARKED, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS, SPLAT,
-                   HASH_INDEX, CELL_CORNERS, CORNER_SIGNS, KUHN_TRIANGLES, FAN_TRIANGLES, QEF, BENT_CELLS, EDGE_ENDS,
-                   EDGE_ROOTS, CORNER_POINTS)
+RUNTIME_ENTRIES = (DROP_MARKED, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS, SPLAT)
+CONTOURING_ENTRIES = (HASH_INDEX, CELL_CORNERS, CORNER_SIGNS, KUHN_TRIANGLES, FAN_TRIANGLES, QEF, BENT_CELLS, EDGE_ENDS,
+                      EDGE_ROOTS, CORNER_POINTS)
+"""... and the contouring's (:mod:`implc.codegen.contour_cells`), a module of its own built on first use by the
+mesher: a first voxelization does not compile it."""
 FLAT_COLLAPSE = _entry("implc_flat_collapse", "faces:i64* vertices:f64* region:i64* planes:f64* inner:i8* movable:i8* "
                                               "head:i64* next:i64* dead:i8* order:i64* count:i64 passes:i64 "
                                               "min_sine:f64 stats:i64*", "i64")

@@ -341,7 +341,7 @@ class _Grid:
 
     def __init__(self, surface, depth: int, bounds):
         self.surface = surface
-        self.runtime = surface.runtime
+        self.runtime = surface.runtime.contouring  # the mesher's native routines
         self._corners: _KeyIndex | None = None  # the corners sampled so far, and F there
         self._corner_values = np.zeros(0)
         self._faces: dict[tuple[int, int], np.ndarray] = {}  # (axis, side): F at the corners of that face of the bounds
@@ -1257,7 +1257,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     stats = MeshStats()
     t0 = time.perf_counter()
     grid = _Grid(surface, depth, surface.bounds if bounds is None else bounds)
-    runtime = surface.runtime
+    runtime = grid.runtime
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
     stats.cells = len(cells)
     grid.find_outside_faces(cells)

@@ -1,7 +1,8 @@
-"""The generic native routines (subdivision, normals, octree, splatting) as callable functions.
+"""The generic native routines (subdivision, normals, octree, splatting, contouring) as callable functions.
 
 A :class:`Runtime` owns the JIT-compiled runtime module (:mod:`implc.codegen.runtime_module`) and its
-entry points, bound from :mod:`implc.abi`. The module is the same for every surface, so a process needs
+entry points, bound from :mod:`implc.abi`, and the modules compiled on first use (the kernels' walk, the
+contouring, the meshes' simplification). The module is the same for every surface, so a process needs
 one: :meth:`Runtime.shared` builds it on first use (from the disk cache after the first time) and hands
 the same one to every caller, which keeps its code alive for the life of the process. The tape engine
 (:class:`TapeEngine`, one interpreter for every program) is compiled on first use by a surface that needs it.
@@ -14,7 +15,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 
 from . import abi
-from .codegen.runtime_module import build_kernel_walk, build_mesh_simplify, build_runtime
+from .codegen.runtime_module import build_contouring, build_kernel_walk, build_mesh_simplify, build_runtime
 from .codegen.tape_engine_module import build_tape_engine
 from .jit import NativeModule
 
@@ -43,12 +44,24 @@ class TapeEngine:
         self.grouped = self.native.bind(abi.TAPE_GROUPED)
 
 
+class Contouring:
+    """The contouring module's entry points (:data:`implc.abi.CONTOURING_ENTRIES`), each an attribute named
+    after its entry without the ``implc_`` prefix: ``hash_index``, ``cell_corners``, ``corner_signs``,
+    ``kuhn_triangles``, ``fan_triangles``, ``qef``, ``bent_cells``, ``edge_ends``, ``edge_roots`` and
+    ``corner_points``."""
+
+    def __init__(self):
+        self.native = NativeModule(build_contouring, source_key="implc-contouring")
+        for entry in abi.CONTOURING_ENTRIES:
+            setattr(self, entry.name.removeprefix("implc_"), self.native.bind(entry))
+
+
 class Runtime:
     """The runtime module's entry points: ``drop_marked``, ``octree_insert``, ``octree_traverse``,
-    ``octree_mark_inside``, ``octree_subtree_rows``, ``splat``, ``hash_index``, ``cell_corners``,
-    ``corner_signs``, ``kuhn_triangles``, ``fan_triangles``, ``qef``, ``bent_cells``, ``edge_ends``, ``edge_roots``
-    and ``corner_points``; the walk over compiled kernels, ``subdivide``, from a module of its own compiled
-    on first use, and likewise ``flat_collapse`` (meshes' simplification; signatures in :mod:`implc.abi`)."""
+    ``octree_mark_inside``, ``octree_subtree_rows`` and ``splat``; the walk over compiled kernels,
+    ``subdivide``, from a module of its own compiled on first use, and likewise ``contouring`` (the
+    mesher's, :class:`Contouring`) and ``flat_collapse`` (meshes' simplification; signatures in
+    :mod:`implc.abi`)."""
 
     _shared: Runtime | None = None
     _lock = threading.Lock()
@@ -57,23 +70,23 @@ class Runtime:
         self.native = NativeModule(build_runtime, source_key="implc-runtime")
         self._walk: NativeModule | None = None  # the compiled kernels' walk, built on first use
         self._simplify: NativeModule | None = None  # the meshes' simplification, built on first use
+        self._contouring: Contouring | None = None  # the mesher's, built on first use
         self.drop_marked = self.native.bind(abi.DROP_MARKED)
         self.octree_insert = self.native.bind(abi.OCTREE_INSERT)
         self.octree_traverse = self.native.bind(abi.OCTREE_TRAVERSE)
         self.octree_mark_inside = self.native.bind(abi.OCTREE_MARK_INSIDE)
         self.octree_subtree_rows = self.native.bind(abi.OCTREE_SUBTREE_ROWS)
         self.splat = self.native.bind(abi.SPLAT)
-        self.hash_index = self.native.bind(abi.HASH_INDEX)
-        self.cell_corners = self.native.bind(abi.CELL_CORNERS)
-        self.corner_signs = self.native.bind(abi.CORNER_SIGNS)
-        self.kuhn_triangles = self.native.bind(abi.KUHN_TRIANGLES)
-        self.fan_triangles = self.native.bind(abi.FAN_TRIANGLES)
-        self.qef = self.native.bind(abi.QEF)
-        self.bent_cells = self.native.bind(abi.BENT_CELLS)
-        self.edge_ends = self.native.bind(abi.EDGE_ENDS)
-        self.edge_roots = self.native.bind(abi.EDGE_ROOTS)
-        self.corner_points = self.native.bind(abi.CORNER_POINTS)
         self._tape_engines: dict[bool, TapeEngine] = {}
+
+    @property
+    def contouring(self) -> Contouring:
+        """The contouring module's entry points, compiled on first use (from the disk cache after the first
+        time)."""
+        with self._lock:
+            if self._contouring is None:
+                self._contouring = Contouring()
+            return self._contouring
 
     def _walk_entry(self, entry: abi.Entry):
         with self._lock:

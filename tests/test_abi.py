@@ -11,7 +11,7 @@ import sympy
 import implc
 from implc import abi, x, y, z
 from implc.codegen.kernels import build_bound_module, build_mean_value_module, build_module
-from implc.codegen.runtime_module import build_kernel_walk, build_mesh_simplify, build_runtime
+from implc.codegen.runtime_module import build_contouring, build_kernel_walk, build_mesh_simplify, build_runtime
 from implc.codegen.tape_engine_module import build_tape_engine
 
 DEFINE = re.compile(r'^define\s+(.*?)\s*@"?([\w.]+)"?\((.*?)\)', re.M)
@@ -35,8 +35,8 @@ def surface():
     return implc.compile(sympy.Min(x**2 + y**2 - 1, sympy.exp(z) - 2) + sympy.sin(x))
 
 
-@pytest.mark.parametrize("module_entries", ["surface", "mean_value", "bound", "tape", "runtime", "walk",
-                                            "simplify"])
+@pytest.mark.parametrize("module_entries", ["surface", "mean_value", "bound", "tape", "runtime", "contouring",
+                                            "walk", "simplify"])
 def test_every_entry_is_exported_with_its_declared_signature(module_entries, surface):
     if module_entries == "surface":
         text, entries = build_module(surface.tape, surface.gradient_tape), abi.SURFACE_ENTRIES
@@ -48,6 +48,8 @@ def test_every_entry_is_exported_with_its_declared_signature(module_entries, sur
         text, entries = build_tape_engine(directed=False), abi.TAPE_ENTRIES
     elif module_entries == "runtime":
         text, entries = build_runtime(), abi.RUNTIME_ENTRIES
+    elif module_entries == "contouring":
+        text, entries = build_contouring(), abi.CONTOURING_ENTRIES
     elif module_entries == "walk":
         text, entries = build_kernel_walk(), abi.KERNEL_WALK_ENTRIES
     else:
@@ -60,7 +62,7 @@ def test_every_entry_is_exported_with_its_declared_signature(module_entries, sur
 
 def test_ctypes_prototypes_follow_the_declarations():
     for entry in (*abi.SURFACE_ENTRIES, *abi.MEAN_VALUE_ENTRIES, *abi.BOUND_ENTRIES, *abi.TAPE_ENTRIES,
-                  *abi.RUNTIME_ENTRIES, *abi.KERNEL_WALK_ENTRIES, *abi.MESH_SIMPLIFY_ENTRIES):
+                  *abi.RUNTIME_ENTRIES, *abi.CONTOURING_ENTRIES, *abi.KERNEL_WALK_ENTRIES, *abi.MESH_SIMPLIFY_ENTRIES):
         proto = entry.ctypes_type()
         assert len(proto._argtypes_) == len(entry.params)
         for (name, kind), ctype in zip(entry.params, proto._argtypes_):

@@ -56,6 +56,27 @@ def test_another_process_reuses_the_cache(tmp_path):
     assert [_probe(tmp_path)[1] for _ in range(2)] == [False, True]
 
 
+def test_a_first_voxelization_compiles_no_mesher(tmp_path):
+    """A cold start that only voxelizes a tape-engine surface compiles the runtime module and the tape engine,
+    nothing more (the mesher's module, a fifth of a colonnade's first compile, waits for a first mesh)."""
+    cache = tmp_path / "kernels"
+    probe = textwrap.dedent("""
+        import sys, sympy, implc
+        from pathlib import Path
+        from implc import x, y, z
+        s = implc.compile(sympy.Min(x**2 + y**2 + z**2 - 0.5, x + y - 0.25), engine="tape")
+        implc.voxelize(s, 4)
+        print(len(list(Path(sys.argv[1]).glob("*.o"))))
+        implc.mesh(s, 4)
+        print(len(list(Path(sys.argv[1]).glob("*.o"))))
+    """)
+    env = {"IMPLC_CACHE_DIR": str(cache), "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
+           "PYTHONDONTWRITEBYTECODE": "1"}
+    run = subprocess.run([sys.executable, "-c", probe, str(cache)], env=env, capture_output=True, text=True,
+                         check=True, cwd=tmp_path)
+    assert run.stdout.split() == ["2", "3"]  # runtime and tape engine; then the contouring module
+
+
 @pytest.mark.slow  # twelve fresh processes, 9 s; test_another_process_reuses_the_cache stays in the default run
 def test_editing_any_module_of_the_package_invalidates_the_cache(tmp_path):
     """A comment appended to a module that the code generator never reads as code (the region planner,

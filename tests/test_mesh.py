@@ -368,7 +368,7 @@ def test_the_qef_point_is_where_the_planes_meet_and_the_mean_where_they_do_not_c
     from implc.runtime import Runtime
 
     rng = np.random.default_rng(7)
-    runtime = Runtime.shared()
+    runtime = Runtime.shared().contouring
     for trial in range(200):
         count = trial % 3 + 1
         normals = rng.normal(size=(count, 3))
@@ -451,14 +451,14 @@ def test_the_key_index_numbers_keys_in_first_seen_order_as_it_grows():
     rng = np.random.default_rng(3)
     keys = rng.integers(0, 1 << 40, 50_000) * 1_000_003 % (1 << 50)
     keys = np.concatenate([keys, keys[::7]])  # repeats
-    index = _KeyIndex(Runtime.shared(), 16)  # grows many times
+    index = _KeyIndex(Runtime.shared().contouring, 16)  # grows many times
     numbers = np.concatenate([index.number(chunk) for chunk in np.array_split(keys, 13)])
     first = np.unique(keys, return_index=True)[1]
     assert np.array_equal(index.keys(), keys[np.sort(first)])  # first-seen order, each once
     assert np.array_equal(index.keys()[numbers], keys)
     absent = np.array([5, (1 << 50) + 1])
     assert np.array_equal(index.number(absent, insert=False), [-1, -1]) or 5 in keys
-    shown = _KeyIndex(Runtime.shared(), 16)  # a table sized by the keys it holds, not by the repeats shown
+    shown = _KeyIndex(Runtime.shared().contouring, 16)  # a table sized by the keys it holds, not by the repeats shown
     distinct = np.arange(5000, dtype=np.int64) * 7919
     assert np.array_equal(shown.number(np.tile(distinct, 40)), np.tile(np.arange(5000), 40))
     assert shown.count == 5000 and shown.limit == 8192

@@ -1,13 +1,13 @@
 """The generic runtime modules: the native routines shared by every surface.
 
 The runtime module: the tape engine's end of the second look (dropping the leaves it marked,
-:func:`.tighten.emit_drop_marked`), the octree (:mod:`.octree_index`), splatting (:mod:`.splat`) and the
-contouring's cells (:mod:`.contour_cells`). The kernel-walk module: the walk (:mod:`.walk`) over a
+:func:`.tighten.emit_drop_marked`), the octree (:mod:`.octree_index`) and splatting (:mod:`.splat`). The
+contouring module: the mesher's cells (:mod:`.contour_cells`). The kernel-walk module: the walk (:mod:`.walk`) over a
 surface's compiled kernels (:mod:`.subdivision`, with their normals and second look), which the tape engine
 does not use (its module holds the walk over itself). The mesh-simplification module: the collapse of flat regions'
 interior vertices (:mod:`.flat_collapse`). :class:`implc.runtime.Runtime` compiles each once per process,
-the walk and the simplification on first use: a cold start on a tape-engine model compiles a fifth of the
-IR it used to.
+all but the runtime module on first use: a cold start that voxelizes a tape-engine model compiles no
+mesher and no kernel walk.
 """
 
 from __future__ import annotations
@@ -61,6 +61,12 @@ def build_runtime() -> str:
     emit_octree_mark_inside(module)
     emit_octree_subtree_rows(module)
     emit_splat(module)
+    return str(module)
+
+
+def build_contouring() -> str:
+    """The LLVM IR text of the contouring module."""
+    module = ir.Module(name="implc_contouring")
     emit_hash_index(module)
     emit_cell_corners(module)
     emit_corner_signs(module)
