@@ -223,7 +223,9 @@ TAPE_HEADER, TAPE_TAPES, TAPE_CHOICES, TAPE_SLOTS, TAPE_NEED, TAPE_MARKS, TAPE_R
 """The tape engine's evaluator words (int64): the addresses of the program header, of room for a program
 per level, of each level's choices (8 bytes per instruction), the interpreter's slots, ``need`` (stamps,
 zeroed), the marks and the remap scratch of simplification, then the last stamp simplification used..."""
-TAPE_PROGRAMS = 8
+TAPE_GRID_DEPTH = 8
+"""... then the depth of the voxelization's grid (a walk may stop above it: a plan's)..."""
+TAPE_PROGRAMS = 9
 """... then each level's program: the instructions' address (WALK_LEVELS words), their count, the output
 slot (WALK_LEVELS words each)."""
 TAPE_EVALUATOR_WORDS = TAPE_PROGRAMS + 3 * WALK_LEVELS

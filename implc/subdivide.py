@@ -202,9 +202,10 @@ class TapeWalk(WalkEvaluator):
     (:data:`implc.abi.TAPE_EVALUATOR_WORDS`) of a program and choices per level and the interpreter's
     scratch."""
 
-    def __init__(self, surface, program):
+    def __init__(self, surface, program, depth: int):
         self.walk = surface.tape_engine.subdivide
         self.program = program
+        self.depth = depth  # the grid's (abi.TAPE_GRID_DEPTH)
 
     def worker_words(self) -> tuple[np.ndarray, tuple]:
         program = self.program
@@ -218,6 +219,7 @@ class TapeWalk(WalkEvaluator):
                    np.empty(slots, dtype=np.int32))
         words = np.zeros(abi.TAPE_EVALUATOR_WORDS, dtype=np.int64)
         words[abi.TAPE_HEADER: abi.TAPE_REMAP + 1] = [a.ctypes.data for a in buffers]
+        words[abi.TAPE_GRID_DEPTH] = self.depth
         return words, buffers
 
 
@@ -248,7 +250,7 @@ class Subdivider:
         self.tightens = refine_leaves == "auto"
         if evaluator is None:
             evaluator = (KernelWalk(surface, runtime, mean_value_levels, self.fine_level, self.tightens)
-                         if self.program is None else TapeWalk(surface, self.program))
+                         if self.program is None else TapeWalk(surface, self.program, depth))
         self.evaluator = evaluator
         self.cancel = np.zeros(1, dtype=np.int32)
         self.geom_ptr = self.geom.ctypes.data

@@ -2,12 +2,12 @@
 
 Enclosing an octant's children runs ``tape_interval`` over the octant's program, recording the Min/Max
 choices each child's enclosure decided; entering a child gives it its own program, ``tape_simplify``'d by
-those choices (or its parent's, where none was decided or pruning is off), so that below an octant every
-decided branch costs nothing; a task starts from the full program simplified down the path from the root
-to its octant. The voxels' unit normals come eight at a time from ``tape_dual`` over the program two levels
-above the leaves (valid for every voxel below that octant, and barely longer than their parents'), through
-the normals block of :mod:`implc.codegen.normals`; the second look is
-:mod:`implc.codegen.tape_tighten`'s, with the program the walk gives (three levels above the leaves, so
+those choices (or its parent's, where none was decided, pruning is off or the child lies just above the
+leaves), so that below an octant every decided branch costs nothing; a task starts from the full program
+simplified down the path from the root to its octant. The voxels' unit normals come eight at a time from
+``tape_dual`` over the program two levels above the leaves (valid for every voxel below that octant, and
+barely longer than their parents'), through the normals block of :mod:`implc.codegen.normals`; the second
+look is :mod:`implc.codegen.tape_tighten`'s, with the program the walk gives (three levels above the leaves, so
 that its batches of eight fill, or two where that program is a fifth shorter). The evaluator's words are
 :data:`implc.abi.TAPE_EVALUATOR_WORDS`."""
 
@@ -25,7 +25,6 @@ from .walk import Evaluator, Walk, emit_walk
 
 FLOAT = ir.FloatType()
 _P = ir.PointerType
-
 
 def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
     """``tape_normals(header, program, length, output, slots, leaf_geom, coords, n, out, flags)`` (internal):
@@ -82,6 +81,7 @@ class TapeEvaluator(Evaluator):
         self.marks = b.inttoptr(load_at(b, words, abi.TAPE_MARKS), _P(I8))
         self.remap = b.inttoptr(load_at(b, words, abi.TAPE_REMAP), _P(I32))
         self.length = load_at(b, self.header, abi.PROGRAM_LENGTH)
+        self.grid_depth = load_at(b, words, abi.TAPE_GRID_DEPTH)
         self.box = local_array(b, DOUBLE, 6 * LANES, "box")
         self.result = local_array(b, DOUBLE, 2 * LANES, "result")
 
@@ -141,10 +141,17 @@ class TapeEvaluator(Evaluator):
 
     def program_for_child(self, walk: Walk, level, c, decided):
         """The program of child ``c`` (i32) of the octant at ``level``: simplified by its choices where one
-        was decided (``decided``: i1) and pruning is on, else the octant's own."""
+        was decided (``decided``: i1) and pruning is on, else the octant's own. A child just above the leaves
+        (of the grid, :data:`implc.abi.TAPE_GRID_DEPTH`, wherever this walk stops) takes the octant's own
+        too: its program would enclose the eight leaves once and serve nothing else, and simplifying costs
+        two passes over the octant's program, about a third of what enclosing eight boxes costs per
+        instruction, for little (bear's programs shrink 7% there, 321 to 299 instructions on average at
+        512³; colonnade's 5.9 to 4.5). Without it, at 512³ in the natural mode, CPU: bear 1.50 -> 1.35 s,
+        Prospero (extruded) 0.244 -> 0.198 s (medians of 5 interleaved runs)."""
         b = walk.b
         child = b.add(level, const(I64, 1))
-        with b.if_else(b.and_(walk.pruning, decided)) as (simplified, shared):
+        above_the_leaves = b.icmp_signed(">=", child, b.sub(self.grid_depth, const(I64, 1)))
+        with b.if_else(b.and_(b.and_(walk.pruning, decided), b.not_(above_the_leaves))) as (simplified, shared):
             with simplified:
                 target = b.gep(self.tapes, [b.mul(b.mul(child, self.length), const(I64, abi.INSTRUCTION_WORDS))])
                 stamp = b.add(load_at(b, self.words, abi.TAPE_STAMP), const(I64, 1))
