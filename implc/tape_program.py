@@ -6,9 +6,13 @@ program with every Min/Max that the octant's enclosure decided replaced by its w
 everything that only fed the losing one dropped (:mod:`implc.codegen.tape_simplify`), as fidget, libfive
 and MPR do. This module owns the encoding both sides agree on:
 
-- every node of the tape has a slot (its index). Constants and the coordinates x, y, z are not
-  instructions: their slots are filled before a program runs (constants once, coordinates per batch of
-  boxes or points), so a program is only the work.
+- every value lives in a slot. Constants and the coordinates x, y, z have slots of their own and are
+  not instructions: their slots are filled before a program runs (constants once, coordinates per batch
+  of boxes or points), so a program is only the work. The instructions' values share slots where their
+  lives do not overlap (:func:`_allocate`, as a register allocator would: bear's 537 instructions and 128
+  constants and coordinates take 215 slots instead of 665, so that the interval slots of its programs,
+  128 bytes each, fit the first-level cache), a choice's value operands kept in place as long as its
+  result is read, since a simplified program reads the winner of a decided choice in its place.
 - an instruction is :data:`implc.abi.INSTRUCTION_WORDS` int32: ``opcode, out, a, b, c``: the result
   goes to slot ``out``, the operands come from slots ``a``, ``b``, ``c`` (as many as the op takes; a
   select reads its condition from a and its branches from b and c). The result of the program is slot ``output`` (a
@@ -150,10 +154,47 @@ def encode(tape: Tape) -> TapeProgram:
         else:
             slot = emit(op, *s)
         slot_of.append(slot)
+    fixed = constant_slots + [v for v in variables if v >= 0]
+    rows, rename, slot_count = _allocate(rows, fixed, slot_of[sub.outputs[0]])
     return TapeProgram(np.array(rows, dtype=np.int32).reshape(-1, abi.INSTRUCTION_WORDS),
                        np.array(constants, dtype=np.float64).reshape(-1, 3),
-                       np.array(constant_slots, dtype=np.int32), np.array(variables, dtype=np.int32),
-                       slot_of[sub.outputs[0]], slot_count)
+                       np.array([rename[c] for c in constant_slots], dtype=np.int32),
+                       np.array([rename[v] if v >= 0 else -1 for v in variables], dtype=np.int32),
+                       rename[slot_of[sub.outputs[0]]], slot_count)
+
+
+def _operands(row) -> tuple[int, ...]:
+    code = row[0]
+    return row[2:3] if code < FIRST_BINARY else row[2:4] if code < FIRST_TERNARY else row[2:5]
+
+
+def _allocate(rows: list, fixed: list, output: int) -> tuple[list, dict, int]:
+    """The instructions ``rows`` (every value in a slot of its own) with their values in as few slots as
+    they allow: a slot is taken again once its value has been read for the last time. Constants and
+    coordinates (``fixed``) keep slots of their own. A choice's value operands stay in their slots as
+    long as its result is read, so that a simplified program may read the winner where it read the
+    choice (:mod:`implc.codegen.tape_simplify` makes a decided choice an alias of its winner). Returns
+    the rows, the new slot of each old one, the slot count."""
+    choice_codes = {OPCODES[op] for op in CHOICE_OPS}
+    last = {output: len(rows)}
+    for i in range(len(rows) - 1, -1, -1):
+        row = rows[i]
+        until = last.get(row[1], i)
+        for k, operand in enumerate(_operands(row)):
+            kept = until if row[0] in choice_codes and (row[0] < FIRST_TERNARY or k > 0) else i
+            last[operand] = max(last.get(operand, i), kept, i)
+    rename = {slot: n for n, slot in enumerate(fixed)}
+    count, free = len(fixed), []
+    for i, row in enumerate(rows):
+        operands = [rename[o] for o in _operands(row)]
+        free += [rename[o] for o in set(_operands(row)) if last[o] == i and rename[o] >= len(fixed)]
+        if free:  # the result may take an operand's slot: every evaluator reads its operands first
+            rename[row[1]] = free.pop()
+        else:
+            rename[row[1]] = count
+            count += 1
+        rows[i] = (row[0], rename[row[1]], *operands, *[0] * (abi.INSTRUCTION_WORDS - 2 - len(operands)))
+    return rows, rename, count
 
 
 def slot_scratch(slot_count: int) -> np.ndarray:

@@ -14,12 +14,12 @@ from hypothesis import strategies as st
 from sympy import Abs, Max, Min, Piecewise, Rational, cos, sin, sqrt
 
 import implc
-from implc import CompileError, x, y, z
+from implc import CompileError, tape_program, x, y, z
 from implc import subdivide as subdivide_module
 from implc.codegen.leaf_split import OUTSIDE
 from implc.lower import lower
 from implc.surface import Grouping, choose_engine
-from implc.tape_program import OPCODES, encode, slot_scratch
+from implc.tape_program import CHOICE_OPS, FIRST_BINARY, FIRST_TERNARY, OPCODES, encode, slot_scratch
 from implc.vm import parse_vm
 
 from .test_vm import CSG, interpret
@@ -338,6 +338,56 @@ def test_the_engine_is_chosen_by_the_tape():
     assert auto(sum(((x - Rational(k, 50))**2 * (y - Rational(k, 70)) for k in range(300)), sympy.Integer(0))) == "tape"
 
 
+def _values_read(row):
+    code = row[0]
+    return list(row[2:3] if code < FIRST_BINARY else row[2:4] if code < FIRST_TERNARY else row[2:5])
+
+
+@settings(max_examples=40, deadline=None)
+@given(csg)
+def test_slots_are_taken_again_only_where_no_simplified_program_reads_them(expr):
+    """Slots are shared by values whose lives do not overlap (a program's slots fit the cache), checked by
+    following the program with every value in a slot of its own (the encoding before the allocation): each
+    instruction reads the values it read there, and a choice's value operands stay in their slots as long
+    as the choice's result is read, so that any simplified program, which reads a decided choice's winner
+    in its place, reads the winner's value."""
+    captured = {}
+    allocate = tape_program._allocate
+
+    def spy(rows, fixed, output):
+        captured["before"], captured["fixed"] = list(rows), list(fixed)
+        result = allocate(rows, fixed, output)
+        captured["after"], captured["rename"] = list(result[0]), result[1]
+        return result
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(tape_program, "_allocate", spy)
+        program = encode(implc.compile(expr + x * y, engine="tape").tape)
+    before, after, fixed = captured["before"], captured["after"], captured["fixed"]
+    assert [tuple(r) for r in program.instructions] == [tuple(r) for r in after]
+    held = {captured["rename"][f]: f for f in fixed}  # each slot's value, named by its slot before
+    assert set(held) == set(program.constant_slots) | {v for v in program.variable_slots if v >= 0}
+    for old_row, new_row in zip(before, after):
+        assert new_row[0] == old_row[0]
+        for old, new in zip(_values_read(old_row), _values_read(new_row)):
+            assert held.get(new) == old, (old_row, new_row)  # the value the instruction read before
+        assert new_row[1] not in program.constant_slots and new_row[1] not in program.variable_slots
+        held[new_row[1]] = old_row[1]
+    assert held[program.output] == before[-1][1]
+    assert program.slot_count == len({r[1] for r in after} | set(held))
+    written_at = {row[1]: i for i, row in enumerate(before)}
+    choice_codes = {OPCODES[op] for op in CHOICE_OPS}
+    for i, row in enumerate(before):  # a choice's result read later: its value operands still in place
+        if row[0] not in choice_codes:
+            continue
+        values = _values_read(row)[1:] if row[0] >= FIRST_TERNARY else _values_read(row)
+        last_read = max([j for j in range(i + 1, len(before)) if row[1] in _values_read(before[j])]
+                        + ([len(before)] if row[1] == before[-1][1] else []), default=i)
+        for value in values:
+            if value in written_at:  # constants' and coordinates' slots are never written
+                slot = after[written_at[value]][1]
+                assert all(after[k][1] != slot for k in range(written_at[value] + 1, min(last_read, len(after)))), row
+
+
 @pytest.mark.parametrize("kwargs, words", [
     ({"engine": "gpu"}, "engine must be one of auto, jit, tape"),
     ({"engine": "tape", "expr": sympy.atan(x)}, "engine='tape' cannot run atan"),
@@ -350,14 +400,14 @@ def test_bad_engine_requests_are_named(kwargs, words):
 
 
 def test_programs_hold_only_the_work():
-    """Constants and coordinates have slots but no instructions; every slot is written once; the output
-    is the last instruction's slot."""
+    """Constants and coordinates have slots of their own but no instructions; the output is the last
+    instruction's slot."""
     s = implc.compile(Max(x * 3, Min(y, z**2)) - 1, engine="jit")
     program = encode(s.tape)
     assert set(program.instructions[:, 0]) <= set(OPCODES.values())
     assert len(program) == 5  # mul, square, min, max, add (3 and -1 are constants)
-    written = list(program.instructions[:, 1]) + list(program.constant_slots) + list(program.variable_slots)
-    assert sorted(written) == list(range(program.slot_count))
+    fixed = set(program.constant_slots) | set(program.variable_slots)
+    assert len(fixed) == 5 and not fixed & set(program.instructions[:, 1])
     assert program.output == program.instructions[-1, 1]
     assert sorted(program.constants[:, 0]) == [-1.0, 3.0]
     assert program.choices == 2

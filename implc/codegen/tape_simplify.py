@@ -7,7 +7,9 @@ instruction that only fed the losing one is dropped; the new program's output sl
 
 Two passes, both linear in the program: backward from the output, marking what the result needs
 (``need``, one int32 per slot: a slot is needed when it holds this call's ``stamp``, so nothing is cleared
-between calls) and what each instruction becomes (``mark``: dropped, kept, or an alias of its first or
+between calls; slots are shared by values whose lives do not overlap, so a needed instruction clears its
+slot's stamp before it marks its operands: what the slot held before is needed only if read after that)
+and what each instruction becomes (``mark``: dropped, kept, or an alias of its first or
 second value operand); forward, writing the kept instructions with their operands renamed through the
 aliases (``remap``, one int32 per slot; constants and coordinates, which no instruction writes, name
 themselves: :func:`~implc.codegen.tape_eval.emit_tape_prefill` sets them). Kept instructions keep their
@@ -48,6 +50,7 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
         first, second = b.select(ternary, c, a), b.select(ternary, d, c)  # the value operands a choice picks from
         store_at(b, const(I8, DROP), mark, i)
         with if_(b, b.icmp_unsigned("==", load_at(b, need, out_slot), stamp)):
+            store_at(b, const(I32, 0), need, out_slot)  # what the slot held before this one wrote it: not yet
             is_choice = b.or_(ternary, b.or_(b.icmp_unsigned("==", code, const(I64, OPCODES["min"])),
                                              b.icmp_unsigned("==", code, const(I64, OPCODES["max"]))))
             choice = b.select(is_choice, load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane)), const(I8, 3))
