@@ -26,6 +26,7 @@ from .walk import Evaluator, Walk, emit_walk
 FLOAT = ir.FloatType()
 _P = ir.PointerType
 
+
 def emit_tape_normals(module: ir.Module, dual: ir.Function) -> ir.Function:
     """``tape_normals(header, program, length, output, slots, leaf_geom, coords, n, out, flags)`` (internal):
     unit normals of ``n`` voxels, the gradient from ``dual`` over the program given (and their flags for
