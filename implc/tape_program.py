@@ -176,24 +176,32 @@ def _allocate(rows: list, fixed: list, output: int) -> tuple[list, dict, int]:
     choice (:mod:`implc.codegen.tape_simplify` makes a decided choice an alias of its winner). Returns
     the rows, the new slot of each old one, the slot count."""
     choice_codes = {OPCODES[op] for op in CHOICE_OPS}
-    last = {output: len(rows)}
-    for i in range(len(rows) - 1, -1, -1):
-        row = rows[i]
-        until = last.get(row[1], i)
-        for k, operand in enumerate(_operands(row)):
-            kept = until if row[0] in choice_codes and (row[0] < FIRST_TERNARY or k > 0) else i
-            last[operand] = max(last.get(operand, i), kept, i)
+    operands = [_operands(row) for row in rows]
+    last = {output: len(rows)}  # each value's last read (a choice's value operands: its result's)
+    for i in range(len(rows) - 1, -1, -1):  # backward: a value's first read seen is its last
+        code = rows[i][0]
+        if code in choice_codes:
+            until = last.get(rows[i][1], i)
+            for k, operand in enumerate(operands[i]):
+                kept = until if code < FIRST_TERNARY or k > 0 else i
+                if last.get(operand, -1) < kept:
+                    last[operand] = kept
+        else:
+            for operand in operands[i]:
+                last.setdefault(operand, i)
     rename = {slot: n for n, slot in enumerate(fixed)}
-    count, free = len(fixed), []
+    count, free, first_free = len(fixed), [], len(fixed)
     for i, row in enumerate(rows):
-        operands = [rename[o] for o in _operands(row)]
-        free += [rename[o] for o in set(_operands(row)) if last[o] == i and rename[o] >= len(fixed)]
+        read = [rename[o] for o in operands[i]]
+        for o in set(operands[i]):
+            if last[o] == i and rename[o] >= first_free:
+                free.append(rename[o])
         if free:  # the result may take an operand's slot: every evaluator reads its operands first
             rename[row[1]] = free.pop()
         else:
             rename[row[1]] = count
             count += 1
-        rows[i] = (row[0], rename[row[1]], *operands, *[0] * (abi.INSTRUCTION_WORDS - 2 - len(operands)))
+        rows[i] = (row[0], rename[row[1]], *read, *[0] * (abi.INSTRUCTION_WORDS - 2 - len(read)))
     return rows, rename, count
 
 
