@@ -410,9 +410,10 @@ def test_octant_kernel_conforms(name, compiled):
         expected = sum(1 << c for c in range(8) if f_lo[c] <= 0 <= f_hi[c])
         expected |= sum(1 << (abi.OCTANT_INSIDE_SHIFT + c) for c in range(8) if f_hi[c] < 0)  # inside
         assert kept == expected, f"{name}: parent {p_lo}..{p_hi}"
-        live_out = np.empty(8, dtype=np.int64)
-        s.kernel(abi.INTERVAL)(lo.ctypes.data, hi.ctypes.data, np.empty(8).ctypes.data, np.empty(8).ctypes.data,
-                               8, np.array([-1], dtype=np.int64).ctypes.data, live_out.ctypes.data)
+        live_out, all_live = np.empty(8, dtype=np.int64), np.array([-1], dtype=np.int64)
+        out_lo, out_hi = np.empty(8), np.empty(8)
+        s.kernel(abi.INTERVAL)(lo.ctypes.data, hi.ctypes.data, out_lo.ctypes.data, out_hi.ctypes.data, 8,
+                               all_live.ctypes.data, live_out.ctypes.data)
         np.testing.assert_array_equal(masks, live_out)
 
 

@@ -221,9 +221,9 @@ BOX_GRADIENT_TRUTHS = {"vm": Min((x - y) * z - Rational(1, 4), x**2 - z) / -3 * 
 def box_gradient(surface, lo, hi):
     """The engine's enclosures of F and its partials over each box: (n, 8) rows."""
     n = len(lo)
-    out = np.empty((n, 8))
-    surface.tape_engine.box_gradient(surface.program.header.ctypes.data, slot_scratch(surface.program.slot_count)
-                                     .ctypes.data, lo.ctypes.data, hi.ctypes.data, out.ctypes.data, n)
+    out, slots = np.empty((n, 8)), slot_scratch(surface.program.slot_count)  # held for the call
+    surface.tape_engine.box_gradient(surface.program.header.ctypes.data, slots.ctypes.data, lo.ctypes.data,
+                                     hi.ctypes.data, out.ctypes.data, n)
     return out
 
 

@@ -169,7 +169,8 @@ def test_octant_kernel_decides_as_the_interval_kernel_on_the_children(name, comp
                                all_live.ctypes.data, expected_masks.ctypes.data)
         expected = sum(1 << c for c in range(8) if f_lo[c] <= 0 <= f_hi[c])
         expected |= sum(1 << (abi.OCTANT_INSIDE_SHIFT + c) for c in range(8) if f_hi[c] < 0)  # inside
-        decided = octant(geom.ctypes.data, np.ascontiguousarray(cell).ctypes.data, depth, -1, masks.ctypes.data)
+        held = np.ascontiguousarray(cell)  # held for the call: the kernel reads it
+        decided = octant(geom.ctypes.data, held.ctypes.data, depth, -1, masks.ctypes.data)
         assert decided == expected, f"cell {cell}"
         kept = decided & 0xFF
         np.testing.assert_array_equal(masks, expected_masks)
