@@ -156,6 +156,9 @@ class Tape:
             return a
         if c == 0:
             return self.const(0)
+        va = self.exact_value(a)
+        if va is not None:  # exact: c is a double, va a Fraction
+            return self.const(va * Fraction(c))
         return self.node("scale", (a,), float(c))
 
     def sub(self, a: int, b: int) -> int:

@@ -74,6 +74,18 @@ def test_gradient_shares_the_value_nodes():
     assert len(grad.outputs) == 4
 
 
+def test_a_partial_along_an_axis_the_value_ignores_is_zero():
+    """sin(8·phi) with phi = atan2(y, x) does not depend on z: its z-partial is the constant 0, not the
+    chain rule's 0 / (x² + y²), which is work, and NaN over a box on the z-axis. With the compiled kernels,
+    over such a box, the z-partial of sin(8·phi) + z is exactly 1."""
+    import implc
+    grad = with_gradient(lower(sympy.sin(8 * phi) + z))
+    assert grad.nodes[grad.outputs[3]] == ("const", (), (1.0, 1.0, 1.0))  # d/dz: the z term's 1 alone
+    s = implc.compile(sympy.sin(8 * phi) + z, engine="jit")
+    enclosures = s.gradient_enclosures([[-0.1, -0.1, 0.4]], [[0.1, 0.1, 0.6]])[0]
+    assert enclosures[6] == enclosures[7] == 1.0  # the z-partial over a box around the z-axis
+
+
 def test_nonnegative_analysis():
     t = lower(x**2 + y**2 + z**2)
     assert t.is_nonnegative(t.outputs[0])
