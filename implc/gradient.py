@@ -174,8 +174,9 @@ def with_gradient(tape: Tape) -> Tape:
         else:
             rule = DERIVATIVE_RULES[op]
             axes = out.axes()[i] if op in STRUCTURAL_ZEROS else 0b111
-            derivs[i] = tuple(rule(out, i, new_args, attr, [derivs[a][k] for a in new_args]) if axes >> k & 1
-                              else out.const(0) for k in range(3))
+            dx, dy, dz = (rule(out, i, new_args, attr, [derivs[a][k] for a in new_args]) if axes >> k & 1
+                          else out.const(0) for k in range(3))
+            derivs[i] = (dx, dy, dz)
     f = remap[tape.outputs[0]]
     out.outputs = [f, *derivs[f]]
     out = out.compacted()
