@@ -69,11 +69,7 @@ class Mesh:
     @property
     def volume(self) -> float:
         """The signed volume enclosed (divergence theorem): positive for a closed mesh oriented outward."""
-        total = []
-        for a, b, c in self._corner_columns():
-            n = _cross(b, c)
-            total.append(float((a[0] * n[0] + a[1] * n[1] + a[2] * n[2]).sum()))
-        return math.fsum(total) / 6
+        return math.fsum(_six_volumes(a, b, c) for a, b, c in self._corner_columns()) / 6
 
     def check(self) -> dict:
         """Counted facts about the mesh, each 0 for a closed, oriented, edge-manifold mesh without
@@ -89,12 +85,16 @@ class Mesh:
         _, dcount = np.unique(dkey, return_counts=True)
         ukey = np.minimum(directed[:, 0], directed[:, 1]) * nv + np.maximum(directed[:, 0], directed[:, 1])
         _, ucount = np.unique(ukey, return_counts=True)
-        area2 = np.concatenate([np.zeros(0)] + [_doubled_area_squared(a, b, c) for a, b, c in self._corner_columns()])
+        areas, volumes = [np.zeros(0)], []  # one pass over the corners for both
+        for a, b, c in self._corner_columns():
+            areas.append(_doubled_area_squared(a, b, c))
+            volumes.append(_six_volumes(a, b, c))
+        area2 = np.concatenate(areas)
         repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
         return {"open_edges": int(np.sum(ucount < 2)), "overused_edges": int(np.sum(ucount > 2)),
                 "repeated_directed_edges": int(np.sum(dcount > 1)),
                 "degenerate": int(np.sum(repeated | ~(area2 > 0))),
-                "split_vertices": _split_vertices(f, len(self.vertices)), "volume": self.volume}
+                "split_vertices": _split_vertices(f, len(self.vertices)), "volume": math.fsum(volumes) / 6}
 
     def simplified(self, tolerance: float) -> Mesh:
         """This mesh with its flat parts' inner vertices collapsed away (:mod:`implc.mesh_simplify`): the
@@ -157,6 +157,13 @@ class Mesh:
 def _cross(u, v):
     """The cross product of two vectors given as three columns each."""
     return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+
+def _six_volumes(a, b, c) -> float:
+    """Σ a · (b x c) over the triangles (corners as three columns each): six times the signed volume of the
+    tetrahedra they make with the origin."""
+    n = _cross(b, c)
+    return float((a[0] * n[0] + a[1] * n[1] + a[2] * n[2]).sum())
 
 
 def _doubled_area_squared(a, b, c) -> np.ndarray:
