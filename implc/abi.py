@@ -159,9 +159,10 @@ partial's lo, hi), as the tape engine's second look uses them."""
 TAPE_GROUPED = _entry("implc_tape_grouped",
                       "program:i64* slots:f64* choices:i8* need:i32* marks:i8* remap:i32* work:i32* lo:f64* hi:f64* "
                       "starts:i64* groups:i64 pts:f64* pts_hi:f64* out_value:f64* out_grad:f64* mode:i64")
-"""F (mode 0), F and its gradient (1) at points, or enclosures of F and its partials over boxes (2), the
-rows grouped by box, each group's program simplified over its box (:mod:`implc.codegen.tape_points`);
-``choices``: 8 bytes per instruction, ``need`` zeros, ``work`` room for one program."""
+"""F (mode 0), F and its gradient (1) at points, enclosures of F and its partials over boxes (2), or of F
+alone with negligible terms replaced (3), the rows grouped by box, each group's program simplified over its
+box (:mod:`implc.codegen.tape_points`);
+``choices``: 8 bytes per instruction (16 in mode 3), ``need`` zeros, ``work`` room for one program."""
 TAPE_ENTRIES = (TAPE_INTERVAL, TAPE_GRADIENT, TAPE_POINT, TAPE_SUBDIVIDE, TAPE_BOX_GRADIENT, TAPE_GROUPED)
 
 # -- layouts shared by native code and Python ------------------------------------------------------
@@ -197,7 +198,8 @@ of x, y, z (three words, -1 where unused); then the slot count."""
 PROGRAM_SLOT_COUNT = 9
 PROGRAM_WORDS = 10
 INSTRUCTION_WORDS = 5
-"""A tape instruction (int32): opcode, output slot, three operand slots (unused ones 0)."""
+"""A tape instruction (int32): opcode, output slot, three operand slots (unused ones 0; a sum's third word
+says which of its operands an exponential gives: :data:`implc.tape_program.TINY_EXPONENTS`)."""
 WALK_LEVELS = MAX_DEPTH + 2
 """Levels the walk keeps a frame (and an evaluator a context) for (0 to MAX_DEPTH + 1)."""
 WALK_FRAME_WORDS = 5
@@ -225,7 +227,10 @@ per level, of each level's choices (8 bytes per instruction), the interpreter's 
 zeroed), the marks and the remap scratch of simplification, then the last stamp simplification used..."""
 TAPE_GRID_DEPTH = 8
 """... then the depth of the voxelization's grid (a walk may stop above it: a plan's)..."""
-TAPE_PROGRAMS = 9
+TAPE_SUBSTITUTED = 9
+"""... then whether the program of the octant in hand two levels above the grid's leaves has a negligible
+term replaced by a constant (:mod:`implc.codegen.tape_simplify`): then it serves enclosures only..."""
+TAPE_PROGRAMS = 10
 """... then each level's program: the instructions' address (WALK_LEVELS words), their count, the output
 slot (WALK_LEVELS words each)."""
 TAPE_EVALUATOR_WORDS = TAPE_PROGRAMS + 3 * WALK_LEVELS

@@ -436,9 +436,9 @@ class Surface:
 
     def _grouped(self, rows: np.ndarray, rows_hi: np.ndarray | None, plan: Grouping, mode: int):
         """``implc_tape_grouped`` over ``rows`` (points, or boxes' lo corners with ``rows_hi``) grouped by
-        ``plan``: (values, (N, 3) gradients or (N, 8) enclosures)."""
+        ``plan``: (values, (N, 3) gradients, (N, 8) enclosures of F and its partials, or (N, 2) of F)."""
         n = len(rows)
-        width = 8 if mode == 2 else 3
+        width = {2: 8, 3: 2}.get(mode, 3)
         if n != plan.rows:
             raise ValueError(f"a grouping of {plan.rows} rows used for {n}")
         if not n:
@@ -455,7 +455,7 @@ class Surface:
 
         def batch(at, count):  # its own scratch: batches run at once on several cores
             slots = slot_scratch(program.slot_count)
-            choices = np.empty(length * 8, dtype=np.uint8)  # the groups' choices
+            choices = np.empty(length * 16, dtype=np.uint8)  # the groups' choices (then the boxes', mode 3)
             need = np.zeros(program.slot_count, dtype=np.int32)  # each call's stamps start from one
             marks = np.empty(length, dtype=np.uint8)
             remap = np.empty(program.slot_count, dtype=np.int32)

@@ -50,6 +50,18 @@ CHOICE_OPS = ("min", "max", "select_lt", "select_le")
 b; selects: b where the condition holds, c where it fails): bit 0 of a choice byte says the first may
 be the result over a box, bit 1 the second."""
 
+TINY_EXPONENTS = tuple(range(2, 127, 2))
+"""The constants [0, 2^-e] a program with a sum of an exponential has (slots 0, 1, ... in this order): below
+an octant where the exponential's enclosure is at most 2^-e, and 2^-e at most :data:`NEGLIGIBLE` times
+the sum's magnitude, the sum reads the constant instead (:mod:`implc.codegen.tape_simplify`), and the
+exponential's argument is not evaluated: far from a primitive, a smooth blend's term costs nothing. Such
+a sum's third instruction word says which of its operands an exponential gives (bit 0: the first, bit 1:
+the second)."""
+NEGLIGIBLE = 2.0 ** -7
+"""How small a sum's exponential term must be, relative to the least magnitude of the sum over an octant,
+for the octant's descendants to read a constant instead: the sum's enclosure widens by that much at most
+(a smooth union's by 2^-12 of its scale's units: at 512³ a fiftieth of a cell of the unit cube)."""
+
 _POWERS = {2: "square", 3: "cube", 4: "fourth"}
 _DIRECT = {"neg", "abs", "sqrt", "exp", "log", "sin", "cos", "sub", "mul", "div", "min", "max", "select_lt",
            "select_le"}
@@ -132,6 +144,10 @@ def encode(tape: Tape) -> TapeProgram:
 
     slot_of: list[int] = []
     signed: set[int] = set()  # the constants' slots whose interval excludes 0
+    exponential = [op == "exp" for op, _, _ in sub.nodes]
+    if any(op == "add" and any(exponential[a] for a in args) for op, args, _ in sub.nodes):
+        for e in TINY_EXPONENTS:  # created first: slots 0, 1, ... (constants keep their order in _allocate)
+            constant(0.0, 0.0, 2.0 ** -e)
 
     for op, args, attr in sub.nodes:
         s = [slot_of[a] for a in args]
@@ -142,7 +158,7 @@ def encode(tape: Tape) -> TapeProgram:
             if attr[1] > 0 or attr[2] < 0:
                 signed.add(slot)
         elif op == "add":
-            slot = emit("add_nonneg" if attr else "add", *s)
+            slot = emit("add_nonneg" if attr else "add", s[0], s[1], exponential[args[0]] | exponential[args[1]] << 1)
         elif op == "scale":  # c is exact: the product's rounding is the mul rule's
             slot = emit("mul_const", s[0], constant(attr, attr, attr)) if attr else emit("mul", constant(0, 0, 0), s[0])
         elif op == "mul" and (s[0] in signed or s[1] in signed):
@@ -201,7 +217,7 @@ def _allocate(rows: list, fixed: list, output: int) -> tuple[list, dict, int]:
         else:
             rename[row[1]] = count
             count += 1
-        rows[i] = (row[0], rename[row[1]], *read, *[0] * (abi.INSTRUCTION_WORDS - 2 - len(read)))
+        rows[i] = (row[0], rename[row[1]], *read, *row[2 + len(read):])  # a sum's third word kept
     return rows, rename, count
 
 

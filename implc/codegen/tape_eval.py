@@ -10,7 +10,9 @@ switch on the opcode, eight lanes (the eight children of an octant, or eight poi
   rules as the compiled kernels (:class:`~implc.codegen.interval_rules.IntervalEmitter`, rule for rule),
   into ``result`` (lo, hi). For each Min/Max instruction at position p it writes eight choice bytes at
   ``choices[8p..]`` (bit 0: operand a may be the result over that box, bit 1: b may; NaN decides
-  nothing) and returns the lanes in which some choice was decided (bit c: box c).
+  nothing) and returns the lanes in which some choice was decided (bit c: box c); for each sum of an
+  exponential, bytes saying in which lanes that term is negligible
+  (:data:`~implc.tape_program.TINY_EXPONENTS`), and those lanes in the returned i16's upper byte.
 - ``tape_dual(header, instructions, length, output, slots, points, result)``: F and its gradient at eight
   points (three vectors), forward mode (value and three partials per slot), into ``result`` (value, dx,
   dy, dz): for normals.
@@ -34,14 +36,16 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from ..tape_program import OPCODES
+from ..tape_program import NEGLIGIBLE, OPCODES, TINY_EXPONENTS
 from . import elementary
 from .control import I32, I64, Local, define_internal, for_range, if_, load_at, store_at
 from .interval_rules import IntervalEmitter
 from .vector import DOUBLE, VectorBuilder, broadcast
 
 LANES = 8
-I8 = ir.IntType(8)
+I8, I16 = ir.IntType(8), ir.IntType(16)
+_TINY_FIRST, _TINY_LAST = TINY_EXPONENTS[0] // 2, TINY_EXPONENTS[-1] // 2
+assert TINY_EXPONENTS == tuple(range(2 * _TINY_FIRST, 2 * _TINY_LAST + 1, 2)) and len(TINY_EXPONENTS) < 64
 V8 = ir.VectorType(DOUBLE, LANES)
 _P = ir.PointerType
 
@@ -152,13 +156,14 @@ def _variables(b, header, store):
 
 def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
     """Define ``tape_interval`` (see the module docstring) in ``module``."""
-    fn, b = define_internal(module, "implc.tape.interval", I8,
+    fn, b = define_internal(module, "implc.tape.interval", I16,
                             [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(I8), _P(DOUBLE), _P(DOUBLE)])
     header, program, length, output, slots, choices, box, result = fn.args
     vb = VectorBuilder(b, LANES, directed, outline_elementary=True)  # their constants stay in their functions
     em = IntervalEmitter(vb)
     vslots, vbox = b.bitcast(slots, _P(V8)), b.bitcast(box, _P(V8))
     decided = Local(b, I8, 0, "decided")
+    negligible = Local(b, I8, 0, "negligible")
 
     def load(slot):
         base = b.mul(slot, ir.Constant(I64, 2))
@@ -204,10 +209,50 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
             decided.set(b.or_(decided.get(), b.bitcast(b.or_(x_only, y_only), I8)))
         return emit
 
+    vi64, vi8 = ir.VectorType(I64, LANES), ir.VectorType(I8, LANES)
+
+    def splat_int(vtype, value):
+        return ir.Constant(vtype, [value] * LANES)
+
+    def tiny(term, limit):
+        """Whether ``term`` (an exponential's enclosure) lies in [0, 2^-e] with 2^-e <= ``limit`` for an
+        e of :data:`TINY_EXPONENTS` (i1 vector), and the byte naming the constant (index + 1)."""
+        field = b.lshr(b.bitcast(term[1], vi64), splat_int(vi64, 52))  # a sign bit set makes it 2048 or more
+        q = b.ashr(b.sub(splat_int(vi64, 1022), field), splat_int(vi64, 1))  # term <= 2^-m <= 2^-2q, m = 1022 - field
+        q = b.select(b.icmp_signed(">", q, splat_int(vi64, _TINY_LAST)), splat_int(vi64, _TINY_LAST), q)
+        bound = b.bitcast(b.shl(b.sub(splat_int(vi64, 1023), b.shl(q, splat_int(vi64, 1))), splat_int(vi64, 52)), V8)
+        ok = b.and_(b.icmp_signed(">=", q, splat_int(vi64, _TINY_FIRST)),
+                    b.and_(vb.cmp(">=", term[0], vb.splat(0.0)), vb.cmp("<=", bound, limit)))
+        return ok, b.trunc(b.sub(q, splat_int(vi64, _TINY_FIRST - 1)), vi8)
+
+    def sum_(nonnegative):
+        """A sum; where its third word marks an exponential operand, the choice bytes say in which lanes
+        that operand is negligible (:data:`TINY_EXPONENTS`; 0: in none): the constant's index + 1, plus 64
+        where it is the second operand."""
+        def emit(i, out, a, c, d):
+            x, y = load(a), load(c)
+            lo, hi = em.i_add([x, y], nonnegative)
+            store(out, (lo, hi))
+            with if_(b, b.icmp_unsigned("!=", d, ir.Constant(I64, 0))):
+                limit = vb.mul(vb.sub(hi, lo), vb.splat(NEGLIGIBLE))
+                first_ok, first_byte = tiny(x, limit)
+                second_ok, second_byte = tiny(y, limit)
+                none = ir.Constant(first_ok.type, [0] * LANES)
+                first_ok = b.select(b.icmp_unsigned("!=", b.and_(d, ir.Constant(I64, 1)), ir.Constant(I64, 0)),
+                                    first_ok, none)
+                second_ok = b.select(b.icmp_unsigned("!=", b.and_(d, ir.Constant(I64, 2)), ir.Constant(I64, 0)),
+                                     second_ok, none)
+                bytes_ = b.select(first_ok, first_byte, b.select(second_ok, b.add(second_byte, splat_int(vi8, 64)),
+                                                                 splat_int(vi8, 0)))
+                b.store(bytes_, b.bitcast(b.gep(choices, [b.mul(i, ir.Constant(I64, LANES))], inbounds=True), _P(vi8)),
+                        align=1)
+                negligible.set(b.or_(negligible.get(), b.bitcast(b.or_(first_ok, second_ok), I8)))
+        return emit
+
     cases = {"neg": unary(em.i_neg), "abs": unary(em.i_abs), "sqrt": unary(em.i_sqrt), "exp": unary(em.i_exp),
              "log": unary(em.i_log), "sin": unary(em.i_sin), "cos": unary(em.i_cos),
              "square": unary(em.i_powi, 2), "cube": unary(em.i_powi, 3), "fourth": unary(em.i_powi, 4),
-             "add": binary(em.i_add, False), "add_nonneg": binary(em.i_add, True), "sub": binary(em.i_sub),
+             "add": sum_(False), "add_nonneg": sum_(True), "sub": binary(em.i_sub),
              "mul": binary(em.i_mul), "div": binary(em.i_div), "mul_const": binary(em.i_mul_const),
              "div_const": binary(em.i_div_const), "min": choice("min"), "max": choice("max"),
              "select_lt": choice("select_lt"), "select_le": choice("select_le")}
@@ -217,7 +262,7 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
     vresult = b.bitcast(result, _P(V8))
     b.store(lo, vresult, align=8)
     b.store(hi, b.gep(vresult, [ir.Constant(I64, 1)]), align=8)
-    b.ret(decided.get())
+    b.ret(b.or_(b.zext(decided.get(), I16), b.shl(b.zext(negligible.get(), I16), ir.Constant(I16, 8))))
     return fn
 
 

@@ -11,7 +11,10 @@ runs at the group's rows, by ``mode``:
   ``out_value``;
 - 1: F and its gradient by ``tape_dual`` into ``out_value`` and ``out_grad`` (three per row);
 - 2: the rows are boxes (``pts`` their lo corners, ``pts_hi`` their hi), and ``tape_box_gradient`` encloses
-  F and its partials over each into ``out_grad`` (eight per row: F's lo, hi, then each partial's).
+  F and its partials over each into ``out_grad`` (eight per row: F's lo, hi, then each partial's);
+- 3: the rows are boxes, and ``tape_interval`` encloses F over each into ``out_grad`` (two per row: lo, hi),
+  the group's program also reading a constant for each exponential term negligible over the group's box
+  (``tape_simplify``'s substitution); ``choices`` has room for twice 8 bytes per instruction here.
  A decided choice holds at every point of its box, so the
 simplified program computes what the full one does there (docs/soundness.md): the mesher samples a model of
 thousands of instructions with the few that matter near each point.
@@ -24,7 +27,7 @@ from llvmlite import ir
 from .. import abi
 from .control import I32, I64, Local, const, define, for_range, if_, load_at, local_array, store_at
 from .kernels import load_xyz, store_lanes, store_xyz
-from .tape_eval import LANES, V8
+from .tape_eval import I8, LANES, V8
 from .vector import DOUBLE
 
 _P = ir.PointerType
@@ -42,6 +45,7 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
     box = local_array(b, DOUBLE, 6 * LANES, "box")
     result = local_array(b, DOUBLE, 8 * LANES, "result")
     simplified_output = local_array(b, I64, 1, "simplified_output")
+    substituted = local_array(b, I64, 1, "substituted")
     run_program = Local(b, _P(I32), None, "run_program")
     run_length = Local(b, I64, None, "run_length")
     run_output = Local(b, I64, None, "run_output")
@@ -59,7 +63,10 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                 k = b.add(b.mul(g, const(I64, 3)), const(I64, a))
                 store_at(b, load_at(b, lo, k), box, const(I64, a * LANES + lane))
                 store_at(b, load_at(b, hi, k), box, const(I64, (3 + a) * LANES + lane))
-        decided = b.zext(b.call(interval, [header, program, length, output, slots, choices, box, result]), I64)
+        found = b.call(interval, [header, program, length, output, slots, choices, box, result])
+        enclosing = b.icmp_unsigned("==", mode, const(I64, 3))  # the only mode that may substitute a term
+        choices_decided, terms_negligible = b.trunc(found, I8), b.trunc(b.lshr(found, ir.Constant(found.type, 8)), I8)
+        decided = b.zext(b.select(enclosing, b.or_(choices_decided, terms_negligible), choices_decided), I64)
         with for_range(b, const(I64, LANES)) as lane:
             g = b.add(first, lane)
             with if_(b, b.icmp_signed("<", g, groups)):
@@ -69,7 +76,7 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                 with if_(b, b.trunc(b.lshr(decided, lane), ir.IntType(1))):
                     stamp.set(b.add(stamp.get(), const(I32, 1)))  # the caller's ``need`` starts at zero
                     n = b.call(simplify, [program, length, output, choices, lane, work, need, stamp.get(), marks,
-                                          remap, simplified_output])
+                                          remap, simplified_output, b.zext(enclosing, I64), substituted])
                     run_program.set(work)
                     run_length.set(n)
                     run_output.set(b.load(simplified_output))
@@ -106,6 +113,19 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                         for j in range(LANES):
                             value = b.load(b.gep(result, [const(I64, LANES * k + j)]))
                             b.store(value, b.gep(rows, [const(I64, 8 * j + k)]))
+                    b.branch(done)
+                    intervals = b.append_basic_block("mode.interval")  # 3: F over boxes
+                    switch.add_case(const(I32, 3), intervals)
+                    b.position_at_end(intervals)
+                    for a, axis in enumerate(load_xyz(b, pts_hi, block, LANES)):
+                        b.store(axis, b.gep(vbox, [const(I64, 3 + a)]), align=8)
+                    row_choices = b.gep(choices, [b.mul(length, const(I64, LANES))])  # not the groups' choices
+                    b.call(interval, [header, *program_now, row_choices, box, result])
+                    rows = b.gep(out_grad, [b.mul(block, const(I64, 2 * LANES))])
+                    for k in range(2):
+                        for j in range(LANES):
+                            b.store(b.load(b.gep(result, [const(I64, LANES * k + j)])),
+                                    b.gep(rows, [const(I64, 2 * j + k)]))
                     b.branch(done)
                     b.position_at_end(done)
     b.ret_void()

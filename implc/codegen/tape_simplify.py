@@ -1,9 +1,14 @@
 """The tape engine's per-region simplification: the program one box's descendants run.
 
-``tape_simplify(program, length, output, choices, lane, out, need, stamp, mark, remap, out_output) -> length'``
-(internal): given the choices ``tape_interval`` wrote for box ``lane``, every Min/Max whose choice was
-decided becomes an alias of its winning operand (a select: of the branch its condition takes), and every
-instruction that only fed the losing one is dropped; the new program's output slot goes to ``out_output``.
+``tape_simplify(program, length, output, choices, lane, out, need, stamp, mark, remap, out_output, substitute,
+substituted) -> length'`` (internal): given the choices ``tape_interval`` wrote for box ``lane``, every
+Min/Max whose choice was decided becomes an alias of its winning operand (a select: of the branch its
+condition takes), and every instruction that only fed the losing one is dropped; the new program's output
+slot goes to ``out_output``. Where ``substitute`` is not 0, a sum whose exponential term was negligible over
+the box reads the constant [0, 2^-e] that encloses it there instead (:data:`implc.tape_program.TINY_EXPONENTS`),
+so that what only fed the term is dropped too, and ``*substituted`` becomes 1: the program encloses F below
+the box (the term's value at every point of it lies in the constant) but its partials are not F's, so only
+``tape_interval`` may run it.
 
 Two passes, both linear in the program: backward from the output, marking what the result needs
 (``need``, one int32 per slot: a slot is needed when it holds this call's ``stamp``, so nothing is cleared
@@ -27,15 +32,27 @@ from ..tape_program import FIRST_BINARY, FIRST_TERNARY, OPCODES
 from .control import I32, I64, Local, const, define_internal, for_range, if_, load_at, store_at
 from .tape_eval import I8, LANES
 
-DROP, KEEP, ALIAS_FIRST, ALIAS_SECOND = 0, 1, 2, 3
+DROP, KEEP, ALIAS_FIRST, ALIAS_SECOND, SUBSTITUTE = 0, 1, 2, 3, 4
 _P = ir.PointerType
 
 
 def emit_tape_simplify(module: ir.Module) -> ir.Function:
     """Define ``tape_simplify`` (see the module docstring) in ``module``."""
     fn, b = define_internal(module, "implc.tape.simplify", I64,
-                            [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I32), I32, _P(I8), _P(I32), _P(I64)])
-    program, length, output, choices, lane, out, need, stamp, mark, remap, out_output = fn.args
+                            [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I32), I32, _P(I8), _P(I32), _P(I64), I64,
+                             _P(I64)])
+    program, length, output, choices, lane, out, need, stamp, mark, remap, out_output, substitute, substituted = \
+        fn.args
+    substituting = b.icmp_unsigned("!=", substitute, const(I64, 0))
+    b.store(const(I64, 0), substituted)
+
+    def tiny_byte(i, code, d):
+        """The choice byte of a sum whose exponential term may be negligible (0 where it is not, or where
+        this call does not substitute)."""
+        is_sum = b.or_(b.icmp_unsigned("==", code, const(I64, OPCODES["add"])),
+                       b.icmp_unsigned("==", code, const(I64, OPCODES["add_nonneg"])))
+        watched = b.and_(substituting, b.and_(is_sum, b.icmp_unsigned("!=", d, const(I64, 0))))
+        return b.select(watched, load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane)), const(I8, 0))
 
     def field(i, k):
         return b.zext(load_at(b, program, b.add(b.mul(i, const(I64, abi.INSTRUCTION_WORDS)), const(I64, k))), I64)
@@ -56,12 +73,18 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
             choice = b.select(is_choice, load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane)), const(I8, 3))
             with b.if_else(b.icmp_unsigned("==", choice, const(I8, 3))) as (both, one):
                 with both:
-                    store_at(b, const(I8, KEEP), mark, i)
-                    store_at(b, stamp, need, a)
-                    with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))):
-                        store_at(b, stamp, need, c)
-                    with if_(b, ternary):
-                        store_at(b, stamp, need, d)
+                    tiny = tiny_byte(i, code, d)
+                    with b.if_else(b.icmp_unsigned("!=", tiny, const(I8, 0))) as (negligible, kept):
+                        with negligible:  # the sum reads a constant for its exponential term: not the term
+                            store_at(b, const(I8, SUBSTITUTE), mark, i)
+                            store_at(b, stamp, need, b.select(b.icmp_unsigned(">=", tiny, const(I8, 64)), a, c))
+                        with kept:
+                            store_at(b, const(I8, KEEP), mark, i)
+                            store_at(b, stamp, need, a)
+                            with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))):
+                                store_at(b, stamp, need, c)
+                            with if_(b, ternary):
+                                store_at(b, stamp, need, d)
                 with one:
                     picks_first = b.icmp_unsigned("==", choice, const(I8, 1))
                     store_at(b, b.select(picks_first, const(I8, ALIAS_FIRST), const(I8, ALIAS_SECOND)), mark, i)
@@ -80,9 +103,25 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
             store_at(b, b.trunc(out_slot, I32), out, b.add(row, const(I64, 1)))
             store_at(b, load_at(b, remap, a), out, b.add(row, const(I64, 2)))
             store_at(b, b.select(binary, load_at(b, remap, c), b.trunc(c, I32)), out, b.add(row, const(I64, 3)))
-            store_at(b, b.select(ternary, load_at(b, remap, d), b.trunc(d, I32)), out, b.add(row, const(I64, 4)))
+            # a substituting call's sums watch nothing: what it writes is only enclosed, never simplified
+            store_at(b, b.select(ternary, load_at(b, remap, d), b.select(substituting, const(I32, 0), b.trunc(d, I32))),
+                     out, b.add(row, const(I64, 4)))
             store_at(b, b.trunc(out_slot, I32), remap, out_slot)
             count.set(b.add(n, const(I64, 1)))
+        with if_(b, b.icmp_unsigned("==", m, const(I8, SUBSTITUTE))):
+            n = count.get()
+            row = b.mul(n, const(I64, abi.INSTRUCTION_WORDS))
+            tiny = load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane))
+            second = b.icmp_unsigned(">=", tiny, const(I8, 64))
+            constant = b.zext(b.sub(b.and_(tiny, const(I8, 63)), const(I8, 1)), I32)  # its slot: its index
+            store_at(b, b.trunc(code, I32), out, row)
+            store_at(b, b.trunc(out_slot, I32), out, b.add(row, const(I64, 1)))
+            store_at(b, b.select(second, load_at(b, remap, a), constant), out, b.add(row, const(I64, 2)))
+            store_at(b, b.select(second, constant, load_at(b, remap, c)), out, b.add(row, const(I64, 3)))
+            store_at(b, const(I32, 0), out, b.add(row, const(I64, 4)))
+            store_at(b, b.trunc(out_slot, I32), remap, out_slot)
+            count.set(b.add(n, const(I64, 1)))
+            b.store(const(I64, 1), substituted)
         with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_FIRST))):
             store_at(b, load_at(b, remap, b.select(ternary, c, a)), remap, out_slot)
         with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_SECOND))):

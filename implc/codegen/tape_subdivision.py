@@ -85,6 +85,8 @@ class TapeEvaluator(Evaluator):
         self.grid_depth = load_at(b, words, abi.TAPE_GRID_DEPTH)
         self.box = local_array(b, DOUBLE, 6 * LANES, "box")
         self.result = local_array(b, DOUBLE, 2 * LANES, "result")
+        self.substituted = local_array(b, I64, 1, "substituted")
+        self.substitution_level = b.sub(self.grid_depth, const(I64, 2))
 
     # -- each level's program and choices ------------------------------------------------------------
     def program_of(self, b, level):
@@ -108,10 +110,26 @@ class TapeEvaluator(Evaluator):
     def choices_of(self, b, level):
         return b.gep(self.choices, [b.mul(b.mul(level, self.length), const(I64, LANES))])
 
+    def exact_level(self, b, level):
+        """The level whose program gives F's partials below the octant at ``level``: its own, or its
+        parent's where its own has a negligible term replaced (:data:`implc.abi.TAPE_SUBSTITUTED`)."""
+        replaced = b.and_(b.icmp_signed("==", level, self.substitution_level),
+                          b.icmp_unsigned("!=", load_at(b, self.words, abi.TAPE_SUBSTITUTED), const(I64, 0)))
+        return b.select(replaced, b.sub(level, const(I64, 1)), level)
+
+    def worth_simplifying(self, b, level, found):
+        """The children (i8 mask) of the octant at ``level`` to get programs of their own, from what
+        ``tape_interval`` found (i16): those with a choice decided, and at the level where negligible terms
+        are replaced (two above the grid's leaves) those with one."""
+        decided, negligible = b.trunc(found, I8), b.trunc(b.lshr(found, ir.Constant(found.type, 8)), I8)
+        here = b.icmp_signed("==", b.add(level, const(I64, 1)), self.substitution_level)
+        return b.select(here, b.or_(decided, negligible), decided)
+
     def enclose_children(self, walk: Walk, level, cell, program_level=None):
         """Enclose the eight children of the octant ``cell`` (three i32) at ``level`` with the program of
         ``program_level`` (default: that level's), recording its choices at ``level``; returns the lanes with
-        a decided choice (i8). The enclosures are in ``self.result`` (lo, then hi)."""
+        a decided choice or a negligible term (i16, as ``tape_interval``). The enclosures are in ``self.result``
+        (lo, then hi)."""
         b, geom = walk.b, walk.geom
         program_level = level if program_level is None else program_level
         child = b.add(level, const(I64, 1))
@@ -142,7 +160,10 @@ class TapeEvaluator(Evaluator):
 
     def program_for_child(self, walk: Walk, level, c, decided):
         """The program of child ``c`` (i32) of the octant at ``level``: simplified by its choices where one
-        was decided (``decided``: i1) and pruning is on, else the octant's own. A child just above the leaves
+        was decided (``decided``: i1) and pruning is on, else the octant's own. Two levels above the grid's
+        leaves it also reads a constant for each negligible exponential term (``tape_simplify``'s
+        substitution; bear's programs there shrink by about a third), and serves only enclosures then: the
+        normals and the second look below it run its parent's (:meth:`exact_level`). A child just above the leaves
         (of the grid, :data:`implc.abi.TAPE_GRID_DEPTH`, wherever this walk stops) takes the octant's own
         too: its program would enclose the eight leaves once and serve nothing else, and simplifying costs
         two passes over the octant's program, about a third of what enclosing eight boxes costs per
@@ -161,12 +182,17 @@ class TapeEvaluator(Evaluator):
                         store_at(b, const(I32, 0), self.need, k)
                 stamp = b.select(b.icmp_signed(">=", stamp, const(I64, 0x7FFFFFFF)), const(I64, 1), stamp)
                 store_at(b, stamp, self.words, abi.TAPE_STAMP)
+                substitute = b.icmp_signed("==", child, self.substitution_level)
                 n = b.call(self.simplify, [*self.program(b, level), self.choices_of(b, level), b.zext(c, I64),
                                            target, self.need, b.trunc(stamp, I32), self.marks, self.remap,
-                                           self.output_at(b, child)])
+                                           self.output_at(b, child), b.zext(substitute, I64), self.substituted])
                 self.set_program(b, child, target, n, b.load(self.output_at(b, child)))
+                with if_(b, substitute):
+                    store_at(b, load_at(b, self.substituted, 0), self.words, abi.TAPE_SUBSTITUTED)
             with shared:
                 self.set_program(b, child, *self.program(b, level))
+                with if_(b, b.icmp_signed("==", child, self.substitution_level)):
+                    store_at(b, const(I64, 0), self.words, abi.TAPE_SUBSTITUTED)
 
     # -- the walk's entries ----------------------------------------------------------------------------
     def start(self, walk: Walk, level, cell) -> None:
@@ -178,7 +204,7 @@ class TapeEvaluator(Evaluator):
         with for_range(b, level) as above_level:
             above = b.trunc(b.sub(level, above_level), I32)  # the ancestor at ``above_level``: the cell >> above
             ancestor = [b.lshr(cell[a], above) for a in range(3)]
-            decided = self.enclose_children(walk, above_level, ancestor)
+            decided = self.worth_simplifying(b, above_level, self.enclose_children(walk, above_level, ancestor))
             below = b.sub(above, const(I32, 1))
             c = const(I32, 0)
             for a in range(3):
@@ -187,7 +213,7 @@ class TapeEvaluator(Evaluator):
 
     def enclose(self, walk: Walk, level, cell):
         b = walk.b
-        decided = self.enclose_children(walk, level, cell)
+        decided = self.worth_simplifying(b, level, self.enclose_children(walk, level, cell))
         f_lo, f_hi = self.enclosure(b)
         below = b.zext(b.bitcast(b.fcmp_ordered("<", f_hi, ir.Constant(V8, [0.0] * LANES)), I8), I32)
         return self.may_meet(b, f_lo, f_hi), below, b.zext(decided, I32)
@@ -203,15 +229,20 @@ class TapeEvaluator(Evaluator):
     def size(self, walk: Walk, level):
         return self.length_of(walk.b, level)
 
+    def look_size(self, walk: Walk, level):
+        return self.length_of(walk.b, self.exact_level(walk.b, level))
+
     def normals(self, walk: Walk, level, first, count) -> None:
         b = walk.b
         offset = b.mul(first, const(I64, 3))
+        level = self.exact_level(b, level)
         b.call(self.normals_fn, [self.header, *self.program(b, level), self.slots, walk.leaf_geom,
                                  b.gep(walk.out, [offset]), count, b.gep(walk.out_normals, [offset]),
                                  walk.flags_from(first)])
 
     def second_look(self, walk: Walk, level, first, count) -> None:
         b = walk.b
+        level = self.exact_level(b, level)
         b.call(self.tighten, [self.header, *self.program(b, level), self.slots,
                               self.choices_of(b, b.add(walk.depth, const(I64, 1))), walk.geom, walk.depth,
                               b.gep(walk.out, [b.mul(first, const(I64, 3))]), b.gep(walk.out_flags, [first]), count])
