@@ -198,8 +198,8 @@ of x, y, z (three words, -1 where unused); then the slot count."""
 PROGRAM_SLOT_COUNT = 9
 PROGRAM_WORDS = 10
 INSTRUCTION_WORDS = 5
-"""A tape instruction (int32): opcode, output slot, three operand slots (unused ones 0; a sum's third word
-says which of its operands an exponential gives: :data:`implc.tape_program.TINY_EXPONENTS`)."""
+"""A tape instruction (int32): opcode, output slot, three operand slots (unused ones 0; a watched sum's third
+word says which of its operands an exponential gives: :data:`implc.tape_program.TINY_EXPONENTS`)."""
 WALK_LEVELS = MAX_DEPTH + 2
 """Levels the walk keeps a frame (and an evaluator a context) for (0 to MAX_DEPTH + 1)."""
 WALK_FRAME_WORDS = 5

@@ -39,7 +39,8 @@ from . import abi
 from .ir import Tape
 
 UNARY = ("neg", "abs", "sqrt", "exp", "log", "sin", "cos", "square", "cube", "fourth")
-BINARY = ("add", "add_nonneg", "sub", "mul", "div", "mul_const", "div_const", "min", "max")
+BINARY = ("add", "add_nonneg", "add_watched", "add_nonneg_watched", "sub", "mul", "div", "mul_const", "div_const",
+          "min", "max")
 TERNARY = ("select_lt", "select_le")
 OPCODES = {name: code for code, name in enumerate(UNARY + BINARY + TERNARY)}
 """Opcode of each instruction kind."""
@@ -56,7 +57,8 @@ an octant where the exponential's enclosure is at most 2^-e, and 2^-e at most :d
 the sum's magnitude, the sum reads the constant instead (:mod:`implc.codegen.tape_simplify`), and the
 exponential's argument is not evaluated: far from a primitive, a smooth blend's term costs nothing. Such
 a sum's third instruction word says which of its operands an exponential gives (bit 0: the first, bit 1:
-the second)."""
+the second), and its opcode is ``add_watched`` or ``add_nonneg_watched``: the same sums, which only
+``tape_interval`` tells from the others (a plain sum costs nothing more)."""
 NEGLIGIBLE = 2.0 ** -7
 """How small a sum's exponential term must be, relative to the least magnitude of the sum over an octant,
 for the octant's descendants to read a constant instead: the sum's enclosure widens by that much at most
@@ -158,7 +160,8 @@ def encode(tape: Tape) -> TapeProgram:
             if attr[1] > 0 or attr[2] < 0:
                 signed.add(slot)
         elif op == "add":
-            slot = emit("add_nonneg" if attr else "add", s[0], s[1], exponential[args[0]] | exponential[args[1]] << 1)
+            watched = exponential[args[0]] | exponential[args[1]] << 1
+            slot = emit(("add_nonneg" if attr else "add") + ("_watched" if watched else ""), s[0], s[1], watched)
         elif op == "scale":  # c is exact: the product's rounding is the mul rule's
             slot = emit("mul_const", s[0], constant(attr, attr, attr)) if attr else emit("mul", constant(0, 0, 0), s[0])
         elif op == "mul" and (s[0] in signed or s[1] in signed):

@@ -213,6 +213,8 @@ BOX_GRADIENT_CASES = {  # together every opcode (checked below)
     "csg": Min(sqrt(x**2 + y**2 + z**2) - Rational(1, 2), Max(Abs(x) - Rational(1, 3), -y)),
     "smooth": sympy.exp(x * y) / (2 + cos(z)) - sympy.log(3 + sin(x + y)) + (y - x)**3 - (z + x)**4,
     "selects": Piecewise((x**2 - y, z < x), (y - z, True)) + Piecewise((z, x <= y), (-x, True)),
+    # a smooth union (a nonnegative sum of exponentials) plus an exponential term: both watched sums
+    "blend": -sympy.log(sympy.exp(-3 * (x**2 + y**2 - z)) + sympy.exp(3 * (x - y))) / 3 + sympy.exp(z - x),
     # a .vm tape keeps its sub instructions; its truth is the same function written in SymPy
     # (with a division by a negative constant and a product with one that is not a double: div_const, mul_const)
     "vm": parse_vm("_0 var-x\n_1 var-y\n_2 var-z\n_3 const 0.25\n_4 sub _0 _1\n_5 mul _4 _2\n_6 sub _5 _3\n"
@@ -376,14 +378,16 @@ def far_blobs():
 
 def test_a_sum_of_an_exponential_is_marked_and_has_its_constants():
     """A sum's third word marks the operands an exponential gives (the slot's last writer, slots being
-    shared), and such a program's first constants are [0, 2^-e], each e of TINY_EXPONENTS in order."""
+    shared), exactly where its opcode is a watched sum's, and such a program's first constants are
+    [0, 2^-e], each e of TINY_EXPONENTS in order."""
     for expr, marked in ((far_blobs(), True), (smooth_blend(), True), (nested_scene(), False)):
         program = implc.compile(expr, engine="tape").program
         writer = {}
         marks = 0
         for code, out, a, b, c in program.instructions:
-            if code in (OPCODES["add"], OPCODES["add_nonneg"]):
+            if code in (OPCODES["add"], OPCODES["add_nonneg"], OPCODES["add_watched"], OPCODES["add_nonneg_watched"]):
                 assert c == (writer.get(a) == OPCODES["exp"]) | (writer.get(b) == OPCODES["exp"]) << 1
+                assert (c != 0) == (code in (OPCODES["add_watched"], OPCODES["add_nonneg_watched"]))
                 marks += c != 0
             elif FIRST_BINARY <= code < FIRST_TERNARY:
                 assert c == 0

@@ -43,13 +43,13 @@ def build_tape_engine(directed: bool) -> str:
     prefill = emit_tape_prefill(module)
     interval = emit_tape_interval(module, directed)
     dual = emit_tape_dual(module)
-    simplify = emit_tape_simplify(module)
+    simplify, substituting = emit_tape_simplify(module), emit_tape_simplify(module, substitute=True)
     normals = emit_tape_normals(module, dual)
     box_gradient = emit_tape_box_gradient(module, directed)
     point = emit_tape_dual(module, partials=False)
     tighten = emit_tape_tighten(module, interval, box_gradient, point, directed)
-    emit_tape_subdivide(module, prefill, interval, simplify, normals, tighten)
-    emit_tape_grouped(module, prefill, interval, simplify, point, dual, box_gradient)
+    emit_tape_subdivide(module, prefill, interval, (simplify, substituting), normals, tighten)
+    emit_tape_grouped(module, prefill, interval, (simplify, substituting), point, dual, box_gradient)
     null_remap = ir.Constant(_P(ir.IntType(32)), None)
 
     @contextmanager

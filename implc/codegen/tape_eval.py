@@ -12,7 +12,8 @@ switch on the opcode, eight lanes (the eight children of an octant, or eight poi
   ``choices[8p..]`` (bit 0: operand a may be the result over that box, bit 1: b may; NaN decides
   nothing) and returns the lanes in which some choice was decided (bit c: box c); for each sum of an
   exponential, bytes saying in which lanes that term is negligible
-  (:data:`~implc.tape_program.TINY_EXPONENTS`), and those lanes in the returned i16's upper byte.
+  (:data:`~implc.tape_program.TINY_EXPONENTS`: its ``add_watched`` or ``add_nonneg_watched``), and those lanes
+  in the returned i16's upper byte.
 - ``tape_dual(header, instructions, length, output, slots, points, result)``: F and its gradient at eight
   points (three vectors), forward mode (value and three partials per slot), into ``result`` (value, dx,
   dy, dz): for normals.
@@ -44,6 +45,7 @@ from .vector import DOUBLE, VectorBuilder, broadcast
 
 LANES = 8
 I8, I16 = ir.IntType(8), ir.IntType(16)
+SUMS = ("add", "add_nonneg", "add_watched", "add_nonneg_watched")
 _TINY_FIRST, _TINY_LAST = TINY_EXPONENTS[0] // 2, TINY_EXPONENTS[-1] // 2
 assert TINY_EXPONENTS == tuple(range(2 * _TINY_FIRST, 2 * _TINY_LAST + 1, 2)) and len(TINY_EXPONENTS) < 64
 V8 = ir.VectorType(DOUBLE, LANES)
@@ -225,34 +227,34 @@ def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
                     b.and_(vb.cmp(">=", term[0], vb.splat(0.0)), vb.cmp("<=", bound, limit)))
         return ok, b.trunc(b.sub(q, splat_int(vi64, _TINY_FIRST - 1)), vi8)
 
-    def sum_(nonnegative):
-        """A sum; where its third word marks an exponential operand, the choice bytes say in which lanes
-        that operand is negligible (:data:`TINY_EXPONENTS`; 0: in none): the constant's index + 1, plus 64
-        where it is the second operand."""
+    def watched_sum(nonnegative):
+        """A sum whose third word marks an exponential operand: the choice bytes say in which lanes that
+        operand is negligible (:data:`TINY_EXPONENTS`; 0: in none): the constant's index + 1, plus 64 where
+        it is the second operand."""
         def emit(i, out, a, c, d):
             x, y = load(a), load(c)
             lo, hi = em.i_add([x, y], nonnegative)
             store(out, (lo, hi))
-            with if_(b, b.icmp_unsigned("!=", d, ir.Constant(I64, 0))):
-                limit = vb.mul(vb.sub(hi, lo), vb.splat(NEGLIGIBLE))
-                first_ok, first_byte = tiny(x, limit)
-                second_ok, second_byte = tiny(y, limit)
-                none = ir.Constant(first_ok.type, [0] * LANES)
-                first_ok = b.select(b.icmp_unsigned("!=", b.and_(d, ir.Constant(I64, 1)), ir.Constant(I64, 0)),
-                                    first_ok, none)
-                second_ok = b.select(b.icmp_unsigned("!=", b.and_(d, ir.Constant(I64, 2)), ir.Constant(I64, 0)),
-                                     second_ok, none)
-                bytes_ = b.select(first_ok, first_byte, b.select(second_ok, b.add(second_byte, splat_int(vi8, 64)),
-                                                                 splat_int(vi8, 0)))
-                b.store(bytes_, b.bitcast(b.gep(choices, [b.mul(i, ir.Constant(I64, LANES))], inbounds=True), _P(vi8)),
-                        align=1)
-                negligible.set(b.or_(negligible.get(), b.bitcast(b.or_(first_ok, second_ok), I8)))
+            limit = vb.mul(vb.sub(hi, lo), vb.splat(NEGLIGIBLE))
+            first_ok, first_byte = tiny(x, limit)
+            second_ok, second_byte = tiny(y, limit)
+            none = ir.Constant(first_ok.type, [0] * LANES)
+            first_ok = b.select(b.icmp_unsigned("!=", b.and_(d, ir.Constant(I64, 1)), ir.Constant(I64, 0)),
+                                first_ok, none)
+            second_ok = b.select(b.icmp_unsigned("!=", b.and_(d, ir.Constant(I64, 2)), ir.Constant(I64, 0)),
+                                 second_ok, none)
+            bytes_ = b.select(first_ok, first_byte, b.select(second_ok, b.add(second_byte, splat_int(vi8, 64)),
+                                                             splat_int(vi8, 0)))
+            b.store(bytes_, b.bitcast(b.gep(choices, [b.mul(i, ir.Constant(I64, LANES))], inbounds=True), _P(vi8)),
+                    align=1)
+            negligible.set(b.or_(negligible.get(), b.bitcast(b.or_(first_ok, second_ok), I8)))
         return emit
 
     cases = {"neg": unary(em.i_neg), "abs": unary(em.i_abs), "sqrt": unary(em.i_sqrt), "exp": unary(em.i_exp),
              "log": unary(em.i_log), "sin": unary(em.i_sin), "cos": unary(em.i_cos),
              "square": unary(em.i_powi, 2), "cube": unary(em.i_powi, 3), "fourth": unary(em.i_powi, 4),
-             "add": sum_(False), "add_nonneg": sum_(True), "sub": binary(em.i_sub),
+             "add": binary(em.i_add, False), "add_nonneg": binary(em.i_add, True),
+             "add_watched": watched_sum(False), "add_nonneg_watched": watched_sum(True), "sub": binary(em.i_sub),
              "mul": binary(em.i_mul), "div": binary(em.i_div), "mul_const": binary(em.i_mul_const),
              "div_const": binary(em.i_div_const), "min": choice("min"), "max": choice("max"),
              "select_lt": choice("select_lt"), "select_le": choice("select_le")}
@@ -352,8 +354,7 @@ def emit_tape_dual(module: ir.Module, partials: bool = True) -> ir.Function:
              "sin": unary(lambda x: chain(elementary.sin(vb, x[0]), elementary.cos(vb, x[0]), x)),
              "cos": unary(lambda x: chain(elementary.cos(vb, x[0]), vb.neg(elementary.sin(vb, x[0])), x)),
              "square": unary(power(2)), "cube": unary(power(3)), "fourth": unary(power(4)),
-             "add": binary(lambda x, y: [vb.add(p, q) for p, q in zip(x, y)]),
-             "add_nonneg": binary(lambda x, y: [vb.add(p, q) for p, q in zip(x, y)]),
+             **{name: binary(lambda x, y: [vb.add(p, q) for p, q in zip(x, y)]) for name in SUMS},
              "sub": binary(lambda x, y: [vb.sub(p, q) for p, q in zip(x, y)]),
              "mul": binary(mul), "div": binary(div),
              "mul_const": binary(lambda x, c: [vb.mul(p, c[0]) for p in x]),  # c's partials are 0
@@ -479,7 +480,8 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
              "sin": unary(lambda x: chain(em.i_sin([x[0]], None), em.i_cos([x[0]], None), x)),
              "cos": unary(lambda x: chain(em.i_cos([x[0]], None), em.i_neg([em.i_sin([x[0]], None)], None), x)),
              "square": unary(power(2)), "cube": unary(power(3)), "fourth": unary(power(4)),
-             "add": binary(add(False)), "add_nonneg": binary(add(True)),
+             "add": binary(add(False)), "add_nonneg": binary(add(True)), "add_watched": binary(add(False)),
+             "add_nonneg_watched": binary(add(True)),
              "sub": binary(lambda x, y: [em.i_sub([p, q], None) for p, q in zip(x, y)]),
              "mul": binary(mul), "div": binary(div),
              "mul_const": binary(lambda x, c: [em.i_mul_const([p, c[0]], None) for p in x]),  # c's partials: 0

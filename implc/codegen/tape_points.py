@@ -33,9 +33,11 @@ from .vector import DOUBLE
 _P = ir.PointerType
 
 
-def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Function, simplify: ir.Function,
+def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Function, simplify: tuple,
                       point: ir.Function, dual: ir.Function, box_gradient: ir.Function):
-    """Define ``implc_tape_grouped`` (see the module docstring) in ``module``."""
+    """Define ``implc_tape_grouped`` (see the module docstring) in ``module``; ``simplify``: ``tape_simplify``
+    and its substituting variant."""
+    simplify, simplify_substituting = simplify
     fn, b = define(module, abi.TAPE_GROUPED)
     (header, slots, choices, need, marks, remap, work, lo, hi, starts, groups, pts, pts_hi, out_value, out_grad,
      mode) = fn.args
@@ -75,10 +77,14 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                 run_output.set(output)
                 with if_(b, b.trunc(b.lshr(decided, lane), ir.IntType(1))):
                     stamp.set(b.add(stamp.get(), const(I32, 1)))  # the caller's ``need`` starts at zero
-                    n = b.call(simplify, [program, length, output, choices, lane, work, need, stamp.get(), marks,
-                                          remap, simplified_output, b.zext(enclosing, I64), substituted])
+                    arguments = [program, length, output, choices, lane, work, need, stamp.get(), marks, remap,
+                                 simplified_output]
+                    with b.if_else(enclosing) as (substituting, plain):
+                        with substituting:
+                            run_length.set(b.call(simplify_substituting, arguments + [substituted]))
+                        with plain:
+                            run_length.set(b.call(simplify, arguments))
                     run_program.set(work)
-                    run_length.set(n)
                     run_output.set(b.load(simplified_output))
                 begin = b.sdiv(load_at(b, starts, g), const(I64, LANES))
                 end = b.sdiv(load_at(b, starts, b.add(g, const(I64, 1))), const(I64, LANES))

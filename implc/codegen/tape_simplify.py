@@ -1,14 +1,15 @@
 """The tape engine's per-region simplification: the program one box's descendants run.
 
-``tape_simplify(program, length, output, choices, lane, out, need, stamp, mark, remap, out_output, substitute,
-substituted) -> length'`` (internal): given the choices ``tape_interval`` wrote for box ``lane``, every
-Min/Max whose choice was decided becomes an alias of its winning operand (a select: of the branch its
-condition takes), and every instruction that only fed the losing one is dropped; the new program's output
-slot goes to ``out_output``. Where ``substitute`` is not 0, a sum whose exponential term was negligible over
-the box reads the constant [0, 2^-e] that encloses it there instead (:data:`implc.tape_program.TINY_EXPONENTS`),
-so that what only fed the term is dropped too, and ``*substituted`` becomes 1: the program encloses F below
-the box (the term's value at every point of it lies in the constant) but its partials are not F's, so only
-``tape_interval`` may run it.
+``tape_simplify(program, length, output, choices, lane, out, need, stamp, mark, remap, out_output) -> length'``
+(internal): given the choices ``tape_interval`` wrote for box ``lane``, every Min/Max whose choice was
+decided becomes an alias of its winning operand (a select: of the branch its condition takes), and every
+instruction that only fed the losing one is dropped; the new program's output slot goes to ``out_output``.
+Its variant ``tape_simplify_substituting(..., substituted)`` also makes a watched sum whose exponential term
+was negligible over the box read the constant [0, 2^-e] that encloses it there
+(:data:`implc.tape_program.TINY_EXPONENTS`), so that what only fed the term is dropped too, and sets
+``*substituted`` to 1 where it did: the program encloses F below the box (the term's value at every point of
+it lies in the constant) but its partials are not F's, so only ``tape_interval`` may run it; its sums are
+plain (nothing below simplifies it again).
 
 Two passes, both linear in the program: backward from the output, marking what the result needs
 (``need``, one int32 per slot: a slot is needed when it holds this call's ``stamp``, so nothing is cleared
@@ -36,26 +37,34 @@ DROP, KEEP, ALIAS_FIRST, ALIAS_SECOND, SUBSTITUTE = 0, 1, 2, 3, 4
 _P = ir.PointerType
 
 
-def emit_tape_simplify(module: ir.Module) -> ir.Function:
-    """Define ``tape_simplify`` (see the module docstring) in ``module``."""
-    fn, b = define_internal(module, "implc.tape.simplify", I64,
-                            [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I32), I32, _P(I8), _P(I32), _P(I64), I64,
-                             _P(I64)])
-    program, length, output, choices, lane, out, need, stamp, mark, remap, out_output, substitute, substituted = \
-        fn.args
-    substituting = b.icmp_unsigned("!=", substitute, const(I64, 0))
-    b.store(const(I64, 0), substituted)
+def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Function:
+    """Define ``tape_simplify`` (see the module docstring) in ``module``; with ``substitute``, the variant
+    that also replaces negligible terms (``implc.tape.simplify_substituting``, the same arguments and
+    ``substituted``): a plain simplification does no work for them."""
+    arguments = [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I32), I32, _P(I8), _P(I32), _P(I64)]
+    fn, b = define_internal(module, "implc.tape.simplify_substituting" if substitute else "implc.tape.simplify", I64,
+                            arguments + ([_P(I64)] if substitute else []))
+    program, length, output, choices, lane, out, need, stamp, mark, remap, out_output = fn.args[:11]
+    watched_codes = (OPCODES["add_watched"], OPCODES["add_nonneg_watched"])
+    if substitute:
+        substituted = fn.args[11]
+        b.store(const(I64, 0), substituted)
 
-    def tiny_byte(i, code, d):
-        """The choice byte of a sum whose exponential term may be negligible (0 where it is not, or where
-        this call does not substitute)."""
-        is_sum = b.or_(b.icmp_unsigned("==", code, const(I64, OPCODES["add"])),
-                       b.icmp_unsigned("==", code, const(I64, OPCODES["add_nonneg"])))
-        watched = b.and_(substituting, b.and_(is_sum, b.icmp_unsigned("!=", d, const(I64, 0))))
-        return b.select(watched, load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane)), const(I8, 0))
+    def choice_byte(i):
+        return load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane))
+
+    def watched(code):
+        return b.or_(*(b.icmp_unsigned("==", code, const(I64, c)) for c in watched_codes))
 
     def field(i, k):
         return b.zext(load_at(b, program, b.add(b.mul(i, const(I64, abi.INSTRUCTION_WORDS)), const(I64, k))), I64)
+
+    def need_operands(code, a, c, d, ternary):
+        store_at(b, stamp, need, a)
+        with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))):
+            store_at(b, stamp, need, c)
+        with if_(b, ternary):
+            store_at(b, stamp, need, d)
 
     store_at(b, stamp, need, output)
     last = b.sub(length, const(I64, 1))
@@ -70,25 +79,36 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
             store_at(b, const(I32, 0), need, out_slot)  # what the slot held before this one wrote it: not yet
             is_choice = b.or_(ternary, b.or_(b.icmp_unsigned("==", code, const(I64, OPCODES["min"])),
                                              b.icmp_unsigned("==", code, const(I64, OPCODES["max"]))))
-            choice = b.select(is_choice, load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane)), const(I8, 3))
+            choice = b.select(is_choice, choice_byte(i), const(I8, 3))
             with b.if_else(b.icmp_unsigned("==", choice, const(I8, 3))) as (both, one):
                 with both:
-                    tiny = tiny_byte(i, code, d)
-                    with b.if_else(b.icmp_unsigned("!=", tiny, const(I8, 0))) as (negligible, kept):
-                        with negligible:  # the sum reads a constant for its exponential term: not the term
-                            store_at(b, const(I8, SUBSTITUTE), mark, i)
-                            store_at(b, stamp, need, b.select(b.icmp_unsigned(">=", tiny, const(I8, 64)), a, c))
-                        with kept:
-                            store_at(b, const(I8, KEEP), mark, i)
-                            store_at(b, stamp, need, a)
-                            with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))):
-                                store_at(b, stamp, need, c)
-                            with if_(b, ternary):
-                                store_at(b, stamp, need, d)
+                    if substitute:
+                        tiny = Local(b, I8, const(I8, 0), "tiny")
+                        with if_(b, watched(code)):
+                            tiny.set(choice_byte(i))
+                        with b.if_else(b.icmp_unsigned("!=", tiny.get(), const(I8, 0))) as (negligible, kept):
+                            with negligible:  # the sum reads a constant for its exponential term: not the term
+                                store_at(b, const(I8, SUBSTITUTE), mark, i)
+                                kept_operand = b.select(b.icmp_unsigned(">=", tiny.get(), const(I8, 64)), a, c)
+                                store_at(b, stamp, need, kept_operand)
+                            with kept:
+                                store_at(b, const(I8, KEEP), mark, i)
+                                need_operands(code, a, c, d, ternary)
+                    else:
+                        store_at(b, const(I8, KEEP), mark, i)
+                        need_operands(code, a, c, d, ternary)
                 with one:
                     picks_first = b.icmp_unsigned("==", choice, const(I8, 1))
                     store_at(b, b.select(picks_first, const(I8, ALIAS_FIRST), const(I8, ALIAS_SECOND)), mark, i)
                     store_at(b, stamp, need, b.select(picks_first, first, second))
+
+    def plain(code):
+        """A watched sum's code as a plain sum's: a substituting call's output is only ever enclosed."""
+        if not substitute:
+            return code
+        return b.select(b.icmp_unsigned("==", code, const(I64, OPCODES["add_watched"])), const(I64, OPCODES["add"]),
+                        b.select(b.icmp_unsigned("==", code, const(I64, OPCODES["add_nonneg_watched"])),
+                                 const(I64, OPCODES["add_nonneg"]), code))
 
     count = Local(b, I64, 0, "count")
     with for_range(b, length) as i:  # forward: write what is kept, operands renamed through the aliases
@@ -99,29 +119,29 @@ def emit_tape_simplify(module: ir.Module) -> ir.Function:
             n = count.get()
             row = b.mul(n, const(I64, abi.INSTRUCTION_WORDS))
             binary = b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))
-            store_at(b, b.trunc(code, I32), out, row)
+            store_at(b, b.trunc(plain(code), I32), out, row)
             store_at(b, b.trunc(out_slot, I32), out, b.add(row, const(I64, 1)))
             store_at(b, load_at(b, remap, a), out, b.add(row, const(I64, 2)))
             store_at(b, b.select(binary, load_at(b, remap, c), b.trunc(c, I32)), out, b.add(row, const(I64, 3)))
-            # a substituting call's sums watch nothing: what it writes is only enclosed, never simplified
-            store_at(b, b.select(ternary, load_at(b, remap, d), b.select(substituting, const(I32, 0), b.trunc(d, I32))),
-                     out, b.add(row, const(I64, 4)))
+            fourth = b.trunc(d, I32) if not substitute else b.select(ternary, b.trunc(d, I32), const(I32, 0))
+            store_at(b, b.select(ternary, load_at(b, remap, d), fourth), out, b.add(row, const(I64, 4)))
             store_at(b, b.trunc(out_slot, I32), remap, out_slot)
             count.set(b.add(n, const(I64, 1)))
-        with if_(b, b.icmp_unsigned("==", m, const(I8, SUBSTITUTE))):
-            n = count.get()
-            row = b.mul(n, const(I64, abi.INSTRUCTION_WORDS))
-            tiny = load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane))
-            second = b.icmp_unsigned(">=", tiny, const(I8, 64))
-            constant = b.zext(b.sub(b.and_(tiny, const(I8, 63)), const(I8, 1)), I32)  # its slot: its index
-            store_at(b, b.trunc(code, I32), out, row)
-            store_at(b, b.trunc(out_slot, I32), out, b.add(row, const(I64, 1)))
-            store_at(b, b.select(second, load_at(b, remap, a), constant), out, b.add(row, const(I64, 2)))
-            store_at(b, b.select(second, constant, load_at(b, remap, c)), out, b.add(row, const(I64, 3)))
-            store_at(b, const(I32, 0), out, b.add(row, const(I64, 4)))
-            store_at(b, b.trunc(out_slot, I32), remap, out_slot)
-            count.set(b.add(n, const(I64, 1)))
-            b.store(const(I64, 1), substituted)
+        if substitute:
+            with if_(b, b.icmp_unsigned("==", m, const(I8, SUBSTITUTE))):
+                n = count.get()
+                row = b.mul(n, const(I64, abi.INSTRUCTION_WORDS))
+                tiny = choice_byte(i)
+                second_operand = b.icmp_unsigned(">=", tiny, const(I8, 64))
+                constant = b.zext(b.sub(b.and_(tiny, const(I8, 63)), const(I8, 1)), I32)  # its slot: its index
+                store_at(b, b.trunc(plain(code), I32), out, row)
+                store_at(b, b.trunc(out_slot, I32), out, b.add(row, const(I64, 1)))
+                store_at(b, b.select(second_operand, load_at(b, remap, a), constant), out, b.add(row, const(I64, 2)))
+                store_at(b, b.select(second_operand, constant, load_at(b, remap, c)), out, b.add(row, const(I64, 3)))
+                store_at(b, const(I32, 0), out, b.add(row, const(I64, 4)))
+                store_at(b, b.trunc(out_slot, I32), remap, out_slot)
+                count.set(b.add(n, const(I64, 1)))
+                b.store(const(I64, 1), substituted)
         with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_FIRST))):
             store_at(b, load_at(b, remap, b.select(ternary, c, a)), remap, out_slot)
         with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_SECOND))):

@@ -16,7 +16,7 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, at, const, define_internal, for_range, if_, load_at, local_array, store_at
+from .control import I32, I64, Local, at, const, define_internal, for_range, if_, load_at, local_array, store_at
 from .kernels import load_xyz, store_xyz
 from .normals import emit_normals_body
 from .tape_eval import I8, LANES, V8
@@ -66,9 +66,10 @@ class TapeEvaluator(Evaluator):
 
     octant_context = True
 
-    def __init__(self, prefill: ir.Function, interval: ir.Function, simplify: ir.Function, normals: ir.Function,
+    def __init__(self, prefill: ir.Function, interval: ir.Function, simplify: tuple, normals: ir.Function,
                  tighten: ir.Function):
-        self.prefill, self.interval, self.simplify = prefill, interval, simplify
+        self.prefill, self.interval = prefill, interval
+        self.simplify, self.simplify_substituting = simplify
         self.normals_fn, self.tighten = normals, tighten
 
     def begin(self, walk: Walk) -> None:
@@ -182,13 +183,16 @@ class TapeEvaluator(Evaluator):
                         store_at(b, const(I32, 0), self.need, k)
                 stamp = b.select(b.icmp_signed(">=", stamp, const(I64, 0x7FFFFFFF)), const(I64, 1), stamp)
                 store_at(b, stamp, self.words, abi.TAPE_STAMP)
-                substitute = b.icmp_signed("==", child, self.substitution_level)
-                n = b.call(self.simplify, [*self.program(b, level), self.choices_of(b, level), b.zext(c, I64),
-                                           target, self.need, b.trunc(stamp, I32), self.marks, self.remap,
-                                           self.output_at(b, child), b.zext(substitute, I64), self.substituted])
-                self.set_program(b, child, target, n, b.load(self.output_at(b, child)))
-                with if_(b, substitute):
-                    store_at(b, load_at(b, self.substituted, 0), self.words, abi.TAPE_SUBSTITUTED)
+                arguments = [*self.program(b, level), self.choices_of(b, level), b.zext(c, I64), target, self.need,
+                             b.trunc(stamp, I32), self.marks, self.remap, self.output_at(b, child)]
+                n = Local(b, I64, const(I64, 0), "simplified_length")
+                with b.if_else(b.icmp_signed("==", child, self.substitution_level)) as (substituting, plain):
+                    with substituting:
+                        n.set(b.call(self.simplify_substituting, arguments + [self.substituted]))
+                        store_at(b, load_at(b, self.substituted, 0), self.words, abi.TAPE_SUBSTITUTED)
+                    with plain:
+                        n.set(b.call(self.simplify, arguments))
+                self.set_program(b, child, target, n.get(), b.load(self.output_at(b, child)))
             with shared:
                 self.set_program(b, child, *self.program(b, level))
                 with if_(b, b.icmp_signed("==", child, self.substitution_level)):
@@ -248,7 +252,8 @@ class TapeEvaluator(Evaluator):
                               b.gep(walk.out, [b.mul(first, const(I64, 3))]), b.gep(walk.out_flags, [first]), count])
 
 
-def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Function, simplify: ir.Function,
+def emit_tape_subdivide(module: ir.Module, prefill: ir.Function, interval: ir.Function, simplify: tuple,
                         normals: ir.Function, tighten: ir.Function) -> ir.Function:
-    """``implc_tape_subdivide``: the walk over the tape engine."""
+    """``implc_tape_subdivide``: the walk over the tape engine (``simplify``: ``tape_simplify`` and its
+    substituting variant)."""
     return emit_walk(module, abi.TAPE_SUBDIVIDE, TapeEvaluator(prefill, interval, simplify, normals, tighten))
