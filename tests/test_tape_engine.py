@@ -399,6 +399,20 @@ def test_a_sum_of_an_exponential_is_marked_and_has_its_constants():
             (0.0, (0.5, 1 - e)) for e in tape_program.TINY_EXPONENTS[:n]]
 
 
+def test_normals_never_come_from_a_program_with_a_term_replaced():
+    """The normals are F's gradient by the dual numbers, over a program with no term replaced, whatever
+    level the tasks start at: at 16³ with five workers the tasks start one level above the leaves, below
+    the octants whose programs replace negligible terms (its normals differed from one worker's by up to
+    1.2e-3 when those took that program); the unpruned run's normals are the full program's."""
+    s = implc.compile(far_blobs(), engine="tape")
+    unpruned = implc.voxelize(s, 4, storage="coords", workers=1, prune=False, **implc.NATURAL)
+    for workers in (1, 5):
+        v = implc.voxelize(s, 4, storage="coords", workers=workers, **implc.NATURAL)
+        assert workers == 1 or v.stats.tasks > 8 ** 2  # tasks below level 2, two above the leaves
+        np.testing.assert_array_equal(v.coords, unpruned.coords)
+        np.testing.assert_array_equal(v.normals, unpruned.normals)
+
+
 def test_enclosures_with_negligible_terms_replaced_hold_at_forty_digits():
     """Below a box, a sum reads [0, 2^-e] for an exponential term at most 2^-e over it (and 2^-e at most
     NEGLIGIBLE times the sum's width): the enclosures over boxes inside it, by the program so simplified

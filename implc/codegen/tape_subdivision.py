@@ -112,11 +112,12 @@ class TapeEvaluator(Evaluator):
         return b.gep(self.choices, [b.mul(b.mul(level, self.length), const(I64, LANES))])
 
     def exact_level(self, b, level):
-        """The level whose program gives F's partials below the octant at ``level``: its own, or its
-        parent's where its own has a negligible term replaced (:data:`implc.abi.TAPE_SUBSTITUTED`)."""
-        replaced = b.and_(b.icmp_signed("==", level, self.substitution_level),
+        """The level whose program gives F's partials below the octant at ``level``: its own, or where the
+        program two levels above the leaves has a negligible term replaced (:data:`implc.abi.TAPE_SUBSTITUTED`)
+        and ``level`` is that one or below (a task's walk may start there), the parent of that octant's."""
+        replaced = b.and_(b.icmp_signed(">=", level, self.substitution_level),
                           b.icmp_unsigned("!=", load_at(b, self.words, abi.TAPE_SUBSTITUTED), const(I64, 0)))
-        return b.select(replaced, b.sub(level, const(I64, 1)), level)
+        return b.select(replaced, b.sub(self.substitution_level, const(I64, 1)), level)
 
     def worth_simplifying(self, b, level, found):
         """The children (i8 mask) of the octant at ``level`` to get programs of their own, from what
