@@ -321,7 +321,9 @@ def voxelize(surface: Surface, depth: int = 9, *, workers: int | None = None, st
 
     ``mean_value_levels``: how many of the deepest levels also use the mean-value form (tighter on small
     boxes, about five times the work per box); 0 uses the natural enclosure everywhere. ``prune``: skip,
-    below each octant, the terms of a blend sum or a Min/Max chain that its enclosure showed dead there.
+    below each octant, the terms of a blend sum or a Min/Max chain that its enclosure showed dead there
+    (and on the tape engine read a constant for a smooth blend's negligible exponential terms: a few more
+    voxels than ``prune=False`` keeps, never fewer; docs/soundness.md).
     ``refine_leaves``: "auto" (the default) tests again the kept leaves that the linear model at their
     centre does not cross with the monotonicity form (over the leaf, then where that fails over its
     eighths and theirs; the tape engine runs its own version) and drops those proven empty;
