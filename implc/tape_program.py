@@ -54,15 +54,16 @@ be the result over a box, bit 1 the second."""
 TINY_EXPONENTS = tuple(range(2, 127, 2))
 """The constants [0, 2^-e] a program with a sum of an exponential has (slots 0, 1, ... in this order): below
 an octant where the exponential's enclosure is at most 2^-e, and 2^-e at most :data:`NEGLIGIBLE` times
-the sum's magnitude, the sum reads the constant instead (:mod:`implc.codegen.tape_simplify`), and the
+the width of the sum's enclosure, the sum reads the constant instead (:mod:`implc.codegen.tape_simplify`), and the
 exponential's argument is not evaluated: far from a primitive, a smooth blend's term costs nothing. Such
 a sum's third instruction word says which of its operands an exponential gives (bit 0: the first, bit 1:
 the second), and its opcode is ``add_watched`` or ``add_nonneg_watched``: the same sums, which only
 ``tape_interval`` tells from the others (a plain sum costs nothing more)."""
 NEGLIGIBLE = 2.0 ** -7
-"""How small a sum's exponential term must be, relative to the least magnitude of the sum over an octant,
-for the octant's descendants to read a constant instead: the sum's enclosure widens by that much at most
-(a smooth union's by 2^-12 of its scale's units: at 512³ a fiftieth of a cell of the unit cube)."""
+"""How small a sum's exponential term must be, relative to the width of the sum's enclosure over an
+octant, for the octant's descendants to read a constant instead: scale-free, and the sum's enclosure over
+a descendant widens by at most that share of its width over the octant (a few per cent of a leaf's two
+levels down; in the median, bear's at 512³, far less: docs/soundness.md)."""
 
 _POWERS = {2: "square", 3: "cube", 4: "fourth"}
 _DIRECT = {"neg", "abs", "sqrt", "exp", "log", "sin", "cos", "sub", "mul", "div", "min", "max", "select_lt",

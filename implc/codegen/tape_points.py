@@ -14,7 +14,7 @@ runs at the group's rows, by ``mode``:
   F and its partials over each into ``out_grad`` (eight per row: F's lo, hi, then each partial's);
 - 3: the rows are boxes, and ``tape_interval`` encloses F over each into ``out_grad`` (two per row: lo, hi),
   the group's program also reading a constant for each exponential term negligible over the group's box
-  (``tape_simplify``'s substitution); ``choices`` has room for twice 8 bytes per instruction here.
+  (``tape_simplify_substituting``); ``choices`` has room for twice 8 bytes per instruction here.
  A decided choice holds at every point of its box, so the
 simplified program computes what the full one does there (docs/soundness.md): the mesher samples a model of
 thousands of instructions with the few that matter near each point.

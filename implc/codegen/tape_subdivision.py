@@ -161,17 +161,16 @@ class TapeEvaluator(Evaluator):
         return b.zext(b.bitcast(lanes, I8), I32)
 
     def program_for_child(self, walk: Walk, level, c, decided):
-        """The program of child ``c`` (i32) of the octant at ``level``: simplified by its choices where one
-        was decided (``decided``: i1) and pruning is on, else the octant's own. Two levels above the grid's
-        leaves it also reads a constant for each negligible exponential term (``tape_simplify``'s
-        substitution; bear's programs there shrink by about a third), and serves only enclosures then: the
-        normals and the second look below it run its parent's (:meth:`exact_level`). A child just above the leaves
-        (of the grid, :data:`implc.abi.TAPE_GRID_DEPTH`, wherever this walk stops) takes the octant's own
-        too: its program would enclose the eight leaves once and serve nothing else, and simplifying costs
-        two passes over the octant's program, about a third of what enclosing eight boxes costs per
-        instruction, for little (bear's programs shrink 7% there, 321 to 299 instructions on average at
-        512³; colonnade's 5.9 to 4.5). Without it, at 512³ in the natural mode, CPU: bear 1.50 -> 1.35 s,
-        Prospero (extruded) 0.244 -> 0.198 s (medians of 5 interleaved runs)."""
+        """The program of child ``c`` (i32) of the octant at ``level``: simplified by its choices where one was decided
+        (``decided``: i1) and pruning is on, else the octant's own. Two levels above the grid's leaves it also reads a
+        constant for each negligible exponential term (``tape_simplify_substituting``: bear's programs just above the
+        leaves 321 -> 144 instructions at 512³), and serves only enclosures then: the normals and the second look
+        below it run its parent's (:meth:`exact_level`). A child just above the leaves (of the grid,
+        :data:`implc.abi.TAPE_GRID_DEPTH`, wherever this walk stops) takes the octant's own too: its program would
+        enclose the eight leaves once and serve nothing else, and simplifying costs two passes over the octant's
+        program, about a third of what enclosing eight boxes costs per instruction, for little (bear's programs shrink
+        7% there, 321 to 299 instructions on average at 512³; colonnade's 5.9 to 4.5). Without it, at 512³ in the
+        natural mode, CPU: bear 1.50 -> 1.35 s, Prospero (extruded) 0.244 -> 0.198 s (medians of 5 interleaved runs)."""
         b = walk.b
         child = b.add(level, const(I64, 1))
         above_the_leaves = b.icmp_signed(">=", child, b.sub(self.grid_depth, const(I64, 1)))
