@@ -53,11 +53,11 @@ be the result over a box, bit 1 the second."""
 
 TINY_EXPONENTS = tuple(range(2, 127, 2))
 """The constants [0, 2^-e] a program with a sum of an exponential has (slots 0, 1, ... in this order): below
-an octant where the exponential's enclosure is at most 2^-e, and 2^-e at most :data:`NEGLIGIBLE` times
-the width of the sum's enclosure, the sum reads the constant instead (:mod:`implc.codegen.tape_simplify`), and the
-exponential's argument is not evaluated: far from a primitive, a smooth blend's term costs nothing. Such
-a sum's third instruction word says which of its operands an exponential gives (bit 0: the first, bit 1:
-the second), and its opcode is ``add_watched`` or ``add_nonneg_watched``: the same sums, which only
+an octant where the exponential's enclosure is at most 2^-e, and 2^-e at most :data:`NEGLIGIBLE` times the
+width of the sum's enclosure, the sum reads the constant instead (:mod:`implc.codegen.tape_simplify`), and the
+exponential's argument is not evaluated: far from a primitive, a smooth blend's term costs nothing. Such a
+sum's third instruction word says which of its operands an exponential gives (bit 0: the first, bit 1: the
+second), and its opcode is ``add_watched`` or ``add_nonneg_watched``: the same sums, which only
 ``tape_interval`` tells from the others (a plain sum costs nothing more)."""
 NEGLIGIBLE = 2.0 ** -7
 """How small a sum's exponential term must be, relative to the width of the sum's enclosure over an

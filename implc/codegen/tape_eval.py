@@ -156,6 +156,12 @@ def _variables(b, header, store):
             store(a, slot)
 
 
+def interval_findings(b: ir.IRBuilder, found):
+    """What ``tape_interval`` returned (i16), split: the lanes with a choice decided, those with a
+    negligible term (two i8 masks)."""
+    return b.trunc(found, I8), b.trunc(b.lshr(found, ir.Constant(found.type, 8)), I8)
+
+
 def emit_tape_interval(module: ir.Module, directed: bool) -> ir.Function:
     """Define ``tape_interval`` (see the module docstring) in ``module``."""
     fn, b = define_internal(module, "implc.tape.interval", I16,

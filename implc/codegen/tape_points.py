@@ -27,7 +27,7 @@ from llvmlite import ir
 from .. import abi
 from .control import I32, I64, Local, const, define, for_range, if_, load_at, local_array, store_at
 from .kernels import load_xyz, store_lanes, store_xyz
-from .tape_eval import I8, LANES, V8
+from .tape_eval import LANES, V8, interval_findings
 from .vector import DOUBLE
 
 _P = ir.PointerType
@@ -67,7 +67,7 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                 store_at(b, load_at(b, hi, k), box, const(I64, (3 + a) * LANES + lane))
         found = b.call(interval, [header, program, length, output, slots, choices, box, result])
         enclosing = b.icmp_unsigned("==", mode, const(I64, 3))  # the only mode that may substitute a term
-        choices_decided, terms_negligible = b.trunc(found, I8), b.trunc(b.lshr(found, ir.Constant(found.type, 8)), I8)
+        choices_decided, terms_negligible = interval_findings(b, found)
         decided = b.zext(b.select(enclosing, b.or_(choices_decided, terms_negligible), choices_decided), I64)
         with for_range(b, const(I64, LANES)) as lane:
             g = b.add(first, lane)

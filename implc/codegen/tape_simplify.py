@@ -111,36 +111,33 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
                                  const(I64, OPCODES["add_nonneg"]), code))
 
     count = Local(b, I64, 0, "count")
+
+    def write(code, out_slot, operands):
+        """Append an instruction (``operands``: its last three words, already renamed); its value is named by
+        its own slot from here on."""
+        row = b.mul(count.get(), const(I64, abi.INSTRUCTION_WORDS))
+        for k, word in enumerate([b.trunc(plain(code), I32), b.trunc(out_slot, I32), *operands]):
+            store_at(b, word, out, b.add(row, const(I64, k)))
+        store_at(b, b.trunc(out_slot, I32), remap, out_slot)
+        count.set(b.add(count.get(), const(I64, 1)))
+
     with for_range(b, length) as i:  # forward: write what is kept, operands renamed through the aliases
         m = load_at(b, mark, i)
         code, out_slot, a, c, d = (field(i, f) for f in range(5))
         ternary = b.icmp_unsigned(">=", code, const(I64, FIRST_TERNARY))
         with if_(b, b.icmp_unsigned("==", m, const(I8, KEEP))):
-            n = count.get()
-            row = b.mul(n, const(I64, abi.INSTRUCTION_WORDS))
             binary = b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))
-            store_at(b, b.trunc(plain(code), I32), out, row)
-            store_at(b, b.trunc(out_slot, I32), out, b.add(row, const(I64, 1)))
-            store_at(b, load_at(b, remap, a), out, b.add(row, const(I64, 2)))
-            store_at(b, b.select(binary, load_at(b, remap, c), b.trunc(c, I32)), out, b.add(row, const(I64, 3)))
-            fourth = b.trunc(d, I32) if not substitute else b.select(ternary, b.trunc(d, I32), const(I32, 0))
-            store_at(b, b.select(ternary, load_at(b, remap, d), fourth), out, b.add(row, const(I64, 4)))
-            store_at(b, b.trunc(out_slot, I32), remap, out_slot)
-            count.set(b.add(n, const(I64, 1)))
+            # a substituting call's sums watch nothing: what it writes is only enclosed, never simplified
+            fourth = const(I32, 0) if substitute else b.trunc(d, I32)
+            write(code, out_slot, [load_at(b, remap, a), b.select(binary, load_at(b, remap, c), b.trunc(c, I32)),
+                                   b.select(ternary, load_at(b, remap, d), fourth)])
         if substitute:
             with if_(b, b.icmp_unsigned("==", m, const(I8, SUBSTITUTE))):
-                n = count.get()
-                row = b.mul(n, const(I64, abi.INSTRUCTION_WORDS))
                 tiny = choice_byte(i)
                 second_operand = b.icmp_unsigned(">=", tiny, const(I8, 64))
                 constant = b.zext(b.sub(b.and_(tiny, const(I8, 63)), const(I8, 1)), I32)  # its slot: its index
-                store_at(b, b.trunc(plain(code), I32), out, row)
-                store_at(b, b.trunc(out_slot, I32), out, b.add(row, const(I64, 1)))
-                store_at(b, b.select(second_operand, load_at(b, remap, a), constant), out, b.add(row, const(I64, 2)))
-                store_at(b, b.select(second_operand, constant, load_at(b, remap, c)), out, b.add(row, const(I64, 3)))
-                store_at(b, const(I32, 0), out, b.add(row, const(I64, 4)))
-                store_at(b, b.trunc(out_slot, I32), remap, out_slot)
-                count.set(b.add(n, const(I64, 1)))
+                write(code, out_slot, [b.select(second_operand, load_at(b, remap, a), constant),
+                                       b.select(second_operand, constant, load_at(b, remap, c)), const(I32, 0)])
                 b.store(const(I64, 1), substituted)
         with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_FIRST))):
             store_at(b, load_at(b, remap, b.select(ternary, c, a)), remap, out_slot)

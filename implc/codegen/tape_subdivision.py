@@ -19,7 +19,7 @@ from .. import abi
 from .control import I32, I64, Local, at, const, define_internal, for_range, if_, load_at, local_array, store_at
 from .kernels import load_xyz, store_xyz
 from .normals import emit_normals_body
-from .tape_eval import I8, LANES, V8
+from .tape_eval import I8, LANES, V8, interval_findings
 from .vector import DOUBLE, broadcast
 from .walk import Evaluator, Walk, emit_walk
 
@@ -123,7 +123,7 @@ class TapeEvaluator(Evaluator):
         """The children (i8 mask) of the octant at ``level`` to get programs of their own, from what
         ``tape_interval`` found (i16): those with a choice decided, and at the level where negligible terms
         are replaced (two above the grid's leaves) those with one."""
-        decided, negligible = b.trunc(found, I8), b.trunc(b.lshr(found, ir.Constant(found.type, 8)), I8)
+        decided, negligible = interval_findings(b, found)
         here = b.icmp_signed("==", b.add(level, const(I64, 1)), self.substitution_level)
         return b.select(here, b.or_(decided, negligible), decided)
 
@@ -161,16 +161,17 @@ class TapeEvaluator(Evaluator):
         return b.zext(b.bitcast(lanes, I8), I32)
 
     def program_for_child(self, walk: Walk, level, c, decided):
-        """The program of child ``c`` (i32) of the octant at ``level``: simplified by its choices where one was decided
-        (``decided``: i1) and pruning is on, else the octant's own. Two levels above the grid's leaves it also reads a
-        constant for each negligible exponential term (``tape_simplify_substituting``: bear's programs just above the
-        leaves 321 -> 144 instructions at 512³), and serves only enclosures then: the normals and the second look
-        below it run its parent's (:meth:`exact_level`). A child just above the leaves (of the grid,
-        :data:`implc.abi.TAPE_GRID_DEPTH`, wherever this walk stops) takes the octant's own too: its program would
-        enclose the eight leaves once and serve nothing else, and simplifying costs two passes over the octant's
-        program, about a third of what enclosing eight boxes costs per instruction, for little (bear's programs shrink
-        7% there, 321 to 299 instructions on average at 512³; colonnade's 5.9 to 4.5). Without it, at 512³ in the
-        natural mode, CPU: bear 1.50 -> 1.35 s, Prospero (extruded) 0.244 -> 0.198 s (medians of 5 interleaved runs)."""
+        """The program of child ``c`` (i32) of the octant at ``level``: simplified by its choices where one
+        was decided (``decided``: i1) and pruning is on, else the octant's own. Two levels above the grid's
+        leaves it also reads a constant for each negligible exponential term (``tape_simplify_substituting``:
+        bear's programs just above the leaves 321 -> 144 instructions at 512³), and serves only enclosures
+        then: the normals and the second look below it run its parent's (:meth:`exact_level`). A child just
+        above the leaves (of the grid, :data:`implc.abi.TAPE_GRID_DEPTH`, wherever this walk stops) takes the
+        octant's own too: its program would enclose the eight leaves once and serve nothing else, and
+        simplifying costs two passes over the octant's program, about a third of what enclosing eight boxes
+        costs per instruction, for little (bear's programs shrink 7% there, 321 to 299 instructions on average
+        at 512³; colonnade's 5.9 to 4.5). Without it, at 512³ in the natural mode, CPU: bear 1.50 -> 1.35 s,
+        Prospero (extruded) 0.244 -> 0.198 s (medians of 5 interleaved runs)."""
         b = walk.b
         child = b.add(level, const(I64, 1))
         above_the_leaves = b.icmp_signed(">=", child, b.sub(self.grid_depth, const(I64, 1)))
