@@ -383,15 +383,16 @@ class _Grid:
         return out
 
     def values(self, points: np.ndarray, grouping: Grouping | None = None) -> np.ndarray:
-        """F at points (:meth:`implc.Surface.eval`); on the tape engine, for a long program, each point's
-        program simplified over its group of cells (:meth:`implc.Surface.eval_grouped`; ``grouping``: the
-        points' :meth:`grouping`, where several calls share it), and NaN where F is not finite (outside, as
-        where its interval engine finds F may be undefined)."""
+        """F at points (:meth:`implc.Surface.eval` with ``fast``: the vector elementary functions, as the
+        voxelizer samples); on the tape engine, for a long program, each point's program simplified over
+        its group of cells (:meth:`implc.Surface.eval_grouped`; ``grouping``: the points' :meth:`grouping`,
+        where several calls share it), and NaN where F is not finite (outside, as where its interval
+        engine finds F may be undefined)."""
         points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
         if self.grouped:
             values = self.surface.eval_grouped(points, grouping or self.grouping(points))[0]
         else:
-            values = self.surface.eval(points)
+            values = self.surface.eval(points, fast=True)
         if self.surface.engine == "tape":
             values[~np.isfinite(values)] = np.nan
         return values
@@ -405,7 +406,7 @@ class _Grid:
         is not finite on the tape engine, as there)."""
         points = np.ascontiguousarray(points.reshape(-1, 3), dtype=np.float64)
         if not self.grouped:
-            values, gradients = self.surface.value_and_gradient(points)
+            values, gradients = self.surface.value_and_gradient(points, fast=True)
         else:
             values, gradients = self.surface.eval_grouped(points, grouping or self.grouping(points), gradient=True)
         if self.surface.engine == "tape":

@@ -384,6 +384,10 @@ def test_point_and_gradient_evaluators_conform(name, width, compiled):
     assert_conforms(value, ref_value, live_budget, scale, f"{name} gradient over live terms' value width {width}")
     assert_conforms(grad, ref_grad, live_budget, scale, f"{name} gradient over live terms width {width}")
     assert_conforms(_point_fast(s, pts), ref_value, live_budget, scale, f"{name} fast point width {width}")
+    assert_conforms(s.eval(pts, fast=True), ref_value, live_budget, scale, f"{name} eval(fast=True) width {width}")
+    value, grad = s.value_and_gradient(pts, fast=True)  # the mesher's samples
+    assert_conforms(value, ref_value, live_budget, scale, f"{name} value_and_gradient(fast=True) width {width}")
+    assert_conforms(grad, ref_grad, live_budget, scale, f"{name} value_and_gradient(fast=True) width {width}")
     if width == 8 and name in TAPE_CASES:  # dual numbers in the tape engine (sin and cos in vector registers)
         value, grad = compiled(name, engine="tape").value_and_gradient(pts)
         assert_conforms(value, ref_value, live_budget, scale, f"{name} tape engine's value")
