@@ -69,6 +69,7 @@ def test_bench_suite_small(tmp_path, capsys, monkeypatch):
         assert (quality["open_edges"], quality["flipped_edges"], quality["degenerate"]) == (0, 0, 0)
         assert quality["manifold3d"] == "NoError" and quality["self_intersecting"] == 0
         assert quality["max_distance_cells"] < 1 and r["marching_cubes"]["triangles"] > 0
+        assert r["marching_cubes"]["quality"]["normal_deviation_median_deg"] < 90  # wound outward, as ours
         simplified = r["simplified"]  # nothing flat on a torus or a ball: the same mesh, still valid
         assert simplified["triangles"] == r["triangles"] and simplified["cpu_s"] >= 0
         assert simplified["quality"]["manifold3d"] == "NoError" and simplified["quality"]["self_intersecting"] == 0
