@@ -391,12 +391,14 @@ def cmd_mesh(args) -> int:
     voxels, seconds = _voxelize(surface, depth, args.workers, args.quiet, tightness=args.tightness)
     t0 = time.perf_counter()
     mesh = voxels.mesh(simplify=tolerance)
+    t1 = time.perf_counter()
     mesh.save(out)
+    t2 = time.perf_counter()
     if not args.quiet:
         simplified = "" if tolerance is None else f" (simplified from {mesh.stats.simplified.triangles_before})"
         print(f"{name}: {len(mesh.faces)} triangles{simplified}, {len(mesh.vertices)} vertices at {1 << depth}³, "
-              f"volume {mesh.volume:.6g} (voxelized in {seconds:.2f} s, meshed in {time.perf_counter() - t0:.2f} s) "
-              f"-> {out}")
+              f"volume {mesh.volume:.6g} (voxelized in {seconds:.2f} s, meshed in {t1 - t0:.2f} s, written in "
+              f"{t2 - t1:.2f} s) -> {out}")
     return 0
 
 
