@@ -28,6 +28,7 @@ from .. import abi
 from .control import I32, I64, Local, const, define, for_range, if_, load_at, local_array, store_at
 from .kernels import load_xyz, store_lanes, store_xyz
 from .tape_eval import LANES, V8, interval_findings
+from .tape_simplify import call_simplify
 from .vector import DOUBLE
 
 _P = ir.PointerType
@@ -37,7 +38,6 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                       point: ir.Function, dual: ir.Function, box_gradient: ir.Function):
     """Define ``implc_tape_grouped`` (see the module docstring) in ``module``; ``simplify``: ``tape_simplify``
     and its substituting variant."""
-    simplify, simplify_substituting = simplify
     fn, b = define(module, abi.TAPE_GROUPED)
     (header, slots, choices, need, marks, remap, work, lo, hi, starts, groups, pts, pts_hi, out_value, out_grad,
      mode) = fn.args
@@ -79,11 +79,7 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                     stamp.set(b.add(stamp.get(), const(I32, 1)))  # the caller's ``need`` starts at zero
                     arguments = [program, length, output, choices, lane, work, need, stamp.get(), marks, remap,
                                  simplified_output]
-                    with b.if_else(enclosing) as (substituting, plain):
-                        with substituting:
-                            run_length.set(b.call(simplify_substituting, arguments + [substituted]))
-                        with plain:
-                            run_length.set(b.call(simplify, arguments))
+                    run_length.set(call_simplify(b, simplify, arguments, substituted, enclosing))
                     run_program.set(work)
                     run_output.set(b.load(simplified_output))
                 begin = b.sdiv(load_at(b, starts, g), const(I64, LANES))

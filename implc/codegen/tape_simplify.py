@@ -146,3 +146,17 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
     b.store(b.sext(load_at(b, remap, output), I64), out_output)
     b.ret(count.get())
     return fn
+
+
+def call_simplify(b: ir.IRBuilder, simplify: tuple, arguments: list, substituted, substituting):
+    """Call ``tape_simplify`` with ``arguments``, or where ``substituting`` (i1) holds its substituting
+    variant (``simplify``: the two functions, as :func:`emit_tape_simplify` defines them; ``substituted``: the
+    i64 the variant sets): the simplified program's length (i64)."""
+    plain, substituting_variant = simplify
+    length = Local(b, I64, const(I64, 0), "simplified_length")
+    with b.if_else(substituting) as (replacing, keeping):
+        with replacing:
+            length.set(b.call(substituting_variant, arguments + [substituted]))
+        with keeping:
+            length.set(b.call(plain, arguments))
+    return length.get()

@@ -16,10 +16,11 @@ from __future__ import annotations
 from llvmlite import ir
 
 from .. import abi
-from .control import I32, I64, Local, at, const, define_internal, for_range, if_, load_at, local_array, store_at
+from .control import I32, I64, at, const, define_internal, for_range, if_, load_at, local_array, store_at
 from .kernels import load_xyz, store_xyz
 from .normals import emit_normals_body
 from .tape_eval import I8, LANES, V8, interval_findings
+from .tape_simplify import call_simplify
 from .vector import DOUBLE, broadcast
 from .walk import Evaluator, Walk, emit_walk
 
@@ -69,7 +70,7 @@ class TapeEvaluator(Evaluator):
     def __init__(self, prefill: ir.Function, interval: ir.Function, simplify: tuple, normals: ir.Function,
                  tighten: ir.Function):
         self.prefill, self.interval = prefill, interval
-        self.simplify, self.simplify_substituting = simplify
+        self.simplify = simplify  # tape_simplify and its substituting variant
         self.normals_fn, self.tighten = normals, tighten
 
     def begin(self, walk: Walk) -> None:
@@ -186,14 +187,11 @@ class TapeEvaluator(Evaluator):
                 store_at(b, stamp, self.words, abi.TAPE_STAMP)
                 arguments = [*self.program(b, level), self.choices_of(b, level), b.zext(c, I64), target, self.need,
                              b.trunc(stamp, I32), self.marks, self.remap, self.output_at(b, child)]
-                n = Local(b, I64, const(I64, 0), "simplified_length")
-                with b.if_else(b.icmp_signed("==", child, self.substitution_level)) as (substituting, plain):
-                    with substituting:
-                        n.set(b.call(self.simplify_substituting, arguments + [self.substituted]))
-                        store_at(b, load_at(b, self.substituted, 0), self.words, abi.TAPE_SUBSTITUTED)
-                    with plain:
-                        n.set(b.call(self.simplify, arguments))
-                self.set_program(b, child, target, n.get(), b.load(self.output_at(b, child)))
+                replacing = b.icmp_signed("==", child, self.substitution_level)
+                n = call_simplify(b, self.simplify, arguments, self.substituted, replacing)
+                with if_(b, replacing):
+                    store_at(b, load_at(b, self.substituted, 0), self.words, abi.TAPE_SUBSTITUTED)
+                self.set_program(b, child, target, n, b.load(self.output_at(b, child)))
             with shared:
                 self.set_program(b, child, *self.program(b, level))
                 with if_(b, b.icmp_signed("==", child, self.substitution_level)):
