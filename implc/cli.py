@@ -390,7 +390,7 @@ def cmd_mesh(args) -> int:
     depth = args.depth if args.depth is not None else (sc.depth if sc else 8)
     voxels, seconds = _voxelize(surface, depth, args.workers, args.quiet, tightness=args.tightness)
     t0 = time.perf_counter()
-    mesh = voxels.mesh(simplify=tolerance)
+    mesh = voxels.mesh(simplify=tolerance, workers=args.workers)
     t1 = time.perf_counter()
     mesh.save(out)
     t2 = time.perf_counter()

@@ -7,11 +7,14 @@ arrays, run the compiled code over whole vectors and handle the ragged tail.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+from contextvars import ContextVar
 from functools import partial
 from typing import Any
 
@@ -42,28 +45,83 @@ ROUNDINGS = ("auto", "directed", "widen")
 ALL_TERMS = -1
 """The live-term mask with every term of a region plan live (``implc_gradient_live``'s last argument)."""
 CHUNK = 1 << 16
-"""Rows per native call of the batched entry points (a multiple of every vector width)."""
+"""The most rows per native call of the batched entry points (a multiple of every vector width)."""
+MIN_CHUNK = 1 << 13
+"""The fewest rows per native call of an entry point that costs a tenth of a microsecond a row or more
+(enclosures, the tape engine's grouped samples), where there are more: below :data:`CHUNK` such rows are
+shared out so that each thread gets several calls (:func:`chunk_rows`). F's samples on the compiled kernels
+(10-20 ns a row) keep :data:`CHUNK`: a call handed to a thread costs about 50 µs on a busy 2-core VM."""
+CALLS_PER_CORE = 4
+"""How many calls each thread gets where :data:`CHUNK` rows per call would give it fewer (several, so that
+a thread that finishes first takes another's share: the rows' costs differ)."""
+
+
+_THREADS: ContextVar[int | None] = ContextVar("implc_threads", default=None)
+"""The threads :func:`in_parallel` may use in this context (None: one per core), set by :func:`threads`."""
+
+
+@contextlib.contextmanager
+def threads(count: int | None) -> Iterator[None]:
+    """Within the block, the batched entry points run on at most ``count`` threads (None: one per usable
+    core), e.g. a mesh contoured with ``workers=1`` (the calling thread alone)."""
+    token = _THREADS.set(count)
+    try:
+        yield
+    finally:
+        _THREADS.reset(token)
+
+
+def thread_count() -> int:
+    """The threads :func:`in_parallel` uses here: those :func:`threads` allows, or one per usable core."""
+    count = _THREADS.get()
+    return default_workers() if count is None else count
+
+
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
+"""The thread pools :func:`in_parallel` keeps, by (process, threads): starting a pool's threads cost about
+0.3 ms a call, as much as sampling 40,000 points of Scene 1 (a forked child starts its own)."""
+_POOLS_LOCK = threading.Lock()
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    key = (os.getpid(), workers)
+    with _POOLS_LOCK:
+        pool = _POOLS.get(key)
+        if pool is None:
+            pool = _POOLS[key] = ThreadPoolExecutor(workers, thread_name_prefix="implc-eval")
+        return pool
 
 
 def in_parallel(jobs: list[Callable[[], None]]) -> None:
-    """Run independent native calls (each releases the GIL) on the process's cores, at most one thread
-    per core; the first error (or Ctrl-C) cancels the jobs not started and is raised once those running
-    finish."""
-    workers = min(len(jobs), default_workers())
+    """Run independent native calls (each releases the GIL) on :func:`thread_count` threads of a pool kept
+    for the process (the jobs themselves on the calling thread where that is one); the first error (or
+    Ctrl-C) cancels the jobs not started and is raised once those running finish (they write into the
+    caller's arrays)."""
+    workers = min(len(jobs), thread_count())
     if workers <= 1:
         for job in jobs:
             job()
         return
-    with ThreadPoolExecutor(workers, thread_name_prefix="implc-eval") as pool:
-        futures = [pool.submit(job) for job in jobs]
-        try:
-            done, _ = wait(futures, return_when=FIRST_EXCEPTION)
-            for future in done:
-                future.result()
-        except BaseException:
-            for future in futures:
-                future.cancel()
-            raise
+    futures = [_pool(workers).submit(job) for job in jobs]
+    try:
+        done, _ = wait(futures, return_when=FIRST_EXCEPTION)
+        for future in done:
+            future.result()
+    except BaseException:
+        for future in futures:
+            future.cancel()
+        wait(futures)
+        raise
+
+
+def chunk_rows(rows: int, width: int = 8, fewest: int | None = None) -> int:
+    """Rows per native call for ``rows`` rows: :data:`CHUNK`, or fewer (down to ``fewest``, by default
+    :data:`MIN_CHUNK`) so that every thread (:func:`thread_count`) gets :data:`CALLS_PER_CORE` calls (the
+    mesher's batches of a few tens of thousands of boxes or points ran on one core); a multiple of
+    ``width``. Each row's result is its own: the same whatever the rows per call."""
+    share = -(-rows // (CALLS_PER_CORE * thread_count()))
+    per_call = min(CHUNK, max(MIN_CHUNK if fewest is None else fewest, share))
+    return -(-per_call // width) * width
 
 
 def default_workers() -> int:
@@ -333,19 +391,22 @@ class Surface:
         return f"Surface({self.expr}, bounds={self.bounds}, {len(self.tape)} ops)"
 
     # -- batched evaluation -----------------------------------------------------------------------
-    def _run(self, kernel, inputs: list[np.ndarray], out_shapes: list[tuple], extra=()) -> list[np.ndarray]:
-        """Run ``kernel`` over whole vectors, in chunks of :data:`CHUNK` rows spread over the cores (Ctrl-C is
-        seen between them), then once more over the zero-padded tail (``extra``: trailing arguments, e.g.
-        NULL live masks)."""
+    def _run(self, kernel, inputs: list[np.ndarray], out_shapes: list[tuple], extra=(),
+             fewest: int = CHUNK) -> list[np.ndarray]:
+        """Run ``kernel`` over whole vectors, in chunks of :func:`chunk_rows` rows (``fewest``: at least that
+        many where there are more) spread over the threads (Ctrl-C is seen between them), then once more over
+        the zero-padded tail (``extra``: trailing arguments, e.g. NULL live masks)."""
         n = len(inputs[0])
         outs = [np.empty((n, *shape), dtype=np.float64) for shape in out_shapes]
         width = self.width
         main = n - n % width
 
+        rows_per_call = chunk_rows(main, width, fewest)
+
         def chunk(start):
-            count = min(CHUNK, main - start)
+            count = min(rows_per_call, main - start)
             kernel(*[a[start:].ctypes.data for a in inputs], *[o[start:].ctypes.data for o in outs], count, *extra)
-        in_parallel([partial(chunk, start) for start in range(0, main, CHUNK)])
+        in_parallel([partial(chunk, start) for start in range(0, main, rows_per_call)])
         if main < n:
             tail_in = [np.zeros((width, 3)) for _ in inputs]
             for pad, a in zip(tail_in, inputs):
@@ -439,7 +500,7 @@ class Surface:
         :meth:`eval_grouped` (on the tape engine, each box's program simplified over its group's box)."""
         lo, hi = _rows("lo", lo), _rows("hi", hi)
         if self.engine != "tape":
-            (out,) = self._run(self.kernel(abi.BOX_GRADIENT), [lo, hi], [(8,)])
+            (out,) = self._run(self.kernel(abi.BOX_GRADIENT), [lo, hi], [(8,)], fewest=MIN_CHUNK)
             return out
         if groups is None or (boxes is None and not isinstance(groups, Grouping)):  # one group: the bounds
             bounds = np.array(self.bounds, dtype=np.float64)
@@ -478,7 +539,7 @@ class Surface:
                 starts[at:].ctypes.data, count, padded_rows.ctypes.data, padded_hi.ctypes.data,
                 out_value.ctypes.data, out_grad.ctypes.data, mode)
         groups = len(lo)
-        step = max(1, groups * CHUNK // total)  # about CHUNK rows per call: Ctrl-C between calls
+        step = max(1, groups * chunk_rows(total) // total)  # about chunk_rows per call: Ctrl-C between calls
         in_parallel([partial(batch, at, min(step, groups - at)) for at in range(0, groups, step)])
         values = np.take(out_value, plan.place)
         grads = np.take(out_grad, plan.place, axis=0) if mode else np.empty((n, width))
@@ -511,11 +572,13 @@ class Surface:
             raise ValueError("choose one of mean_value and monotone")
         if mean_value or monotone:
             kernel = self.kernel(abi.INTERVAL_MONOTONE if monotone else abi.INTERVAL_MVF)
-            f_lo, f_hi = self._run(kernel, [lo, hi], [(), ()], extra=(None, None))
+            f_lo, f_hi = self._run(kernel, [lo, hi], [(), ()], extra=(None, None), fewest=MIN_CHUNK)
         elif self.engine == "tape":
-            f_lo, f_hi = self._run(self._tape_kernel(self.tape_engine.interval, choices=True), [lo, hi], [(), ()])
+            f_lo, f_hi = self._run(self._tape_kernel(self.tape_engine.interval, choices=True), [lo, hi], [(), ()],
+                                   fewest=MIN_CHUNK)
         else:
-            f_lo, f_hi = self._run(self.kernel(abi.INTERVAL), [lo, hi], [(), ()], extra=(None, None))
+            f_lo, f_hi = self._run(self.kernel(abi.INTERVAL), [lo, hi], [(), ()], extra=(None, None),
+                                   fewest=MIN_CHUNK)
         return f_lo, f_hi
 
 

@@ -23,7 +23,7 @@ from .storage import bytes_per_voxel, make_backend
 from .storage.grid import dense_bytes
 from .storage.octree import Octree, OctreeAssembly, OctreeBuilder
 from .subdivide import Subdivider, SubdivisionStats
-from .surface import Surface, default_workers
+from .surface import Surface, default_workers, threads
 from .triangle_mesh import Mesh
 
 MIN_DEPTH, MAX_DEPTH = 1, 21
@@ -151,7 +151,7 @@ class Voxels:
         return self.show(max_bytes=4 << 20)._repr_html_()
 
     def mesh(self, surface: Surface | None = None, *, features: bool = True, witnesses: bool = False,
-             simplify: float | None = None) -> Mesh:
+             simplify: float | None = None, workers: int | None = None) -> Mesh:
         """The boundary of {F < 0} within the bounds as a closed, oriented, intersection-free triangle mesh,
         contoured over these voxels' cells (:func:`implc.contour.contour`; docs/soundness.md says what holds
         by construction). ``surface``: the surface these voxels came from, needed only for voxels read from
@@ -159,16 +159,20 @@ class Voxels:
         edges; False: every cell split the same way, creases chamfered). ``witnesses``: keep each vertex's
         edge ends (``Mesh.witnesses``: two points of its cell where F has opposite signs). ``simplify``: a
         tolerance (in the bounds' units) to merge the flat parts' triangles within (:meth:`Mesh.simplified`).
+        ``workers``: the threads that sample F, enclose it and place the vertices (default: one per usable
+        core); the mesh is the same for every count.
         """
         if simplify is not None:
             check_tolerance(simplify)  # refused before the contouring, not after it
+        workers = None if workers is None else _check_count("workers", workers)
         surface = self.surface if surface is None else surface
         if not isinstance(surface, Surface):
             raise ValueError("these voxels do not know their surface (read from a file?): pass it, "
                              "voxels.mesh(implc.compile(...))")
         if tuple(map(tuple, surface.bounds)) != tuple(map(tuple, self.bounds)):
             raise ValueError(f"the surface's bounds {surface.bounds} are not these voxels' {self.bounds}")
-        mesh = contour(surface, self.coords, self.depth, self.bounds, features=features, witnesses=witnesses)
+        with threads(workers):
+            mesh = contour(surface, self.coords, self.depth, self.bounds, features=features, witnesses=witnesses)
         return mesh if simplify is None else mesh.simplified(simplify)
 
     def inside_voxels(self) -> int:
@@ -427,7 +431,8 @@ def mesh(surface: Surface, depth: int = 8, *, workers: int | None = None, progre
          features: bool = True, witnesses: bool = False, simplify: float | None = None, **options: Any) -> Mesh:
     """The boundary of the solid {F < 0} within ``surface``'s bounds as a closed, oriented,
     intersection-free triangle mesh on the 2^depth grid: :func:`voxelize` finds the cells the surface may
-    meet, then :meth:`Voxels.mesh` contours them (``features``, ``witnesses``, ``simplify``: see there).
+    meet, then :meth:`Voxels.mesh` contours them (``features``, ``witnesses``, ``simplify``: see there), both
+    on ``workers`` threads.
 
     The voxelization runs in the natural mode (:data:`NATURAL`) unless ``options`` (its tightness options)
     say otherwise: the mesh does not depend on them. A tighter voxelization keeps fewer cells, but it drops
@@ -446,7 +451,7 @@ def mesh(surface: Surface, depth: int = 8, *, workers: int | None = None, progre
     if simplify is not None:
         check_tolerance(simplify)
     voxels = voxelize(surface, depth, workers=workers, progress=progress, **{**NATURAL, **options})
-    return voxels.mesh(features=features, witnesses=witnesses, simplify=simplify)
+    return voxels.mesh(features=features, witnesses=witnesses, simplify=simplify, workers=workers)
 
 
 @contextlib.contextmanager

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import threading
 from fractions import Fraction
 from pathlib import Path
 
@@ -546,12 +547,55 @@ def test_a_plane_through_grid_corners_brackets_its_exact_zeros(engine):
     assert_on_witness_edges_in_kept_cells(mesh, ((-1, 1),) * 3, 6, voxels.coords)
 
 
-def test_the_same_mesh_for_every_worker_count():
-    sc = load_scene("paper_blobs")
-    s = implc.compile(sc.surface, sc.bounds)
+@pytest.mark.parametrize("name", ["paper_blobs", "vm"])
+def test_the_same_mesh_for_every_worker_count(name, monkeypatch):
+    """The mesh does not depend on how many threads make it: with calls of 64 rows (so that the samples,
+    the enclosures and the tape engine's groups are shared out over the threads even at 64³), one, two and
+    three workers give the same vertices, faces and normals, bit for bit."""
+    from implc import surface as surface_module
+
+    monkeypatch.setattr(surface_module, "MIN_CHUNK", 64)
+    if name == "vm":
+        s = implc.compile(parse_vm(CSG, name="csg"), engine="tape")
+    else:
+        sc = load_scene(name)
+        s = implc.compile(sc.surface, sc.bounds)
     one = implc.mesh(s, 6, workers=1)
-    two = implc.mesh(s, 6, workers=2)
-    assert np.array_equal(one.vertices, two.vertices) and np.array_equal(one.faces, two.faces)
+    for workers in (2, 3):
+        other = implc.mesh(s, 6, workers=workers)
+        assert np.array_equal(one.vertices, other.vertices) and np.array_equal(one.faces, other.faces)
+        assert np.array_equal(one.normals, other.normals)
+
+
+def test_contouring_runs_on_the_threads_it_is_given(monkeypatch):
+    """``workers=1`` keeps the contouring's native calls on the calling thread; ``workers=2`` shares each
+    batch of calls out over at most two threads of a pool (recorded by the thread each call runs on)."""
+    from implc import surface as surface_module
+
+    monkeypatch.setattr(surface_module, "MIN_CHUNK", 64)
+    batches: list[list[str]] = []
+    original = surface_module.in_parallel
+
+    def recording(jobs):
+        names: list[str] = []
+        batches.append(names)
+
+        def wrap(job):
+            def run():
+                names.append(threading.current_thread().name)
+                job()
+            return run
+        original([wrap(job) for job in jobs])
+
+    monkeypatch.setattr(surface_module, "in_parallel", recording)
+    sc = load_scene("paper_blobs")
+    voxels = implc.voxelize(implc.compile(sc.surface, sc.bounds), 6)
+    voxels.mesh(workers=1)
+    assert sum(map(len, batches)) > 10 and {name for names in batches for name in names} == {"MainThread"}
+    batches.clear()
+    voxels.mesh(workers=2)
+    shared = [set(names) for names in batches if len(names) > 1]
+    assert shared and all(len(names) <= 2 and "MainThread" not in names for names in shared)
 
 
 def surface_and_f(name):
