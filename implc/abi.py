@@ -158,8 +158,10 @@ TAPE_BOX_GRADIENT = _entry("implc_tape_box_gradient", "program:i64* slots:f64* l
 partial's lo, hi), as the tape engine's second look uses them."""
 TAPE_GROUPED = _entry("implc_tape_grouped",
                       "program:i64* slots:f64* choices:i8* need:i32* marks:i8* remap:i32* work:i32* lo:f64* hi:f64* "
-                      "starts:i64* groups:i64 pts:f64* pts_hi:f64* out_value:f64* out_grad:f64* mode:i64")
-"""F (mode 0), F and its gradient (1) at points, enclosures of F and its partials over boxes (2), or of F
+                      "starts:i64* groups:i64 pts:f64* pts_hi:f64* out_value:f64* out_grad:f64* mode:i64 "
+                      "seeds:f64*")
+"""F (mode 0), F and its gradient (1) at points, enclosures of F and its partials (or, with ``seeds`` not
+NULL, its derivatives along the three directions there: 9 doubles) over boxes (2), or of F
 alone with negligible terms replaced (3), the rows grouped by box, each group's program simplified over its
 box (:mod:`implc.codegen.tape_points`);
 ``choices``: 8 bytes per instruction (16 in mode 3), ``need`` zeros, ``work`` room for one program."""

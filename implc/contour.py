@@ -82,6 +82,10 @@ GROUPED_PROGRAM = 128
 (the sorting and gathering of the points), colonnade's 676 twice as fast."""
 PROOF_LEVELS = 2
 """How many levels below the grid the proof of regular cells looks, in the cells it has not proven yet."""
+DIAGONALS = np.array([(1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1), (0, 1, 1), (0, 1, -1),
+                      (1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1)], dtype=np.float64)
+"""The directions beyond the axes along which the proof of regular cells seeks a derivative of one sign
+(the face and body diagonals of a cell, up to sign): on the tape engine, for the cells the axes leave open."""
 PROOF_YIELD = 0.25
 """The share of the boxes a level of the proof must prove for the next level to be tried (:func:`_prove`)."""
 PROOF_SAMPLE, PROOF_SAMPLE_MIN = 16, 256
@@ -109,9 +113,12 @@ SQUARE = ((0, 0), (1, 0), (1, 1), (0, 1))
 @dataclass
 class MeshStats:
     """What a contouring did: cells, triangles, feature cells, the cells it had to add, seconds per stage;
-    and how many of the crossed cells are proven regular: some partial of F keeps its sign over the whole
-    cell (its enclosure excludes 0), so F is strictly monotone along that axis there and the surface in the
-    cell is a graph over the cell's face across it — no singular point, no fold, no closed piece inside.
+    and how many of the crossed cells are proven regular: F's derivative along some direction (an axis,
+    or on the tape engine one of the cell's face and body :data:`DIAGONALS`) keeps one strict sign wherever
+    F may vanish in the cell (its enclosure excludes 0 over the cell, or over each of the sub-boxes
+    covering it whose enclosure of F contains 0), so every zero there is a transversal crossing, F has at
+    most one zero on each line along that direction, and the surface in the cell is a graph over the plane
+    across it — no singular point, no fold, no closed piece inside.
     The others (``unproven_cells``: at a singular point, a thin feature below the grid, a sharp crease or
     where the enclosure is too wide) are meshed all the same, but nothing proves the mesh's topology there."""
     cells: int = 0
@@ -1307,10 +1314,12 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
 
 
 def _regular(grid: _Grid, cells: np.ndarray) -> np.ndarray:
-    """Whether some partial of F keeps one strict sign over each whole cell, so that the cell is proven
-    regular (:class:`MeshStats`). First over the cells' parents (2³ cells: what holds over a box holds over
-    each box inside it, and the surface's cells share a parent three or four at a time), then over the
-    cells of the parents not proven, and below them down to :data:`PROOF_LEVELS` levels (:func:`_prove`)."""
+    """Whether some partial of F keeps one strict sign wherever F may vanish in each cell, so that the cell
+    is proven regular (:class:`MeshStats`). First over the cells' parents (2³ cells: what holds over a box
+    holds over each box inside it, and the surface's cells share a parent three or four at a time), then
+    over the cells of the parents not proven, and below them down to :data:`PROOF_LEVELS` levels
+    (:func:`_prove`); on the tape engine the cells still open try F's derivatives along the
+    :data:`DIAGONALS` the same way (a crease's cells: :func:`_diagonal_signs`)."""
     regular = np.zeros(len(cells), bool)
     if not len(cells):
         return regular
@@ -1322,22 +1331,29 @@ def _regular(grid: _Grid, cells: np.ndarray) -> np.ndarray:
     rest = np.flatnonzero(~regular)
     lo, hi = grid.world(cells[rest]), grid.world(cells[rest] + 1)
     regular[rest] = _prove(grid, lo, hi, np.ones((len(rest), 6), bool), PROOF_LEVELS).any(1)
+    if grid.surface.engine == "tape":
+        rest = np.flatnonzero(~regular)
+        lo, hi = grid.world(cells[rest]), grid.world(cells[rest] + 1)
+        wanted = np.ones((len(rest), 2 * len(DIAGONALS)), bool)
+        regular[rest] = _prove(grid, lo, hi, wanted, PROOF_LEVELS, signs_of=_diagonal_signs).any(1)
     return regular
 
 
 def _prove(grid: _Grid, lo, hi, wanted: np.ndarray, levels: int, signs: np.ndarray | None = None,
-           sample: bool = True) -> np.ndarray:
-    """Which of the ``wanted`` signs of F's partials ((n, 6): rising along x, y, z, then falling) are
-    proven over each box [lo, hi]: by the box's own enclosures (``signs`` where known), or else by its 8
-    sub-boxes, down to ``levels`` levels. A partial keeping one sign over every sub-box keeps it over the
-    box they cover; so below a box only the signs that every proven sub-box shares are still sought, and
-    a box whose proven sub-boxes share none is given up (a crease: one side rises along x, the other
-    along y); and a level pays for the next only where it proved at least :data:`PROOF_YIELD` of the
-    boxes it was given (around creases finer boxes prove almost nothing: colonnade's, 0.4%). The first
-    level, where ``sample`` and it is given many boxes, is tried on a sample of them first
-    (:data:`PROOF_SAMPLE`)."""
+           sample: bool = True, signs_of=None) -> np.ndarray:
+    """Which of the ``wanted`` signs of F's derivatives ((n, 6): rising along x, y, z, then falling; or
+    the columns ``signs_of(grid, lo, hi)`` gives, :func:`_partial_signs` by default) are proven over each
+    box [lo, hi]: by the box's own enclosures (``signs`` where known), or else by its 8 sub-boxes, down to
+    ``levels`` levels. A derivative keeping one sign over every sub-box (but those the surface does not
+    meet: :func:`_partial_signs`) keeps it wherever F may vanish in the box they cover; so below a box only
+    the signs that every proven sub-box shares are still sought, and a box whose proven sub-boxes share
+    none is given up (a crease: one side rises along x, the other along y); and a level pays for the next
+    only where it proved at least :data:`PROOF_YIELD` of the boxes it was given (around creases finer
+    boxes prove almost nothing: colonnade's, 0.4%). The first level, where ``sample`` and it is given many
+    boxes, is tried on a sample of them first (:data:`PROOF_SAMPLE`)."""
+    signs_of = signs_of or _partial_signs
     if signs is None:
-        signs = _partial_signs(grid, lo, hi)
+        signs = signs_of(grid, lo, hi)
     signs &= wanted
     open_ = np.flatnonzero(~signs.any(1) & wanted.any(1))
     if not levels or not len(open_):
@@ -1345,19 +1361,20 @@ def _prove(grid: _Grid, lo, hi, wanted: np.ndarray, levels: int, signs: np.ndarr
     if sample and len(open_) >= PROOF_SAMPLE_MIN * PROOF_SAMPLE:
         first = np.zeros(len(open_), bool)
         first[::PROOF_SAMPLE] = True
-        if _prove_below(grid, lo, hi, wanted, levels, signs, open_[first]) < PROOF_YIELD:
+        if _prove_below(grid, lo, hi, wanted, levels, signs, open_[first], signs_of) < PROOF_YIELD:
             return signs
         open_ = open_[~first]
-    _prove_below(grid, lo, hi, wanted, levels, signs, open_)
+    _prove_below(grid, lo, hi, wanted, levels, signs, open_, signs_of)
     return signs
 
 
-def _prove_below(grid: _Grid, lo, hi, wanted, levels: int, signs: np.ndarray, open_: np.ndarray) -> float:
+def _prove_below(grid: _Grid, lo, hi, wanted, levels: int, signs: np.ndarray, open_: np.ndarray,
+                 signs_of) -> float:
     """:func:`_prove`'s next level for the boxes ``open_``: their signs proven by their sub-boxes, in place;
     returns the share of them proven."""
     sub_lo, sub_hi = _halves(lo[open_], hi[open_])  # (m, 8, 3)
     m = len(open_)
-    sub = _partial_signs(grid, sub_lo.reshape(-1, 3), sub_hi.reshape(-1, 3)).reshape(m, 8, 6) & wanted[open_, None]
+    sub = signs_of(grid, sub_lo.reshape(-1, 3), sub_hi.reshape(-1, 3)).reshape(m, 8, -1) & wanted[open_, None]
     proven = sub.any(2)
     sought = np.where(proven[..., None], sub, True).all(1) & wanted[open_]  # what every proven sub-box shares
     signs[open_] = sub.all(1) & sought
@@ -1366,7 +1383,7 @@ def _prove_below(grid: _Grid, lo, hi, wanted, levels: int, signs: np.ndarray, op
         rows, cols = np.nonzero(~proven & (sought.any(1) & ~gained)[:, None])
         if len(rows):
             sub[rows, cols] = _prove(grid, sub_lo[rows, cols], sub_hi[rows, cols], sought[rows], levels - 1,
-                                     sub[rows, cols], sample=False)
+                                     sub[rows, cols], sample=False, signs_of=signs_of)
             signs[open_] = sub.all(1) & sought
             gained = np.asarray(signs[open_].any(1))
     return float(gained.mean())
@@ -1397,7 +1414,10 @@ def _halves(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _partial_signs(grid: _Grid, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """For each box [lo, hi]: whether F's partial along x, y, z is proven > 0 over the whole box, then
-    whether it is proven < 0, (n, 6)."""
+    whether it is proven < 0, (n, 6); all six where F's enclosure over the box excludes 0: the surface does
+    not meet the box, so among boxes that cover a cell only those it may meet need a partial's sign (F
+    strictly rising along x wherever it may vanish has at most one zero on each line along x: between two
+    rising zeros it would have to fall through a third)."""
     if not len(lo):
         return np.zeros((0, 6), bool)
     if grid.grouped:
@@ -1405,7 +1425,30 @@ def _partial_signs(grid: _Grid, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     else:
         enclosures = grid.surface.gradient_enclosures(lo, hi)
     partials = enclosures[:, 2:].reshape(-1, 3, 2)
-    return np.concatenate([partials[:, :, 0] > 0, partials[:, :, 1] < 0], 1)
+    empty = (enclosures[:, 0] > 0) | (enclosures[:, 1] < 0)
+    return np.concatenate([partials[:, :, 0] > 0, partials[:, :, 1] < 0], 1) | empty[:, None]
+
+
+def _diagonal_signs(grid: _Grid, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """:func:`_partial_signs` for F's derivatives along the :data:`DIAGONALS` (the tape engine's, three at a
+    time, each with its own hull at a kink): (n, 2·10), rising along each, then falling; all where F's
+    enclosure over the box excludes 0. F rising along a direction d wherever it may vanish in a cell has
+    at most one zero on each line along d there, so the surface in the cell is a graph over the plane
+    across d: across a crease of Min/Max CSG the two sides' partials along an axis may differ in sign
+    (every axis's hull straddles 0) while both rise along a diagonal."""
+    count = len(DIAGONALS)
+    if not len(lo):
+        return np.zeros((0, 2 * count), bool)
+    grouping = grid.grouping((lo + hi) / 2)
+    rising, falling, empty = [], [], None
+    for first in range(0, count, 3):
+        three = DIAGONALS[[min(first + k, count - 1) for k in range(3)]]
+        enclosures = grid.surface.gradient_enclosures(lo, hi, grouping, directions=three)
+        derivatives = enclosures[:, 2:].reshape(-1, 3, 2)[:, : count - first]
+        rising.append(derivatives[:, :, 0] > 0)
+        falling.append(derivatives[:, :, 1] < 0)
+        empty = (enclosures[:, 0] > 0) | (enclosures[:, 1] < 0)
+    return np.concatenate(rising + falling, 1) | empty[:, None]
 
 
 def _never(cells):

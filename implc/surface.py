@@ -492,24 +492,39 @@ class Surface:
         return values, grads if gradient else None
 
     def gradient_enclosures(self, lo: ArrayLike, hi: ArrayLike, groups: np.ndarray | Grouping | None = None,
-                            boxes: Callable[[np.ndarray], tuple] | None = None) -> np.ndarray:
+                            boxes: Callable[[np.ndarray], tuple] | None = None,
+                            directions: ArrayLike | None = None) -> np.ndarray:
         """Enclosures of F and of its three partials over each box [lo[i], hi[i]]: (N, 8), F's lo, hi,
         then each partial's lo, hi (NaN where a partial may be undefined or jump). Where a Min/Max may take
         either operand a partial's enclosure is the hull of both (the generalized gradient: an enclosure
         that excludes 0 still proves F strictly monotone along that axis). ``groups`` and ``boxes`` as for
-        :meth:`eval_grouped` (on the tape engine, each box's program simplified over its group's box)."""
+        :meth:`eval_grouped` (on the tape engine, each box's program simplified over its group's box).
+        ``directions`` ((3, 3), a direction a row): F's derivatives along them instead of the partials, on
+        the tape engine each computed in forward mode with its own hull at a kink (across a crease whose
+        two sides both rise along a diagonal, that derivative's enclosure excludes 0 where every partial's
+        straddles it); the compiled kernels refuse them (from the partials' enclosures they would prove
+        nothing more)."""
         lo, hi = _rows("lo", lo), _rows("hi", hi)
+        seeds = None
+        if directions is not None:
+            seeds = np.ascontiguousarray(directions, dtype=np.float64)
+            if seeds.shape != (3, 3) or not np.isfinite(seeds).all():
+                raise ValueError(f"directions must be a finite (3, 3) array, one direction a row, not {seeds.shape}")
+            if self.engine != "tape":
+                raise ValueError("derivatives along directions need the tape engine (engine='tape')")
         if self.engine != "tape":
             (out,) = self._run(self.kernel(abi.BOX_GRADIENT), [lo, hi], [(8,)], fewest=MIN_CHUNK)
             return out
         if groups is None or (boxes is None and not isinstance(groups, Grouping)):  # one group: the bounds
             bounds = np.array(self.bounds, dtype=np.float64)
             groups = Grouping(np.zeros(len(lo), np.int64), lambda labels: (bounds[None, :, 0], bounds[None, :, 1]))
-        return self._grouped(lo, hi, _grouping(groups, boxes), 2)[1]
+        return self._grouped(lo, hi, _grouping(groups, boxes), 2, seeds)[1]
 
-    def _grouped(self, rows: np.ndarray, rows_hi: np.ndarray | None, plan: Grouping, mode: int):
+    def _grouped(self, rows: np.ndarray, rows_hi: np.ndarray | None, plan: Grouping, mode: int,
+                 seeds: np.ndarray | None = None):
         """``implc_tape_grouped`` over ``rows`` (points, or boxes' lo corners with ``rows_hi``) grouped by
-        ``plan``: (values, (N, 3) gradients, (N, 8) enclosures of F and its partials, or (N, 2) of F)."""
+        ``plan``: (values, (N, 3) gradients, (N, 8) enclosures of F and its partials (or its derivatives
+        along the directions ``seeds``), or (N, 2) of F)."""
         n = len(rows)
         width = {2: 8, 3: 2}.get(mode, 3)
         if n != plan.rows:
@@ -537,7 +552,7 @@ class Surface:
                 program.header.ctypes.data, slots.ctypes.data, choices.ctypes.data, need.ctypes.data,
                 marks.ctypes.data, remap.ctypes.data, work.ctypes.data, lo[at:].ctypes.data, hi[at:].ctypes.data,
                 starts[at:].ctypes.data, count, padded_rows.ctypes.data, padded_hi.ctypes.data,
-                out_value.ctypes.data, out_grad.ctypes.data, mode)
+                out_value.ctypes.data, out_grad.ctypes.data, mode, None if seeds is None else seeds.ctypes.data)
         groups = len(lo)
         step = max(1, groups * chunk_rows(total) // total)  # about chunk_rows per call: Ctrl-C between calls
         in_parallel([partial(batch, at, min(step, groups - at)) for at in range(0, groups, step)])

@@ -241,12 +241,17 @@ def _grouped_enclosures(s, lo, hi):
     return s.gradient_enclosures(lo, hi, groups, lambda labels: (halves[labels, :3], halves[labels, 3:]))
 
 
-@pytest.mark.parametrize("way", ["engine", "engine grouped", "compiled"])
+DIRECTIONS = np.array([[0.6, -1.0, 0.3], [1.0, 1.0, 1.0], [0.0, -0.25, 2.0]])
+"""Directions for the derivatives along them (one a row): none an axis, one a body diagonal."""
+
+
+@pytest.mark.parametrize("way", ["engine", "engine grouped", "compiled", "engine directions"])
 def test_box_gradients_enclose_the_partials_at_forty_digits(way):
     """The interval-gradient interpreter (the second look's monotonicity test; the mesher's proof of regular
-    cells, grouped or compiled) against mpmath at 40 digits: at random points of random boxes, F and each
-    partial (mpmath's own differentiation of the SymPy expression, never implc's) lie in the enclosures
-    wherever those are defined and finite; most are."""
+    cells, grouped or compiled, and along the diagonals) against mpmath at 40 digits: at random points of
+    random boxes, F and each partial, or each derivative along :data:`DIRECTIONS` (mpmath's own
+    differentiation of the SymPy expression, never implc's), lie in the enclosures wherever those are
+    defined and finite; most are."""
     mpmath.mp.dps = 40
     rng = np.random.default_rng(7)
     seen = set()
@@ -263,7 +268,9 @@ def test_box_gradients_enclose_the_partials_at_forty_digits(way):
             half[:, 0] = np.minimum(half[:, 0], np.abs(centres[:, 0]))  # within its half
         lo, hi = np.ascontiguousarray(centres - half), np.ascontiguousarray(centres + half)
         out = {"engine": box_gradient, "engine grouped": _grouped_enclosures,
-               "compiled": lambda s, lo, hi: s.gradient_enclosures(lo, hi)}[way](s, lo, hi)
+               "compiled": lambda s, lo, hi: s.gradient_enclosures(lo, hi),
+               "engine directions": lambda s, lo, hi: s.gradient_enclosures(lo, hi, directions=DIRECTIONS),
+               }[way](s, lo, hi)
         finite = 0
         for box in range(64):
             usable = [np.isfinite(out[box, 2 + 2 * a: 4 + 2 * a]).all() for a in range(3)]
@@ -273,12 +280,35 @@ def test_box_gradients_enclose_the_partials_at_forty_digits(way):
                 value = f(*p)
                 assert out[box, 0] <= value <= out[box, 1], (label, box, p, value, out[box, :2])
                 for a in range(3):
-                    if usable[a]:
+                    if usable[a] and way == "engine directions":
+                        along = [mpmath.mpf(float(v)) for v in DIRECTIONS[a]]
+                        partial = mpmath.diff(lambda t: f(*[p[k] + t * along[k] for k in range(3)]), 0)
+                    elif usable[a]:
                         partial = mpmath.diff(lambda v: f(*[v if k == a else p[k] for k in range(3)]), p[a])
+                    if usable[a]:
                         assert out[box, 2 + 2 * a] <= partial <= out[box, 3 + 2 * a], (label, box, a, partial,
                                                                                        out[box])
         assert finite >= 32, f"{label}: only {finite} of 64 boxes have finite partials"
     assert way == "compiled" or seen == set(OPCODES)
+
+
+def test_derivatives_along_directions_prove_a_crease_the_partials_cannot():
+    """At a crease of max(x - 0.1, y - 0.2) every partial's enclosure over a box across it straddles 0
+    (its hull holds both sides' partials, 0 and 1), while the derivative along (1, 1, 0) is 1 on both
+    sides; the axes as directions give the partials, bit for bit; the compiled kernels and a malformed
+    array are refused with a clear message."""
+    s = implc.compile(sympy.Max(x - 0.1, y - 0.2), engine="tape")
+    lo, hi = np.array([[0.05, 0.15, 0.0]]), np.array([[0.15, 0.25, 0.1]])
+    partials = s.gradient_enclosures(lo, hi)
+    assert partials[0, 2] <= 0 <= partials[0, 3] and partials[0, 4] <= 0 <= partials[0, 5]
+    along = s.gradient_enclosures(lo, hi, directions=[[1, 1, 0], [1, -1, 0], [0, 0, 1]])
+    assert 0 < along[0, 2] <= 1 <= along[0, 3] < 2 and along[0, 4] <= 0 <= along[0, 5]
+    assert np.array_equal(along[:, :2], partials[:, :2])
+    assert np.array_equal(s.gradient_enclosures(lo, hi, directions=np.eye(3)), partials)
+    with pytest.raises(ValueError, match="tape engine"):
+        implc.compile(sympy.Max(x - 0.1, y - 0.2), engine="jit").gradient_enclosures(lo, hi, directions=np.eye(3))
+    with pytest.raises(ValueError, match=r"\(3, 3\)"):
+        s.gradient_enclosures(lo, hi, directions=np.eye(2))
 
 
 def smooth_blend():

@@ -97,7 +97,7 @@ def build_tape_engine(directed: bool) -> str:
         header, slots, lo, hi, out, n = args
         _soa(b, lo, block, box)
         _soa(b, hi, block, b.gep(box, [ir.Constant(I64, 3 * LANES)]))
-        b.call(box_gradient, [header, *program, slots, box, result])
+        b.call(box_gradient, [header, *program, slots, box, result, ir.Constant(_P(DOUBLE), None)])
         rows = b.gep(out, [b.mul(block, ir.Constant(I64, 8 * LANES))])
         for k in range(8):  # lane j of result vector k: entry k of box j's row
             for j in range(LANES):

@@ -19,12 +19,15 @@ switch on the opcode, eight lanes (the eight children of an octant, or eight poi
   dy, dz): for normals.
 - ``tape_point(header, instructions, length, output, slots, points, result)``: F alone at eight points, by
   ``tape_dual``'s value rules: for sampling (the mesher's).
-- ``tape_box_gradient(header, instructions, length, output, slots, box, result)``: enclosures of F and of
-  its three partials over eight boxes (as ``tape_interval``'s), forward mode with the interval rules
+- ``tape_box_gradient(header, instructions, length, output, slots, box, result, seeds)``: enclosures of F
+  and of its three partials over eight boxes (as ``tape_interval``'s), forward mode with the interval rules
   (an interval and three interval partials per slot), into ``result`` (eight vectors: F's lo, hi, then
   each partial's lo, hi). Where a Min/Max may take either operand its partial is the hull of both (the
   generalized gradient of a kink); an undecided select's is NaN (it may jump); NaN stays NaN. For the
-  monotonicity test of :mod:`.tape_tighten`.
+  monotonicity test of :mod:`.tape_tighten`. ``seeds`` not NULL: the derivatives along three directions
+  instead of the axes (9 doubles: direction k's x, y, z at 3k), each with its own hull at a kink (where
+  both sides of a crease rise along a diagonal, that derivative's enclosure excludes 0 while every
+  partial's straddles it).
 
 ``header`` is the full program's (:data:`implc.abi.PROGRAM_WORDS`); ``instructions``, ``length`` and
 ``output`` those of the program to run (the full one, or one simplified from it). ``slots``: the scratch
@@ -39,7 +42,7 @@ from llvmlite import ir
 from .. import abi
 from ..tape_program import NEGLIGIBLE, OPCODES, TINY_EXPONENTS
 from . import elementary
-from .control import I32, I64, Local, define_internal, for_range, if_, load_at, store_at
+from .control import I32, I64, Local, const, define_internal, for_range, if_, load_at, store_at
 from .interval_rules import IntervalEmitter
 from .vector import DOUBLE, VectorBuilder, broadcast
 
@@ -381,12 +384,12 @@ def emit_tape_dual(module: ir.Module, partials: bool = True) -> ir.Function:
 def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
     """Define ``tape_box_gradient`` (see the module docstring) in ``module``."""
     fn, b = define_internal(module, "implc.tape.box_gradient", ir.VoidType(),
-                            [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE), _P(DOUBLE)])
-    header, program, length, output, slots, box, result = fn.args
+                            [_P(I64), _P(I32), I64, I64, _P(DOUBLE), _P(DOUBLE), _P(DOUBLE), _P(DOUBLE)])
+    header, program, length, output, slots, box, result, seeds = fn.args
     vb = VectorBuilder(b, LANES, directed, outline_elementary=True)
     em = IntervalEmitter(vb)
     vslots, vbox = b.bitcast(box_gradient_slots(b, header, slots), _P(V8)), b.bitcast(box, _P(V8))
-    zero, one = vb.splat(0.0), vb.splat(1.0)
+    zero = vb.splat(0.0)
 
     def load(slot):
         """[F's (lo, hi), then each partial's (lo, hi)]."""
@@ -399,10 +402,26 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
         for k, value in enumerate(x for pair in pairs for x in pair):
             b.store(value, b.gep(vslots, [b.add(base, ir.Constant(I64, k))], inbounds=True), align=8)
 
+    seeded = b.icmp_unsigned("!=", seeds, ir.Constant(seeds.type, None))
+
     def variable(a, slot):
         value = (b.load(b.gep(vbox, [ir.Constant(I64, a)]), align=8),
                  b.load(b.gep(vbox, [ir.Constant(I64, 3 + a)]), align=8))
-        store(slot, [value] + [(one, one) if k == a else (zero, zero) for k in range(3)])
+        partials = []
+        for k in range(3):  # the coordinate's derivative along direction k: the axis's, or seeds[3k + a]
+            unit = const(DOUBLE, 1.0 if k == a else 0.0)
+            with b.if_else(seeded) as (given, axis):
+                with given:
+                    from_seeds = load_at(b, seeds, ir.Constant(I64, 3 * k + a))
+                    given_block = b.block
+                with axis:
+                    axis_block = b.block
+            d = b.phi(DOUBLE)
+            d.add_incoming(from_seeds, given_block)
+            d.add_incoming(unit, axis_block)
+            d = broadcast(b, d, LANES)
+            partials.append((d, d))
+        store(slot, [value] + partials)
 
     _variables(b, header, variable)
 

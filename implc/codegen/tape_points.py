@@ -11,7 +11,8 @@ runs at the group's rows, by ``mode``:
   ``out_value``;
 - 1: F and its gradient by ``tape_dual`` into ``out_value`` and ``out_grad`` (three per row);
 - 2: the rows are boxes (``pts`` their lo corners, ``pts_hi`` their hi), and ``tape_box_gradient`` encloses
-  F and its partials over each into ``out_grad`` (eight per row: F's lo, hi, then each partial's);
+  F and its partials over each into ``out_grad`` (eight per row: F's lo, hi, then each partial's), or its
+  derivatives along the three directions at ``seeds`` where that is not NULL;
 - 3: the rows are boxes, and ``tape_interval`` encloses F over each into ``out_grad`` (two per row: lo, hi),
   the group's program also reading a constant for each exponential term negligible over the group's box
   (``tape_simplify_substituting``); ``choices`` has room for twice 8 bytes per instruction here.
@@ -40,7 +41,7 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
     and its substituting variant."""
     fn, b = define(module, abi.TAPE_GROUPED)
     (header, slots, choices, need, marks, remap, work, lo, hi, starts, groups, pts, pts_hi, out_value, out_grad,
-     mode) = fn.args
+     mode, seeds) = fn.args
     program = b.inttoptr(load_at(b, header, abi.PROGRAM_INSTRUCTIONS), _P(I32))
     length = load_at(b, header, abi.PROGRAM_LENGTH)
     output = load_at(b, header, abi.PROGRAM_OUTPUT)
@@ -109,7 +110,7 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                     b.position_at_end(boxes)
                     for a, axis in enumerate(load_xyz(b, pts_hi, block, LANES)):
                         b.store(axis, b.gep(vbox, [const(I64, 3 + a)]), align=8)
-                    b.call(box_gradient, [header, *program_now, box, result])
+                    b.call(box_gradient, [header, *program_now, box, result, seeds])
                     rows = b.gep(out_grad, [b.mul(block, const(I64, 8 * LANES))])
                     for k in range(8):  # lane j of result vector k: entry k of box j's row
                         for j in range(LANES):

@@ -33,6 +33,7 @@ from .vector import DOUBLE, VectorBuilder, broadcast
 
 I8 = ir.IntType(8)
 _P = ir.PointerType
+_AXES = ir.Constant(_P(DOUBLE), None)  # tape_box_gradient's seeds: the partials along the axes
 
 
 def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir.Function, point: ir.Function,
@@ -115,7 +116,7 @@ def emit_tape_tighten(module: ir.Module, interval: ir.Function, box_gradient: ir
         if not first:
             verdict.set(b.bitcast(on_side(*enclose_reduced(above, *held_signs())), I8))
         with if_(b, b.icmp_unsigned("!=", verdict.get(), const(I8, 0xFF))):
-            b.call(box_gradient, [header, program, length, output, slots, box, gradient])
+            b.call(box_gradient, [header, program, length, output, slots, box, gradient, _AXES])
             f_lo, f_hi = (b.load(b.gep(vgradient, [const(I64, k)]), align=8) for k in range(2))
             defined = b.not_(b.or_(vb.isnan(f_lo), vb.isnan(f_hi)))
             proven = on_side(f_lo, f_hi)
