@@ -9,8 +9,10 @@ a tetrahedralization of the voxel grid, cut by the bounds' faces where the solid
   at the surface's crossings disagree (a crease or corner of Min/Max CSG runs through it), is split
   instead into a fan from a cell point inside it (dual contouring's QEF minimiser: on the crease) over
   its faces, each face fanned from a face point of its own (the face's 2D QEF minimiser: where the crease
-  crosses it); its neighbours fan from their centres over the same face triangulations. Every such split
-  is a valid tetrahedralization of the grid: points stay strictly inside their cells and faces.
+  crosses it); where F has no kink (:attr:`implc.Surface.has_kinks`) only such a cell not proven regular
+  is, since a smooth F's surface bends in a proven cell without a crease. Its neighbours fan from their
+  centres over the same face triangulations. Every such split is a valid tetrahedralization of the grid:
+  points stay strictly inside their cells and faces.
 - **marching tetrahedra** over it: each tetrahedron whose vertices' signs differ holds one triangle or
   one quadrilateral (two triangles, split along the diagonal that keeps them on their sides). Each
   surface vertex lies on a tetrahedron edge whose ends have opposite signs, at the root that Newton's
@@ -1289,6 +1291,8 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     vertices, normals, ends = _vertices(grid, index.keys(), _NO_POINTS, _NO_POINTS, witnesses)
     t3 = time.perf_counter()
     feature_rows = _feature_cells(runtime, todo.cells, kuhn, owner, normals) if features else []
+    if len(feature_rows) and not surface.has_kinks:  # a smooth F: a crease only where its gradient may vanish
+        feature_rows = feature_rows[~_regular(grid, todo.cells[feature_rows])]
     stats.feature_cells = len(feature_rows)
     mesh = _Pieces(vertices, normals, ends, kuhn, owner, caps)
     del vertices, normals, ends, kuhn, owner, caps  # the pieces hold them, and let each go once it is joined
@@ -1440,14 +1444,14 @@ def _diagonal_signs(grid: _Grid, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     if not len(lo):
         return np.zeros((0, 2 * count), bool)
     grouping = grid.grouping((lo + hi) / 2)
-    rising, falling, empty = [], [], None
+    rising, falling, empty = [], [], np.zeros(len(lo), bool)
     for first in range(0, count, 3):
         three = DIAGONALS[[min(first + k, count - 1) for k in range(3)]]
         enclosures = grid.surface.gradient_enclosures(lo, hi, grouping, directions=three)
         derivatives = enclosures[:, 2:].reshape(-1, 3, 2)[:, : count - first]
         rising.append(derivatives[:, :, 0] > 0)
         falling.append(derivatives[:, :, 1] < 0)
-        empty = (enclosures[:, 0] > 0) | (enclosures[:, 1] < 0)
+        empty |= (enclosures[:, 0] > 0) | (enclosures[:, 1] < 0)
     return np.concatenate(rising + falling, 1) | empty[:, None]
 
 

@@ -42,6 +42,8 @@ from .vm import VmModel
 
 DEFAULT_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
 ROUNDINGS = ("auto", "directed", "widen")
+KINK_OPS = frozenset({"abs", "min", "max", "select_lt", "select_le"})
+"""The IR ops whose derivative may jump (:attr:`Surface.has_kinks`)."""
 ALL_TERMS = -1
 """The live-term mask with every term of a region plan live (``implc_gradient_live``'s last argument)."""
 CHUNK = 1 << 16
@@ -303,6 +305,12 @@ class Surface:
         self._engine = Runtime.shared_tape_engine(directed) if engine == "tape" else None  # shared, cached
         if engine == "jit":
             self._module_of(abi.POINT)  # this surface's kernels: compiled now, or loaded from the cache
+
+    @property
+    def has_kinks(self) -> bool:
+        """Whether F has an op whose derivative may jump (Min, Max, abs, a select): without one, F is
+        smooth wherever its ops are defined, and so is its surface wherever F's gradient is not zero."""
+        return any(op in KINK_OPS for op, _, _ in self.tape.nodes)
 
     @property
     def gradient_tape(self) -> Tape:
