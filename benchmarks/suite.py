@@ -837,8 +837,9 @@ def mesh(args, out):
                   f"{q['normal_deviation_p99_deg']:.1f} |{cells}")
     md += ["", "voxelize: the default mode (the figure the issue's bar compares with); implc.mesh voxelizes in the "
            "natural mode (the same mesh, fewer tests) and contours. "
-           "Unproven cells: crossed cells where no partial of F keeps its sign (MeshStats; the others are "
-           "proven to hold a graph of F = 0). "
+           "Unproven cells: crossed cells where no derivative of F (along an axis, or on the tape engine a "
+           "face or body diagonal) keeps one sign wherever F may vanish (MeshStats; the others are proven to "
+           "hold a graph of F = 0). "
            "Distance: |F| / |∇F| at each vertex (first order), in cells. Open edges: edges not in exactly two "
            "triangles (marching cubes leaves the solid open where it meets the grid's faces). Self-intersections "
            f"counted by pymeshlab up to {1 << args.mesh_quality_depth}³ (– above).", "",

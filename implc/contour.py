@@ -1326,7 +1326,9 @@ def _regular(grid: _Grid, cells: np.ndarray) -> np.ndarray:
     holds over each box inside it, and the surface's cells share a parent three or four at a time), then
     over the cells of the parents not proven, and below them down to :data:`PROOF_LEVELS` levels
     (:func:`_prove`); on the tape engine the cells still open try F's derivatives along the
-    :data:`DIAGONALS` the same way (a crease's cells: :func:`_diagonal_signs`)."""
+    :data:`DIAGONALS` the same way (a crease's cells: :func:`_diagonal_signs`), on a sample of them first
+    and on the others where the sample gained :data:`PROOF_YIELD` (colonnade's crease cells at 256³: 65%;
+    bear's, around smooth blends, 15% for 0.18 s of CPU)."""
     regular = np.zeros(len(cells), bool)
     if not len(cells):
         return regular
@@ -1340,9 +1342,15 @@ def _regular(grid: _Grid, cells: np.ndarray) -> np.ndarray:
     regular[rest] = _prove(grid, lo, hi, np.ones((len(rest), 6), bool), PROOF_LEVELS).any(1)
     if grid.surface.engine == "tape":
         rest = np.flatnonzero(~regular)
-        lo, hi = grid.world(cells[rest]), grid.world(cells[rest] + 1)
-        wanted = np.ones((len(rest), 2 * len(DIAGONALS)), bool)
-        regular[rest] = _prove(grid, lo, hi, wanted, PROOF_LEVELS, signs_of=_diagonal_signs).any(1)
+        sample = np.zeros(len(rest), bool)  # a sample first: the diagonals pay on creases, not on smooth blends
+        sample[:: max(1, min(PROOF_SAMPLE, len(rest) // PROOF_SAMPLE_MIN))] = True
+        for rows in (rest[sample], rest[~sample]):
+            lo, hi = grid.world(cells[rows]), grid.world(cells[rows] + 1)
+            wanted = np.ones((len(rows), 2 * len(DIAGONALS)), bool)
+            proven = _prove(grid, lo, hi, wanted, PROOF_LEVELS, signs_of=_diagonal_signs).any(1)
+            regular[rows] = proven
+            if len(proven) and proven.mean() < PROOF_YIELD:
+                break
     return regular
 
 
