@@ -1347,9 +1347,9 @@ def _regular(grid: _Grid, cells: np.ndarray) -> np.ndarray:
         for rows in (rest[sample], rest[~sample]):
             lo, hi = grid.world(cells[rows]), grid.world(cells[rows] + 1)
             wanted = np.ones((len(rows), 2 * len(DIAGONALS)), bool)
-            proven = _prove(grid, lo, hi, wanted, PROOF_LEVELS, signs_of=_diagonal_signs).any(1)
-            regular[rows] = proven
-            if len(proven) and proven.mean() < PROOF_YIELD:
+            gained = np.asarray(_prove(grid, lo, hi, wanted, PROOF_LEVELS, signs_of=_diagonal_signs).any(1))
+            regular[rows] = gained
+            if len(gained) and gained.mean() < PROOF_YIELD:
                 break
     return regular
 
