@@ -1294,8 +1294,10 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     vertices, normals, ends = _vertices(grid, index.keys(), _NO_POINTS, _NO_POINTS, witnesses)
     t3 = time.perf_counter()
     feature_rows = _feature_cells(runtime, todo.cells, kuhn, owner, normals) if features else []
+    proven_rows = np.zeros(0, np.int64)  # rows of todo proven regular already (not proven again below)
     if len(feature_rows) and not surface.has_kinks:  # a smooth F: a crease only where its gradient may vanish
-        feature_rows = feature_rows[~_regular(grid, todo.cells[feature_rows])]
+        bent_regular = _regular(grid, todo.cells[feature_rows])
+        proven_rows, feature_rows = feature_rows[bent_regular], feature_rows[~bent_regular]
     stats.feature_cells = len(feature_rows)
     mesh = _Pieces(vertices, normals, ends, kuhn, owner, caps)
     del vertices, normals, ends, kuhn, owner, caps  # the pieces hold them, and let each go once it is joined
@@ -1307,9 +1309,12 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     vertices, normals, faces, ends = mesh.compacted()
     normals = _fill_normals(grid, normals, vertices, faces)
     t4 = time.perf_counter()
-    crossed_cells = todo.cells[todo.crossed()]
-    unproven = crossed_cells[~_regular(grid, crossed_cells)]
-    stats.regular_cells, stats.unproven_cells = len(crossed_cells) - len(unproven), len(unproven)
+    crossed = todo.crossed()
+    crossed[proven_rows] = False
+    open_cells = todo.cells[crossed]
+    unproven = open_cells[~_regular(grid, open_cells)]
+    stats.regular_cells = int(np.count_nonzero(todo.crossed())) - len(unproven)
+    stats.unproven_cells = len(unproven)
     t5 = time.perf_counter()
     stats.triangles, stats.vertices = len(faces), len(vertices)
     stats.seconds = {"signs": t1 - t0, "triangles": t2 - t1, "vertices": t3 - t2, "features": t4 - t3,
@@ -1435,13 +1440,8 @@ def _partial_signs(grid: _Grid, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     rising zeros it would have to fall through a third)."""
     if not len(lo):
         return np.zeros((0, 6), bool)
-    if grid.grouped:
-        enclosures = grid.surface.gradient_enclosures(lo, hi, grid.groups((lo + hi) / 2), grid.group_boxes)
-    else:
-        enclosures = grid.surface.gradient_enclosures(lo, hi)
-    partials = enclosures[:, 2:].reshape(-1, 3, 2)
-    empty = (enclosures[:, 0] > 0) | (enclosures[:, 1] < 0)
-    return np.concatenate([partials[:, :, 0] > 0, partials[:, :, 1] < 0], 1) | empty[:, None]
+    rising, falling, empty = _signs_along(grid, lo, hi, grid.grouping((lo + hi) / 2))
+    return np.concatenate([rising, falling], 1) | empty[:, None]
 
 
 def _diagonal_signs(grid: _Grid, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -1455,15 +1455,22 @@ def _diagonal_signs(grid: _Grid, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     if not len(lo):
         return np.zeros((0, 2 * count), bool)
     grouping = grid.grouping((lo + hi) / 2)
-    rising, falling, empty = [], [], np.zeros(len(lo), bool)
+    rising, falling = [], []
     for first in range(0, count, 3):
         three = DIAGONALS[[min(first + k, count - 1) for k in range(3)]]
-        enclosures = grid.surface.gradient_enclosures(lo, hi, grouping, directions=three)
-        derivatives = enclosures[:, 2:].reshape(-1, 3, 2)[:, : count - first]
-        rising.append(derivatives[:, :, 0] > 0)
-        falling.append(derivatives[:, :, 1] < 0)
-        empty |= (enclosures[:, 0] > 0) | (enclosures[:, 1] < 0)
+        up, down, empty = _signs_along(grid, lo, hi, grouping, three)
+        rising.append(up[:, : count - first])
+        falling.append(down[:, : count - first])
     return np.concatenate(rising + falling, 1) | empty[:, None]
+
+
+def _signs_along(grid: _Grid, lo, hi, grouping: Grouping | None, directions=None):
+    """Over each box [lo, hi] (the tape engine's program simplified over its group of ``grouping``): whether
+    F's derivative along each of three directions (the axes, or the rows of ``directions``) is proven > 0,
+    whether it is proven < 0 ((n, 3) each), and whether F's enclosure excludes 0 ((n,))."""
+    enclosures = grid.surface.gradient_enclosures(lo, hi, grouping, directions=directions)
+    derivatives = enclosures[:, 2:].reshape(-1, 3, 2)
+    return derivatives[:, :, 0] > 0, derivatives[:, :, 1] < 0, (enclosures[:, 0] > 0) | (enclosures[:, 1] < 0)
 
 
 def _never(cells):

@@ -99,12 +99,13 @@ def in_parallel(jobs: list[Callable[[], None]]) -> None:
     for the process (the jobs themselves on the calling thread where that is one); the first error (or
     Ctrl-C) cancels the jobs not started and is raised once those running finish (they write into the
     caller's arrays)."""
-    workers = min(len(jobs), thread_count())
-    if workers <= 1:
+    workers = thread_count()
+    if workers <= 1 or len(jobs) <= 1:
         for job in jobs:
             job()
         return
-    futures = [_pool(workers).submit(job) for job in jobs]
+    pool = _pool(workers)  # one pool per count of threads: a batch of fewer jobs leaves some idle
+    futures = [pool.submit(job) for job in jobs]
     try:
         done, _ = wait(futures, return_when=FIRST_EXCEPTION)
         for future in done:

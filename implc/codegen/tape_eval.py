@@ -42,7 +42,7 @@ from llvmlite import ir
 from .. import abi
 from ..tape_program import NEGLIGIBLE, OPCODES, TINY_EXPONENTS
 from . import elementary
-from .control import I32, I64, Local, const, define_internal, for_range, if_, load_at, store_at
+from .control import I32, I64, Local, const, define_internal, for_range, if_, load_at, local_array, store_at
 from .interval_rules import IntervalEmitter
 from .vector import DOUBLE, VectorBuilder, broadcast
 
@@ -402,26 +402,18 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
         for k, value in enumerate(x for pair in pairs for x in pair):
             b.store(value, b.gep(vslots, [b.add(base, ir.Constant(I64, k))], inbounds=True), align=8)
 
-    seeded = b.icmp_unsigned("!=", seeds, ir.Constant(seeds.type, None))
+    axes = local_array(b, DOUBLE, 9, "axes")  # the directions where ``seeds`` is NULL: the axes
+    for k in range(3):
+        for a in range(3):
+            store_at(b, const(DOUBLE, 1.0 if k == a else 0.0), axes, const(I64, 3 * k + a))
+    directions = b.select(b.icmp_unsigned("!=", seeds, ir.Constant(seeds.type, None)), seeds, axes)
 
     def variable(a, slot):
         value = (b.load(b.gep(vbox, [ir.Constant(I64, a)]), align=8),
                  b.load(b.gep(vbox, [ir.Constant(I64, 3 + a)]), align=8))
-        partials = []
-        for k in range(3):  # the coordinate's derivative along direction k: the axis's, or seeds[3k + a]
-            unit = const(DOUBLE, 1.0 if k == a else 0.0)
-            with b.if_else(seeded) as (given, axis):
-                with given:
-                    from_seeds = load_at(b, seeds, ir.Constant(I64, 3 * k + a))
-                    given_block = b.block
-                with axis:
-                    axis_block = b.block
-            d = b.phi(DOUBLE)
-            d.add_incoming(from_seeds, given_block)
-            d.add_incoming(unit, axis_block)
-            d = broadcast(b, d, LANES)
-            partials.append((d, d))
-        store(slot, [value] + partials)
+        # the coordinate's derivative along direction k: component a of that direction
+        along = [broadcast(b, load_at(b, directions, const(I64, 3 * k + a)), LANES) for k in range(3)]
+        store(slot, [value] + [(d, d) for d in along])
 
     _variables(b, header, variable)
 
