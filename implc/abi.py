@@ -196,9 +196,11 @@ PROGRAM_CONSTANTS, PROGRAM_CONSTANT_SLOTS, PROGRAM_CONSTANT_COUNT = 3, 4, 5
 PROGRAM_VARIABLES = 6
 """A program header (int64, :class:`implc.tape_program.TapeProgram`): the address of the instructions,
 their count, the output slot; the constant table's address, its slots' address, its row count; the slots
-of x, y, z (three words, -1 where unused); then the slot count."""
+of x, y, z (three words, -1 where unused); then the slot count, and the slot of the exact zero constant (-1:
+the program has none)."""
 PROGRAM_SLOT_COUNT = 9
-PROGRAM_WORDS = 10
+PROGRAM_ZERO = 10
+PROGRAM_WORDS = 11
 INSTRUCTION_WORDS = 5
 """A tape instruction (int32): opcode, output slot, three operand slots (unused ones 0; a watched sum's third
 word says which of its operands an exponential gives: :data:`implc.tape_program.TINY_EXPONENTS`)."""

@@ -83,6 +83,7 @@ class TapeProgram:
     variable_slots: np.ndarray  # (3,) int32, -1 where the coordinate is unused
     output: int
     slot_count: int
+    zero: int = -1  # the slot of the exact zero constant (every one the tape has), -1 if none
     header: np.ndarray = field(init=False, repr=False, compare=False)  # what native code receives
 
     def __post_init__(self):
@@ -95,6 +96,7 @@ class TapeProgram:
         header[abi.PROGRAM_CONSTANT_COUNT] = len(self.constants)
         header[abi.PROGRAM_VARIABLES: abi.PROGRAM_VARIABLES + 3] = self.variable_slots
         header[abi.PROGRAM_SLOT_COUNT] = self.slot_count
+        header[abi.PROGRAM_ZERO] = self.zero
         object.__setattr__(self, "header", header)  # holds addresses: the arrays live as long as self
 
     def __len__(self) -> int:
@@ -135,9 +137,15 @@ def encode(tape: Tape) -> TapeProgram:
         slot_count += 1
         return slot_count - 1
 
+    zero: list[int] = []  # the one slot of every exact zero: a simplified program tells a zero by its slot
+
     def constant(nearest, lo, hi) -> int:
+        if zero and nearest == lo == hi == 0:
+            return zero[0]
         constants.append((nearest, lo, hi))
         constant_slots.append(new_slot())
+        if nearest == lo == hi == 0:
+            zero.append(constant_slots[-1])
         return constant_slots[-1]
 
     def emit(name, a, b=0, c=0) -> int:
@@ -175,12 +183,12 @@ def encode(tape: Tape) -> TapeProgram:
             slot = emit(op, *s)
         slot_of.append(slot)
     fixed = constant_slots + [v for v in variables if v >= 0]
-    rows, rename, slot_count = _allocate(rows, fixed, slot_of[sub.outputs[0]])
+    rows, rename, slot_count = _allocate(rows, fixed, slot_of[sub.outputs[0]], zero[0] if zero else None)
     return TapeProgram(np.array(rows, dtype=np.int32).reshape(-1, abi.INSTRUCTION_WORDS),
                        np.array(constants, dtype=np.float64).reshape(-1, 3),
                        np.array([rename[c] for c in constant_slots], dtype=np.int32),
                        np.array([rename[v] if v >= 0 else -1 for v in variables], dtype=np.int32),
-                       rename[slot_of[sub.outputs[0]]], slot_count)
+                       rename[slot_of[sub.outputs[0]]], slot_count, rename[zero[0]] if zero else -1)
 
 
 def _operands(row) -> tuple[int, ...]:
@@ -188,19 +196,61 @@ def _operands(row) -> tuple[int, ...]:
     return row[2:3] if code < FIRST_BINARY else row[2:4] if code < FIRST_TERNARY else row[2:5]
 
 
-def _allocate(rows: list, fixed: list, output: int) -> tuple[list, dict, int]:
+def zero_prone(rows: list, zero: int | None) -> tuple[set, list]:
+    """The values a simplified program may find exactly 0 (:data:`ZERO_KEEPING` of one, a choice with one
+    as an operand, a sum or difference of two; ``zero``: the zero constant's slot), and per instruction
+    whether it is a sum that may become an alias of an operand (:data:`ALIASING_SUMS`, the other operand
+    such a value; a difference only of its first)."""
+    prone = set() if zero is None else {zero}
+    keeping = {OPCODES[op] for op in ZERO_KEEPING}
+    sums = {OPCODES[op] for op in ALIASING_SUMS}
+    aliasing = []
+    for row in rows:
+        code, out, a, b, c = row
+        if code in keeping:
+            hit = a in prone
+        elif code in (OPCODES["min"], OPCODES["max"]):
+            hit = a in prone or b in prone
+        elif code >= FIRST_TERNARY:
+            hit = b in prone or c in prone
+        elif code in sums:
+            hit = a in prone and b in prone
+        else:
+            hit = False
+        aliasing.append(code in sums and (b in prone or (a in prone and code != OPCODES["sub"])))
+        (prone.add if hit else prone.discard)(out)
+    return prone, aliasing
+
+
+ZERO_KEEPING = ("neg", "square", "cube", "fourth", "mul_const", "div_const")
+"""The operations whose value is exactly 0 (its partials 0) wherever their first operand is the exact 0
+(mul_const and div_const: a constant second operand that excludes 0): a simplified program reads the zero
+constant in their place (:mod:`implc.codegen.tape_simplify`)."""
+ALIASING_SUMS = ("add", "add_watched", "sub")
+"""The sums a simplified program replaces by an operand where the other is the exact 0 (a difference: where
+its second is): x + 0 and x − 0 are x exactly, in every rounding mode, and so are their partials."""
+
+
+def _allocate(rows: list, fixed: list, output: int, zero: int | None = None) -> tuple[list, dict, int]:
     """The instructions ``rows`` (every value in a slot of its own) with their values in as few slots as
     they allow: a slot is taken again once its value has been read for the last time. Constants and
     coordinates (``fixed``) keep slots of their own. A choice's value operands stay in their slots as
     long as its result is read, so that a simplified program may read the winner where it read the
-    choice (:mod:`implc.codegen.tape_simplify` makes a decided choice an alias of its winner). Returns
-    the rows, the new slot of each old one, the slot count."""
+    choice (:mod:`implc.codegen.tape_simplify` makes a decided choice an alias of its winner); so do a
+    sum's operands where the sum may become an alias of one (:func:`zero_prone`; ``zero``: the zero
+    constant's slot). Returns the rows, the new slot of each old one, the slot count."""
     choice_codes = {OPCODES[op] for op in CHOICE_OPS}
     operands = [_operands(row) for row in rows]
+    aliasing = zero_prone(rows, zero)[1]
     last = {output: len(rows)}  # each value's last read (a choice's value operands: its result's)
     for i in range(len(rows) - 1, -1, -1):  # backward: a value's first read seen is its last
         code = rows[i][0]
-        if code in choice_codes:
+        if aliasing[i]:
+            until = last.get(rows[i][1], i)
+            for operand in operands[i]:
+                if last.get(operand, -1) < until:
+                    last[operand] = until
+        elif code in choice_codes:
             until = last.get(rows[i][1], i)
             for k, operand in enumerate(operands[i]):
                 kept = until if code < FIRST_TERNARY or k > 0 else i

@@ -79,7 +79,7 @@ def emit_tape_grouped(module: ir.Module, prefill: ir.Function, interval: ir.Func
                 with if_(b, b.trunc(b.lshr(decided, lane), ir.IntType(1))):
                     stamp.set(b.add(stamp.get(), const(I32, 1)))  # the caller's ``need`` starts at zero
                     arguments = [program, length, output, choices, lane, work, need, stamp.get(), marks, remap,
-                                 simplified_output]
+                                 simplified_output, load_at(b, header, abi.PROGRAM_ZERO)]
                     run_length.set(call_simplify(b, simplify, arguments, substituted, enclosing))
                     run_program.set(work)
                     run_output.set(b.load(simplified_output))

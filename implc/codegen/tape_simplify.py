@@ -1,9 +1,13 @@
 """The tape engine's per-region simplification: the program one box's descendants run.
 
-``tape_simplify(program, length, output, choices, lane, out, need, stamp, mark, remap, out_output) -> length'``
+``tape_simplify(program, length, output, choices, lane, out, need, stamp, mark, remap, out_output, zero) -> length'``
 (internal): given the choices ``tape_interval`` wrote for box ``lane``, every Min/Max whose choice was
 decided becomes an alias of its winning operand (a select: of the branch its condition takes), and every
 instruction that only fed the losing one is dropped; the new program's output slot goes to ``out_output``.
+Where that leaves an operand the exact zero constant (slot ``zero``, -1: none), an operation that keeps 0
+(:data:`~implc.tape_program.ZERO_KEEPING`) becomes an alias of it, and a sum of it and x an alias of x
+(:data:`~implc.tape_program.ALIASING_SUMS`): a blend's terms decided 0 far from their blobs cost nothing,
+not a scale, a negation and a sum each.
 Its variant ``tape_simplify_substituting(..., substituted)`` also makes a watched sum whose exponential term
 was negligible over the box read the constant [0, 2^-e] that encloses it there
 (:data:`implc.tape_program.TINY_EXPONENTS`), so that what only fed the term is dropped too, and sets
@@ -26,10 +30,12 @@ program's wherever the interval rules are inclusion-monotone (docs/soundness.md)
 
 from __future__ import annotations
 
+import functools
+
 from llvmlite import ir
 
 from .. import abi
-from ..tape_program import FIRST_BINARY, FIRST_TERNARY, OPCODES
+from ..tape_program import ALIASING_SUMS, FIRST_BINARY, FIRST_TERNARY, OPCODES, ZERO_KEEPING
 from .control import I32, I64, Local, const, define_internal, for_range, if_, load_at, store_at
 from .tape_eval import I8, LANES
 
@@ -41,13 +47,13 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
     """Define ``tape_simplify`` (see the module docstring) in ``module``; with ``substitute``, the variant
     that also replaces negligible terms (``implc.tape.simplify_substituting``, the same arguments and
     ``substituted``): a plain simplification does no work for them."""
-    arguments = [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I32), I32, _P(I8), _P(I32), _P(I64)]
+    arguments = [_P(I32), I64, I64, _P(I8), I64, _P(I32), _P(I32), I32, _P(I8), _P(I32), _P(I64), I64]
     fn, b = define_internal(module, "implc.tape.simplify_substituting" if substitute else "implc.tape.simplify", I64,
                             arguments + ([_P(I64)] if substitute else []))
-    program, length, output, choices, lane, out, need, stamp, mark, remap, out_output = fn.args[:11]
+    program, length, output, choices, lane, out, need, stamp, mark, remap, out_output, zero = fn.args[:12]
     watched_codes = (OPCODES["add_watched"], OPCODES["add_nonneg_watched"])
     if substitute:
-        substituted = fn.args[11]
+        substituted = fn.args[12]
         b.store(const(I64, 0), substituted)
 
     def choice_byte(i):
@@ -127,10 +133,22 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
         ternary = b.icmp_unsigned(">=", code, const(I64, FIRST_TERNARY))
         with if_(b, b.icmp_unsigned("==", m, const(I8, KEEP))):
             binary = b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))
-            # a substituting call's sums watch nothing: what it writes is only enclosed, never simplified
-            fourth = const(I32, 0) if substitute else b.trunc(d, I32)
-            write(code, out_slot, [load_at(b, remap, a), b.select(binary, load_at(b, remap, c), b.trunc(c, I32)),
-                                   b.select(ternary, load_at(b, remap, d), fourth)])
+            first, second = load_at(b, remap, a), b.select(binary, load_at(b, remap, c), b.trunc(c, I32))
+            # an exact 0 kept by its operation, or a sum with an exact 0 term: no instruction, its value named
+            zero_slot = b.trunc(zero, I32)
+            first_zero = b.icmp_signed("==", first, zero_slot)
+            second_zero = b.and_(binary, b.icmp_signed("==", second, zero_slot))
+            stays_zero = b.and_(first_zero, _is(b, code, ZERO_KEEPING))
+            to_first = b.and_(second_zero, _is(b, code, ALIASING_SUMS))
+            to_second = b.and_(first_zero, _is(b, code, ("add", "add_watched")))
+            named = b.select(stays_zero, zero_slot, b.select(to_first, first, second))
+            with b.if_else(b.or_(stays_zero, b.or_(to_first, to_second))) as (alias, kept):
+                with alias:
+                    store_at(b, named, remap, out_slot)
+                with kept:
+                    # a substituting call's sums watch nothing: what it writes is only enclosed, never simplified
+                    fourth = const(I32, 0) if substitute else b.trunc(d, I32)
+                    write(code, out_slot, [first, second, b.select(ternary, load_at(b, remap, d), fourth)])
         if substitute:
             with if_(b, b.icmp_unsigned("==", m, const(I8, SUBSTITUTE))):
                 tiny = choice_byte(i)
@@ -146,6 +164,11 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
     b.store(b.sext(load_at(b, remap, output), I64), out_output)
     b.ret(count.get())
     return fn
+
+
+def _is(b: ir.IRBuilder, code, names) -> ir.Value:
+    """An i1: ``code`` (an i64) is the opcode of one of ``names``."""
+    return functools.reduce(b.or_, [b.icmp_unsigned("==", code, const(I64, OPCODES[name])) for name in names])
 
 
 def call_simplify(b: ir.IRBuilder, simplify: tuple, arguments: list, substituted, substituting):

@@ -186,7 +186,8 @@ class TapeEvaluator(Evaluator):
                 stamp = b.select(b.icmp_signed(">=", stamp, const(I64, 0x7FFFFFFF)), const(I64, 1), stamp)
                 store_at(b, stamp, self.words, abi.TAPE_STAMP)
                 arguments = [*self.program(b, level), self.choices_of(b, level), b.zext(c, I64), target, self.need,
-                             b.trunc(stamp, I32), self.marks, self.remap, self.output_at(b, child)]
+                             b.trunc(stamp, I32), self.marks, self.remap, self.output_at(b, child),
+                             load_at(b, self.header, abi.PROGRAM_ZERO)]
                 replacing = b.icmp_signed("==", child, self.substitution_level)
                 n = call_simplify(b, self.simplify, arguments, self.substituted, replacing)
                 with if_(b, replacing):
