@@ -183,6 +183,8 @@ def encode(tape: Tape) -> TapeProgram:
             slot = emit(op, *s)
         slot_of.append(slot)
     fixed = constant_slots + [v for v in variables if v >= 0]
+    if zero and zero_aliasing(rows, zero[0]) is None:
+        zero.clear()  # a value that may simplify to the zero constant meets an operation that tells −0 from +0
     rows, rename, slot_count = _allocate(rows, fixed, slot_of[sub.outputs[0]], zero[0] if zero else None)
     return TapeProgram(np.array(rows, dtype=np.int32).reshape(-1, abi.INSTRUCTION_WORDS),
                        np.array(constants, dtype=np.float64).reshape(-1, 3),
@@ -196,17 +198,42 @@ def _operands(row) -> tuple[int, ...]:
     return row[2:3] if code < FIRST_BINARY else row[2:4] if code < FIRST_TERNARY else row[2:5]
 
 
-def zero_prone(rows: list, zero: int | None) -> tuple[set, list]:
-    """The values a simplified program may find exactly 0 (:data:`ZERO_KEEPING` of one, a choice with one
-    as an operand, a sum or difference of two; ``zero``: the zero constant's slot), and per instruction
-    whether it is a sum that may become an alias of an operand (:data:`ALIASING_SUMS`, the other operand
-    such a value; a difference only of its first)."""
-    prone = set() if zero is None else {zero}
+ZERO_KEEPING = ("neg", "square", "cube", "fourth", "mul_const", "div_const")
+"""The operations whose value is 0 (its partials 0) wherever their first operand is the exact 0
+(mul_const and div_const: a constant second operand that excludes 0): a simplified program reads the zero
+constant in their place (:mod:`implc.codegen.tape_simplify`)."""
+ALIASING_SUMS = ("add", "add_watched", "sub")
+"""The sums a simplified program replaces by an operand where the other is the exact 0 (a difference: where
+its second is): x + 0 and x − 0 are x exactly, in every rounding mode, and so are their partials."""
+_ZERO_SIGN_SHOWN = ("sqrt", "log", "abs")
+"""Operations whose value or partials differ for −0 and +0 (sqrt's and log's derivatives ±∞, abs's partial
+±1), as a quotient's divisor does: a simplified program reads +0 where the whole program may compute −0
+(−x, x·c with c < 0, a sum rounded down), so a value that may differ so must not reach one of them."""
+_ZERO_SIGN_LOST = ("square", "fourth", "exp", "cos")
+"""Operations whose value and partials are the same for −0 and +0: what they compute from a zero of either
+sign is the same number."""
+
+
+def zero_aliasing(rows: list, zero: int | None) -> list[bool] | None:
+    """Per instruction (``rows`` before allocation, ``zero``: the zero constant's slot or None) whether it
+    is a sum a simplified program may replace by an operand (:data:`ALIASING_SUMS`, the other operand a
+    value that may be exactly 0: a :data:`ZERO_KEEPING` of one, a choice with one as a value operand, a sum
+    or difference of two); None where a value computed from one, whose zero's sign may then differ from the
+    whole program's, reaches an operation that shows it (a divisor, :data:`_ZERO_SIGN_SHOWN`), which the
+    simplification then leaves alone (the program's header has no zero slot)."""
+    if zero is None:
+        return None
+    prone, signed = {zero}, {zero}  # exactly 0 where simplified; its sign of zero perhaps not the program's
     keeping = {OPCODES[op] for op in ZERO_KEEPING}
     sums = {OPCODES[op] for op in ALIASING_SUMS}
+    shown = {OPCODES[op] for op in _ZERO_SIGN_SHOWN}
+    lost = {OPCODES[op] for op in _ZERO_SIGN_LOST}
     aliasing = []
     for row in rows:
         code, out, a, b, c = row
+        values = _operands(row)[1:] if code >= FIRST_TERNARY else _operands(row)  # a select's condition: a sign test
+        if (code in shown and a in signed) or (code == OPCODES["div"] and b in signed):
+            return None
         if code in keeping:
             hit = a in prone
         elif code in (OPCODES["min"], OPCODES["max"]):
@@ -218,17 +245,11 @@ def zero_prone(rows: list, zero: int | None) -> tuple[set, list]:
         else:
             hit = False
         aliasing.append(code in sums and (b in prone or (a in prone and code != OPCODES["sub"])))
-        (prone.add if hit else prone.discard)(out)
-    return prone, aliasing
-
-
-ZERO_KEEPING = ("neg", "square", "cube", "fourth", "mul_const", "div_const")
-"""The operations whose value is exactly 0 (its partials 0) wherever their first operand is the exact 0
-(mul_const and div_const: a constant second operand that excludes 0): a simplified program reads the zero
-constant in their place (:mod:`implc.codegen.tape_simplify`)."""
-ALIASING_SUMS = ("add", "add_watched", "sub")
-"""The sums a simplified program replaces by an operand where the other is the exact 0 (a difference: where
-its second is): x + 0 and x − 0 are x exactly, in every rounding mode, and so are their partials."""
+        if hit:
+            prone.add(out)
+        if hit or (code not in lost and any(v in signed for v in values)):
+            signed.add(out)
+    return aliasing
 
 
 def _allocate(rows: list, fixed: list, output: int, zero: int | None = None) -> tuple[list, dict, int]:
@@ -237,11 +258,11 @@ def _allocate(rows: list, fixed: list, output: int, zero: int | None = None) -> 
     coordinates (``fixed``) keep slots of their own. A choice's value operands stay in their slots as
     long as its result is read, so that a simplified program may read the winner where it read the
     choice (:mod:`implc.codegen.tape_simplify` makes a decided choice an alias of its winner); so do a
-    sum's operands where the sum may become an alias of one (:func:`zero_prone`; ``zero``: the zero
+    sum's operands where the sum may become an alias of one (:func:`zero_aliasing`; ``zero``: the zero
     constant's slot). Returns the rows, the new slot of each old one, the slot count."""
     choice_codes = {OPCODES[op] for op in CHOICE_OPS}
     operands = [_operands(row) for row in rows]
-    aliasing = zero_prone(rows, zero)[1]
+    aliasing = zero_aliasing(rows, zero) or [False] * len(rows)
     last = {output: len(rows)}  # each value's last read (a choice's value operands: its result's)
     for i in range(len(rows) - 1, -1, -1):  # backward: a value's first read seen is its last
         code = rows[i][0]
