@@ -127,7 +127,10 @@ EDGE_ROOTS = _entry("implc_edge_roots", "phase:i64 n:i64 rows:i64* keys:i64* a:f
                                         "f:f64* g:f64* guesses:f64* vertices:f64* normals:f64* margin:f64 "
                                         "nudge:f64 tolerance:f64", "i64")
 CORNER_POINTS = _entry("implc_corner_points", "keys:i64* n:i64 geometry:f64* points:f64*")
-RUNTIME_ENTRIES = (DROP_MARKED, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS, SPLAT)
+ARRANGE_GROUPS = _entry("implc_arrange_groups", "labels:i64* n:i64 bound:i64 counts:i64* group_labels:i64* "
+                                                "starts:i64* taken:i64* place:i64*", "i64")
+RUNTIME_ENTRIES = (DROP_MARKED, OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUBTREE_ROWS, SPLAT,
+                   ARRANGE_GROUPS)
 CONTOURING_ENTRIES = (HASH_INDEX, CELL_CORNERS, CORNER_SIGNS, KUHN_TRIANGLES, FAN_TRIANGLES, QEF, BENT_CELLS, EDGE_ENDS,
                       EDGE_ROOTS, CORNER_POINTS)
 """... and the contouring's (:mod:`implc.codegen.contour_cells`), a module of its own built on first use by the

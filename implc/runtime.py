@@ -58,7 +58,7 @@ class Contouring:
 
 class Runtime:
     """The runtime module's entry points: ``drop_marked``, ``octree_insert``, ``octree_traverse``,
-    ``octree_mark_inside``, ``octree_subtree_rows`` and ``splat``; the walk over compiled kernels,
+    ``octree_mark_inside``, ``octree_subtree_rows``, ``splat`` and ``arrange_groups``; the walk over compiled kernels,
     ``subdivide``, from a module of its own compiled on first use, and likewise ``contouring`` (the
     mesher's, :class:`Contouring`) and ``flat_collapse`` (meshes' simplification; signatures in
     :mod:`implc.abi`)."""
@@ -77,6 +77,7 @@ class Runtime:
         self.octree_mark_inside = self.native.bind(abi.OCTREE_MARK_INSIDE)
         self.octree_subtree_rows = self.native.bind(abi.OCTREE_SUBTREE_ROWS)
         self.splat = self.native.bind(abi.SPLAT)
+        self.arrange_groups = self.native.bind(abi.ARRANGE_GROUPS)
         self._tape_engines: dict[bool, TapeEngine] = {}
 
     @property

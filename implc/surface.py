@@ -235,40 +235,31 @@ class Grouping:
     and its normal; :meth:`subset` for the rows still open after a step)."""
 
     def __init__(self, groups: np.ndarray, boxes: Callable[[np.ndarray], tuple]):
-        groups = np.asarray(groups)
-        # any order within a group (each row's result is its own); stable: numpy's merge sort takes the runs
-        # that rows in grid order already form, 5x faster than its default on a mesh's vertices
-        order = np.argsort(groups, kind="stable")
-        self._arrange(order, groups[order], boxes)
-
-    def _arrange(self, order: np.ndarray, ordered: np.ndarray, boxes: Callable[[np.ndarray], tuple]):
-        """The padded places of the rows ``order`` (sorted by group), whose labels are ``ordered``."""
-        n = self.rows = len(order)
-        first = np.flatnonzero(np.concatenate([[True], ordered[1:] != ordered[:-1]])) if n else np.zeros(0, np.int64)
-        counts = np.diff(np.append(first, n))
-        self.lo, self.hi = (np.ascontiguousarray(a, dtype=np.float64) for a in boxes(ordered[first]))
-        padded = (counts + 7) & ~7  # whole blocks of eight: a group's last row repeated
-        self.starts = np.zeros(len(first) + 1, np.int64)
-        np.cumsum(padded, out=self.starts[1:])
+        labels = np.ascontiguousarray(groups, dtype=np.int64)
+        n = self.rows = len(labels)
+        bound = int(labels.max()) + 1 if n else 0
+        if n and (labels.min() < 0 or bound > max(4 * n, 1 << 16)):  # a sparse range: numbered densely first
+            distinct, dense = np.unique(labels, return_inverse=True)
+            self.__init__(dense.reshape(-1), lambda chosen: boxes(distinct[chosen]))
+            self._labels, self._boxes = labels, boxes
+            return
+        group_labels, starts, place = np.empty(n, np.int64), np.empty(n + 1, np.int64), np.empty(n, np.int64)
+        taken = np.empty(8 * n, np.int64)  # at most seven repeats a group: pages never written cost nothing
+        counts = np.zeros(bound, np.int64)  # named: a temporary's address would point at freed memory
+        count = Runtime.shared().arrange_groups(labels.ctypes.data, n, bound, counts.ctypes.data,
+                                                group_labels.ctypes.data, starts.ctypes.data, taken.ctypes.data,
+                                                place.ctypes.data)
+        self.starts = starts[: count + 1]
         self.padded = int(self.starts[-1])
-        at_row = np.arange(n) + np.repeat(self.starts[:-1] - first, counts)  # each sorted row's place
-        source = np.repeat(first + counts - 1, padded)
-        source[at_row] = np.arange(n)
-        self.taken = order[source]  # the row in each padded place
-        self.place = np.empty(n, np.int64)  # each row's padded place
-        self.place[order] = at_row
-        self._order, self._ordered, self._boxes = order, ordered, boxes
+        self.taken = taken[: self.padded]  # the row in each padded place
+        self.place = place  # each row's padded place
+        self.lo, self.hi = (np.ascontiguousarray(a, dtype=np.float64) for a in boxes(group_labels[:count]))
+        self._labels, self._boxes = labels, boxes
 
     def subset(self, rows: np.ndarray) -> Grouping:
         """The grouping of ``rows`` (increasing row numbers of this one's), as row 0, 1, … in that order:
-        the same groups, without sorting again."""
-        keep = np.zeros(self.rows, bool)
-        keep[rows] = True
-        renumber = np.cumsum(keep) - 1
-        sorted_kept = keep[self._order]
-        sub = Grouping.__new__(Grouping)
-        sub._arrange(renumber[self._order[sorted_kept]], self._ordered[sorted_kept], self._boxes)
-        return sub
+        the same groups."""
+        return Grouping(self._labels[rows], self._boxes)
 
 
 def _grouping(groups: np.ndarray | Grouping, boxes: Callable[[np.ndarray], tuple] | None) -> Grouping:

@@ -746,3 +746,41 @@ def test_points_grouped_by_box_give_f_and_its_gradient(expr, seed):
     smooth = defined & (np.abs(forward - backward) < 1e-4).all(1)
     assert smooth.sum() > 100
     np.testing.assert_allclose(gradients[smooth], (forward + backward)[smooth] / 2, rtol=1e-6, atol=1e-6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(0, 40), max_size=300) | st.lists(st.integers(-2**40, 2**40), max_size=60),
+       st.integers(0, 2**31 - 1))
+def test_rows_grouped_by_box_are_laid_out_in_whole_blocks_of_their_group(labels, seed):
+    """``implc_tape_grouped``'s layout (native ``implc_arrange_groups``), checked row by row in Python: the
+    groups in increasing label order, each from a multiple of eight, holding its own rows in row order and
+    then its last row again up to the block's end; every row's place holds it; a subset of the rows laid
+    out the same way over the kept ones, renumbered in order. Labels in a small range, and sparse ones
+    (numbered densely first)."""
+    labels = np.array(labels, dtype=np.int64)
+    boxes_seen = []
+
+    def boxes(chosen):
+        boxes_seen.append(chosen.copy())
+        return np.stack([chosen, chosen, chosen], 1) * 1.0, np.stack([chosen, chosen, chosen], 1) + 1.0
+
+    def check(plan, labels):
+        distinct = sorted(set(labels.tolist()))
+        assert boxes_seen[-1].tolist() == distinct
+        np.testing.assert_array_equal(plan.lo[:, 0], distinct)
+        assert plan.rows == len(labels) and len(plan.starts) == len(distinct) + 1 and plan.starts[0] == 0
+        assert plan.padded == plan.starts[-1] == len(plan.taken)
+        for g, label in enumerate(distinct):
+            begin, end = plan.starts[g], plan.starts[g + 1]
+            assert begin % 8 == 0 and end - begin < len(labels) + 8
+            rows = [r for r in range(len(labels)) if labels[r] == label]
+            placed = plan.taken[begin:end].tolist()
+            assert placed[: len(rows)] == rows
+            assert placed[len(rows):] == [placed[len(rows) - 1]] * (end - begin - len(rows))
+            assert end - begin == (len(rows) + 7) // 8 * 8
+        np.testing.assert_array_equal(plan.taken[plan.place], np.arange(len(labels)))
+
+    plan = Grouping(labels, boxes)
+    check(plan, labels)
+    kept = np.flatnonzero(np.random.default_rng(seed).uniform(size=len(labels)) < 0.5)
+    check(plan.subset(kept), labels[kept])

@@ -1,7 +1,8 @@
 """The generic runtime modules: the native routines shared by every surface.
 
 The runtime module: the tape engine's end of the second look (dropping the leaves it marked,
-:func:`.tighten.emit_drop_marked`), the octree (:mod:`.octree_index`) and splatting (:mod:`.splat`). The
+:func:`.tighten.emit_drop_marked`), the octree (:mod:`.octree_index`), splatting (:mod:`.splat`) and the
+layout of rows grouped by box (:mod:`.grouped_rows`). The
 contouring module: the mesher's cells (:mod:`.contour_cells`). The kernel-walk module: the walk (:mod:`.walk`) over a
 surface's compiled kernels (:mod:`.subdivision`, with their normals and second look), which the tape engine
 does not use (its module holds the walk over itself). The mesh-simplification module: the collapse of flat regions'
@@ -27,6 +28,7 @@ from .contour_cells import (
     emit_qef,
 )
 from .flat_collapse import emit_flat_collapse
+from .grouped_rows import emit_arrange_groups
 from .octree_index import (
     emit_octree_insert,
     emit_octree_mark_inside,
@@ -61,6 +63,7 @@ def build_runtime() -> str:
     emit_octree_mark_inside(module)
     emit_octree_subtree_rows(module)
     emit_splat(module)
+    emit_arrange_groups(module)
     return str(module)
 
 
