@@ -236,13 +236,18 @@ class Grouping:
 
     def __init__(self, groups: np.ndarray, boxes: Callable[[np.ndarray], tuple]):
         labels = np.ascontiguousarray(groups, dtype=np.int64)
+        self._labels, self._boxes = labels, boxes
+        bound = int(labels.max()) + 1 if len(labels) else 0
+        if len(labels) and (labels.min() < 0 or bound > max(4 * len(labels), 1 << 16)):
+            distinct, dense = np.unique(labels, return_inverse=True)  # a sparse range: numbered densely first
+            self._lay_out(np.ascontiguousarray(dense.reshape(-1), dtype=np.int64), len(distinct),
+                          lambda chosen: boxes(distinct[chosen]))
+        else:
+            self._lay_out(labels, bound, boxes)
+
+    def _lay_out(self, labels: np.ndarray, bound: int, boxes: Callable[[np.ndarray], tuple]):
+        """The padded places of rows with ``labels`` (each below ``bound``), native: ``implc_arrange_groups``."""
         n = self.rows = len(labels)
-        bound = int(labels.max()) + 1 if n else 0
-        if n and (labels.min() < 0 or bound > max(4 * n, 1 << 16)):  # a sparse range: numbered densely first
-            distinct, dense = np.unique(labels, return_inverse=True)
-            self.__init__(dense.reshape(-1), lambda chosen: boxes(distinct[chosen]))
-            self._labels, self._boxes = labels, boxes
-            return
         group_labels, starts, place = np.empty(n, np.int64), np.empty(n + 1, np.int64), np.empty(n, np.int64)
         taken = np.empty(8 * n, np.int64)  # at most seven repeats a group: pages never written cost nothing
         counts = np.zeros(bound, np.int64)  # named: a temporary's address would point at freed memory
@@ -254,7 +259,6 @@ class Grouping:
         self.taken = taken[: self.padded]  # the row in each padded place
         self.place = place  # each row's padded place
         self.lo, self.hi = (np.ascontiguousarray(a, dtype=np.float64) for a in boxes(group_labels[:count]))
-        self._labels, self._boxes = labels, boxes
 
     def subset(self, rows: np.ndarray) -> Grouping:
         """The grouping of ``rows`` (increasing row numbers of this one's), as row 0, 1, … in that order:
