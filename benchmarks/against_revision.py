@@ -13,7 +13,7 @@ With ``--task mesh`` each process voxelizes once and times ``Voxels.mesh()`` in 
 contouring, which runs on one thread), the count column then being triangles; ``--task implc.mesh`` times
 what a user calls, ``implc.mesh(surface, depth)`` (its voxelization and the contouring, CPU seconds).
 
-A case is a scene name, "union of 50 spheres" or the path of a ``.vm`` model (read with ``implc.load_vm``
+A case is a scene name, "union of 50 spheres", "blend of 90 blobs" or the path of a ``.vm`` model (read with ``implc.load_vm``
 where the revision has it, else converted to SymPy with ``evaluate=False``, keeping the DAG).
 """
 
@@ -42,6 +42,11 @@ if case == "union of 50 spheres":
     centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
     expr = shapes.union(*[shapes.sphere(sympy.Rational(rng.randint(6, 14), 100), centre()) for _ in range(50)])
     s = implc.compile(expr, ((-1, 1),) * 3)
+elif case == "blend of 90 blobs":  # the tape engine's (over 1,000 instructions): its far terms decided 0
+    rng = random.Random(7)
+    centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
+    s = implc.compile(shapes.blobs([centre() for _ in range(90)], sympy.Rational(1, 5), sympy.Rational(1, 4)),
+                      ((-1, 1),) * 3)
 elif case.endswith(".vm"):  # a peer model: load_vm where the revision has it, else SymPy with the DAG kept
     text = open(case).read()
     if hasattr(implc, "load_vm"):
@@ -105,7 +110,7 @@ for _ in range(repeats):
 print(json.dumps({"seconds": {w: statistics.median(t) for w, t in times.items()}, "voxels": n}))
 """
 
-CASES = ("paper_blobs", "union of 50 spheres", "paper_sin4_sin8", "paper_sin3_sin4")
+CASES = ("paper_blobs", "union of 50 spheres", "blend of 90 blobs", "paper_sin4_sin8", "paper_sin3_sin4")
 
 
 def run(tree: Path, case: str, depth: int, repeats: int, workers: list, cache: Path, task: str) -> dict:
