@@ -13,8 +13,9 @@ With ``--task mesh`` each process voxelizes once and times ``Voxels.mesh()`` in 
 contouring, which runs on one thread), the count column then being triangles; ``--task implc.mesh`` times
 what a user calls, ``implc.mesh(surface, depth)`` (its voxelization and the contouring, CPU seconds).
 
-A case is a scene name, "union of 50 spheres", "blend of 90 blobs" or the path of a ``.vm`` model (read with ``implc.load_vm``
-where the revision has it, else converted to SymPy with ``evaluate=False``, keeping the DAG).
+A case is a scene name, "union of 50 spheres", "blend of 90 blobs" or the path of a ``.vm`` model (read
+with ``implc.load_vm`` where the revision has it, else converted to SymPy with ``evaluate=False``, keeping
+the DAG).
 """
 
 from __future__ import annotations
