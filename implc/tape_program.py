@@ -183,9 +183,10 @@ def encode(tape: Tape) -> TapeProgram:
             slot = emit(op, *s)
         slot_of.append(slot)
     fixed = constant_slots + [v for v in variables if v >= 0]
-    if zero and zero_aliasing(rows, zero[0]) is None:
+    aliasing = zero_aliasing(rows, zero[0]) if zero else None
+    if aliasing is None:
         zero.clear()  # a value that may simplify to the zero constant meets an operation that tells −0 from +0
-    rows, rename, slot_count = _allocate(rows, fixed, slot_of[sub.outputs[0]], zero[0] if zero else None)
+    rows, rename, slot_count = _allocate(rows, fixed, slot_of[sub.outputs[0]], aliasing)
     return TapeProgram(np.array(rows, dtype=np.int32).reshape(-1, abi.INSTRUCTION_WORDS),
                        np.array(constants, dtype=np.float64).reshape(-1, 3),
                        np.array([rename[c] for c in constant_slots], dtype=np.int32),
@@ -214,15 +215,13 @@ _ZERO_SIGN_LOST = ("square", "fourth", "exp", "cos")
 sign is the same number."""
 
 
-def zero_aliasing(rows: list, zero: int | None) -> list[bool] | None:
-    """Per instruction (``rows`` before allocation, ``zero``: the zero constant's slot or None) whether it
+def zero_aliasing(rows: list, zero: int) -> list[bool] | None:
+    """Per instruction (``rows`` before allocation, ``zero``: the zero constant's slot) whether it
     is a sum a simplified program may replace by an operand (:data:`ALIASING_SUMS`, the other operand a
     value that may be exactly 0: a :data:`ZERO_KEEPING` of one, a choice with one as a value operand, a sum
     or difference of two); None where a value computed from one, whose zero's sign may then differ from the
     whole program's, reaches an operation that shows it (a divisor, :data:`_ZERO_SIGN_SHOWN`), which the
     simplification then leaves alone (the program's header has no zero slot)."""
-    if zero is None:
-        return None
     prone, signed = {zero}, {zero}  # exactly 0 where simplified; its sign of zero perhaps not the program's
     keeping = {OPCODES[op] for op in ZERO_KEEPING}
     sums = {OPCODES[op] for op in ALIASING_SUMS}
@@ -252,26 +251,21 @@ def zero_aliasing(rows: list, zero: int | None) -> list[bool] | None:
     return aliasing
 
 
-def _allocate(rows: list, fixed: list, output: int, zero: int | None = None) -> tuple[list, dict, int]:
+def _allocate(rows: list, fixed: list, output: int, aliasing: list[bool] | None = None) -> tuple[list, dict, int]:
     """The instructions ``rows`` (every value in a slot of its own) with their values in as few slots as
     they allow: a slot is taken again once its value has been read for the last time. Constants and
     coordinates (``fixed``) keep slots of their own. A choice's value operands stay in their slots as
     long as its result is read, so that a simplified program may read the winner where it read the
     choice (:mod:`implc.codegen.tape_simplify` makes a decided choice an alias of its winner); so do a
-    sum's operands where the sum may become an alias of one (:func:`zero_aliasing`; ``zero``: the zero
-    constant's slot). Returns the rows, the new slot of each old one, the slot count."""
+    sum's operands where the sum may become an alias of one (``aliasing``, per row: :func:`zero_aliasing`).
+    Returns the rows, the new slot of each old one, the slot count."""
     choice_codes = {OPCODES[op] for op in CHOICE_OPS}
     operands = [_operands(row) for row in rows]
-    aliasing = zero_aliasing(rows, zero) or [False] * len(rows)
+    aliasing = aliasing or [False] * len(rows)
     last = {output: len(rows)}  # each value's last read (a choice's value operands: its result's)
     for i in range(len(rows) - 1, -1, -1):  # backward: a value's first read seen is its last
         code = rows[i][0]
-        if aliasing[i]:
-            until = last.get(rows[i][1], i)
-            for operand in operands[i]:
-                if last.get(operand, -1) < until:
-                    last[operand] = until
-        elif code in choice_codes:
+        if code in choice_codes or aliasing[i]:  # an aliasing sum is binary: both its operands kept
             until = last.get(rows[i][1], i)
             for k, operand in enumerate(operands[i]):
                 kept = until if code < FIRST_TERNARY or k > 0 else i

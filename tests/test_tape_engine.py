@@ -595,9 +595,9 @@ def test_slots_are_taken_again_only_where_no_simplified_program_reads_them(expr)
     captured = {}
     allocate = tape_program._allocate
 
-    def spy(rows, fixed, output, zero=None):
-        captured["before"], captured["fixed"], captured["zero"] = list(rows), list(fixed), zero
-        result = allocate(rows, fixed, output, zero)
+    def spy(rows, fixed, output, aliasing=None):
+        captured["before"], captured["fixed"], captured["aliasing"] = list(rows), list(fixed), aliasing
+        result = allocate(rows, fixed, output, aliasing)
         captured["after"], captured["rename"] = list(result[0]), result[1]
         return result
     with pytest.MonkeyPatch.context() as patch:
@@ -617,7 +617,7 @@ def test_slots_are_taken_again_only_where_no_simplified_program_reads_them(expr)
     assert program.slot_count == len({r[1] for r in after} | set(held))
     written_at = {row[1]: i for i, row in enumerate(before)}
     choice_codes = {OPCODES[op] for op in CHOICE_OPS}
-    aliasing = tape_program.zero_aliasing(before, captured["zero"]) or [False] * len(before)
+    aliasing = captured["aliasing"] or [False] * len(before)
     for i, row in enumerate(before):  # a choice's result read later: its value operands still in place
         if row[0] not in choice_codes and not aliasing[i]:  # and a sum's that may become an alias of one
             continue

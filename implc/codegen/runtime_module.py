@@ -2,8 +2,8 @@
 
 The runtime module: the tape engine's end of the second look (dropping the leaves it marked,
 :func:`.tighten.emit_drop_marked`), the octree (:mod:`.octree_index`), splatting (:mod:`.splat`) and the
-layout of rows grouped by box (:mod:`.grouped_rows`). The
-contouring module: the mesher's cells (:mod:`.contour_cells`). The kernel-walk module: the walk (:mod:`.walk`) over a
+layout of rows grouped by box (:mod:`.grouped_rows`). The contouring module: the mesher's cells
+(:mod:`.contour_cells`). The kernel-walk module: the walk (:mod:`.walk`) over a
 surface's compiled kernels (:mod:`.subdivision`, with their normals and second look), which the tape engine
 does not use (its module holds the walk over itself). The mesh-simplification module: the collapse of flat regions'
 interior vertices (:mod:`.flat_collapse`). :class:`implc.runtime.Runtime` compiles each once per process,

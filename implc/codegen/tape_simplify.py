@@ -51,7 +51,6 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
     fn, b = define_internal(module, "implc.tape.simplify_substituting" if substitute else "implc.tape.simplify", I64,
                             arguments + ([_P(I64)] if substitute else []))
     program, length, output, choices, lane, out, need, stamp, mark, remap, out_output, zero = fn.args[:12]
-    watched_codes = (OPCODES["add_watched"], OPCODES["add_nonneg_watched"])
     if substitute:
         substituted = fn.args[12]
         b.store(const(I64, 0), substituted)
@@ -60,7 +59,7 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
         return load_at(b, choices, b.add(b.mul(i, const(I64, LANES)), lane))
 
     def watched(code):
-        return b.or_(*(b.icmp_unsigned("==", code, const(I64, c)) for c in watched_codes))
+        return _is(b, code, ("add_watched", "add_nonneg_watched"))
 
     def field(i, k):
         return b.zext(load_at(b, program, b.add(b.mul(i, const(I64, abi.INSTRUCTION_WORDS)), const(I64, k))), I64)
