@@ -430,8 +430,8 @@ def models(args, out):
                   f"{r['missed_128']} ({r['sign_change_cells_128']}) |")
     md += ["", f"Live ops per octant (tape engine): the mean length of the program the octants ran, at the root → "
                f"one level above the leaves. Scene 1 (paper_blobs) at 512³: {scene1_cpu:.3f} CPU s. Fresh processes "
-               "find Python's bytecode cached (as after an install) and the kernel cache empty, then holding only "
-               "what the first compiled (the tape engine)."]
+               "find Python's bytecode cached (as after an install) and the kernel cache empty, then holding what "
+               "the first compiled (a tape model's: the shared tape engine)."]
     return md
 
 
