@@ -38,14 +38,12 @@ from implc import scene, shapes
 case, depth, repeats = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 workers = [int(w) for w in sys.argv[4].split(",")]
 task = sys.argv[5]
+rng = random.Random(7)  # the random cases' centres: the same sequence in every process
+centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
 if case == "union of 50 spheres":
-    rng = random.Random(7)
-    centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
     expr = shapes.union(*[shapes.sphere(sympy.Rational(rng.randint(6, 14), 100), centre()) for _ in range(50)])
     s = implc.compile(expr, ((-1, 1),) * 3)
 elif case == "blend of 90 blobs":  # the tape engine's (over 1,000 instructions): its far terms decided 0
-    rng = random.Random(7)
-    centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
     s = implc.compile(shapes.blobs([centre() for _ in range(90)], sympy.Rational(1, 5), sympy.Rational(1, 4)),
                       ((-1, 1),) * 3)
 elif case.endswith(".vm"):  # a peer model: load_vm where the revision has it, else SymPy with the DAG kept
