@@ -205,8 +205,10 @@ PROGRAM_SLOT_COUNT = 9
 PROGRAM_ZERO = 10
 PROGRAM_WORDS = 11
 INSTRUCTION_WORDS = 5
-"""A tape instruction (int32): opcode, output slot, three operand slots (unused ones 0; a watched sum's third
-word says which of its operands an exponential gives: :data:`implc.tape_program.TINY_EXPONENTS`)."""
+"""A tape instruction (int32): opcode (its low :data:`OPCODE_BITS`; the bits above: the axes the value does
+not depend on, bit 0 for x), output slot, three operand slots (unused ones 0; a watched sum's third word says
+which of its operands an exponential gives: :data:`implc.tape_program.TINY_EXPONENTS`)."""
+OPCODE_BITS = 8
 WALK_LEVELS = MAX_DEPTH + 2
 """Levels the walk keeps a frame (and an evaluator a context) for (0 to MAX_DEPTH + 1)."""
 WALK_FRAME_WORDS = 5

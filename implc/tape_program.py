@@ -15,8 +15,12 @@ and MPR do. This module owns the encoding both sides agree on:
   result is read, since a simplified program reads the winner of a decided choice in its place.
 - an instruction is :data:`implc.abi.INSTRUCTION_WORDS` int32: ``opcode, out, a, b, c``: the result
   goes to slot ``out``, the operands come from slots ``a``, ``b``, ``c`` (as many as the op takes; a
-  select reads its condition from a and its branches from b and c). The result of the program is slot ``output`` (a
-  simplified program has its own: a decided Min/Max at the top makes its winner the output).
+  select reads its condition from a and its branches from b and c). Above its low
+  :data:`implc.abi.OPCODE_BITS`, the first word has bit k set where the value does not depend on axis k
+  (:attr:`TapeProgram.zeros`): the dual numbers and interval gradients make that partial 0 exactly, as the
+  gradient tape does (:func:`implc.gradient.with_gradient`), not the rule's NaN where it would multiply
+  the 0 by an infinity. The result of the program is slot ``output`` (a simplified program has its own: a
+  decided Min/Max at the top makes its winner the output).
 - the header (:data:`implc.abi.PROGRAM_WORDS` int64) is what native code receives: addresses and
   counts of the instructions, the constant table (rows ``nearest, lo, hi`` with lo <= value <= hi,
   certified as in :data:`implc.ir.OPS`) and its slots, the slots of x, y and z (-1: unused), the slot
@@ -103,10 +107,19 @@ class TapeProgram:
         return len(self.instructions)
 
     @property
+    def opcodes(self) -> np.ndarray:
+        """Each instruction's opcode."""
+        return self.instructions[:, 0] & ((1 << abi.OPCODE_BITS) - 1)
+
+    @property
+    def zeros(self) -> np.ndarray:
+        """Each instruction's axes its value does not depend on (bit k: axis k), whose partials are 0."""
+        return self.instructions[:, 0] >> abi.OPCODE_BITS
+
+    @property
     def choices(self) -> int:
         """How many Min/Max instructions the program has."""
-        codes = self.instructions[:, 0]
-        return int(np.isin(codes, [OPCODES[op] for op in CHOICE_OPS]).sum())
+        return int(np.isin(self.opcodes, [OPCODES[op] for op in CHOICE_OPS]).sum())
 
 
 def unsupported_ops(tape: Tape) -> set[str]:
@@ -148,9 +161,13 @@ def encode(tape: Tape) -> TapeProgram:
             zero.append(constant_slots[-1])
         return constant_slots[-1]
 
+    axes = sub.axes()
+    zeros: list[int] = []  # per row: the axes its value does not depend on
+
     def emit(name, a, b=0, c=0) -> int:
         slot = new_slot()
         rows.append((OPCODES[name], slot, a, b, c))
+        zeros.append(0b111 & ~axes[node])
         return slot
 
     slot_of: list[int] = []
@@ -160,7 +177,7 @@ def encode(tape: Tape) -> TapeProgram:
         for e in TINY_EXPONENTS:  # created first: slots 0, 1, ... (constants keep their order in _allocate)
             constant(0.0, 0.0, 2.0 ** -e)
 
-    for op, args, attr in sub.nodes:
+    for node, (op, args, attr) in enumerate(sub.nodes):
         s = [slot_of[a] for a in args]
         if op == "var":
             slot = variables[attr] = new_slot()
@@ -187,6 +204,7 @@ def encode(tape: Tape) -> TapeProgram:
     if aliasing is None:
         zero.clear()  # a value that may simplify to the zero constant meets an operation that tells −0 from +0
     rows, rename, slot_count = _allocate(rows, fixed, slot_of[sub.outputs[0]], aliasing)
+    rows = [(row[0] | zero_axes << abi.OPCODE_BITS, *row[1:]) for row, zero_axes in zip(rows, zeros)]
     return TapeProgram(np.array(rows, dtype=np.int32).reshape(-1, abi.INSTRUCTION_WORDS),
                        np.array(constants, dtype=np.float64).reshape(-1, 3),
                        np.array([rename[c] for c in constant_slots], dtype=np.int32),

@@ -86,6 +86,32 @@ def test_a_partial_along_an_axis_the_value_ignores_is_zero():
     assert enclosures[6] == enclosures[7] == 1.0  # the z-partial over a box around the z-axis
 
 
+def test_partials_along_ignored_axes_are_zero_on_every_evaluator():
+    """rho = sqrt(x² + y²) does not depend on z: on the z axis, where the chain rule's 0 / (2·rho) is NaN,
+    the z-partial of F = rho + z − 1/2 is exactly 1 (F(0, 0, z) = z − 1/2) and its x- and y-partials are
+    undefined (a cone's tip): so in the gradient tape, in the compiled kernels' and the tape engine's
+    gradients at points on the axis, and in both engines' interval gradients over a box around it (the
+    derivative along (0, 0, 2) there: exactly 2)."""
+    import numpy as np
+
+    import implc
+    expr = sympy.sqrt(x**2 + y**2) + z - sympy.Rational(1, 2)
+    grad = with_gradient(lower(expr))
+    assert grad.nodes[grad.outputs[3]] == ("const", (), (1.0, 1.0, 1.0))
+    points = np.array([[0.0, 0.0, 0.3], [0.0, 0.0, -0.7]])
+    lo, hi = np.array([[-0.1, -0.1, 0.4]]), np.array([[0.1, 0.1, 0.6]])
+    for engine in ("jit", "tape"):
+        s = implc.compile(expr, engine=engine)
+        value, gradient = s.value_and_gradient(points)
+        assert list(value) == [-0.2, -1.2] and list(gradient[:, 2]) == [1.0, 1.0], engine
+        assert np.isnan(gradient[:, :2]).all(), engine
+        enclosures = s.gradient_enclosures(lo, hi)[0]
+        assert enclosures[6] == enclosures[7] == 1.0, engine
+        if engine == "tape":  # derivatives along directions: the engine's
+            along = s.gradient_enclosures(lo, hi, directions=np.array([[0.0, 0.0, 2.0], [1, 0, 0], [0, 1, 0]]))[0]
+            assert along[2] == along[3] == 2.0
+
+
 def test_nonnegative_analysis():
     t = lower(x**2 + y**2 + z**2)
     assert t.is_nonnegative(t.outputs[0])

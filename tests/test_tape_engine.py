@@ -259,7 +259,7 @@ def test_box_gradients_enclose_the_partials_at_forty_digits(way):
     for label, expr in BOX_GRADIENT_CASES.items():
         s = implc.compile(expr, engine="jit" if way == "compiled" else "tape")
         if s.program is not None:
-            seen |= {names[int(code)] for code in s.program.instructions[:, 0]}
+            seen |= {names[int(code)] for code in s.program.opcodes}
         f = sympy.lambdify((x, y, z), BOX_GRADIENT_TRUTHS.get(label, expr), "mpmath")
         centres = rng.uniform(-0.9, 0.9, (64, 3))
         half = rng.choice([0.3, 0.05, 0.004], (64, 1)) * rng.uniform(0.2, 1.0, (64, 3))
@@ -414,7 +414,7 @@ def test_a_sum_of_an_exponential_is_marked_and_has_its_constants():
         program = implc.compile(expr, engine="tape").program
         writer = {}
         marks = 0
-        for code, out, a, b, c in program.instructions:
+        for code, (_, out, a, b, c) in zip(program.opcodes, program.instructions):
             if code in (OPCODES["add"], OPCODES["add_nonneg"], OPCODES["add_watched"], OPCODES["add_nonneg_watched"]):
                 assert c == (writer.get(a) == OPCODES["exp"]) | (writer.get(b) == OPCODES["exp"]) << 1
                 assert (c != 0) == (code in (OPCODES["add_watched"], OPCODES["add_nonneg_watched"]))
@@ -498,6 +498,26 @@ def test_the_engine_is_chosen_by_the_tape():
     assert auto(sympy.atan(nested_scene())) == "jit"  # an op the engine lacks
     assert auto(nested_scene(), width=4) == "jit"  # the engine runs eight lanes
     assert auto(sum(((x - Rational(k, 50))**2 * (y - Rational(k, 70)) for k in range(300)), sympy.Integer(0))) == "tape"
+
+
+def test_each_instruction_names_the_axes_its_value_ignores():
+    """An instruction's first word carries, above its opcode, the axes its value does not depend on (whose
+    partials the dual numbers and interval gradients make 0): checked by following each program's slots
+    from the coordinates' (constants depend on none), apart from the tape's own analysis."""
+    seen = 0
+    for expr in (nested_scene(), far_blobs(), smooth_blend(),
+                 Min(sqrt(x**2 + y**2) - Rational(1, 2), z**2 - x) + sin(z) * cos(y)):
+        program = implc.compile(expr, engine="tape").program
+        depends = {int(slot): 1 << axis for axis, slot in enumerate(program.variable_slots) if slot >= 0}
+        depends |= {int(slot): 0 for slot in program.constant_slots}
+        for code, zeros, row in zip(program.opcodes, program.zeros, program.instructions):
+            mask = 0
+            for operand in _values_read((code, *row[1:])):
+                mask |= depends[int(operand)]
+            assert zeros == 0b111 & ~mask, (code, row)
+            depends[int(row[1])] = mask
+            seen += zeros != 0
+    assert seen > 0
 
 
 def _values_read(row):
@@ -604,7 +624,7 @@ def test_slots_are_taken_again_only_where_no_simplified_program_reads_them(expr)
         patch.setattr(tape_program, "_allocate", spy)
         program = encode(implc.compile(expr + x * y, engine="tape").tape)
     before, after, fixed = captured["before"], captured["after"], captured["fixed"]
-    assert [tuple(r) for r in program.instructions] == [tuple(r) for r in after]
+    assert [(code, *r[1:]) for code, r in zip(program.opcodes, program.instructions)] == [tuple(r) for r in after]
     held = {captured["rename"][f]: f for f in fixed}  # each slot's value, named by its slot before
     assert set(held) == set(program.constant_slots) | {v for v in program.variable_slots if v >= 0}
     for old_row, new_row in zip(before, after):
@@ -646,7 +666,7 @@ def test_programs_hold_only_the_work():
     instruction's slot."""
     s = implc.compile(Max(x * 3, Min(y, z**2)) - 1, engine="jit")
     program = encode(s.tape)
-    assert set(program.instructions[:, 0]) <= set(OPCODES.values())
+    assert set(program.opcodes) <= set(OPCODES.values())
     assert len(program) == 5  # mul, square, min, max, add (3 and -1 are constants)
     fixed = set(program.constant_slots) | set(program.variable_slots)
     assert len(fixed) == 5 and not fixed & set(program.instructions[:, 1])

@@ -29,6 +29,11 @@ switch on the opcode, eight lanes (the eight children of an octant, or eight poi
   both sides of a crease rise along a diagonal, that derivative's enclosure excludes 0 while every
   partial's straddles it).
 
+In both forward modes a value's partial (or derivative along a direction) is 0 exactly where the value
+does not depend on the axes (the direction moves along), as the instruction's first word says
+(:attr:`implc.tape_program.TapeProgram.zeros`): as the gradient tape has it, not the rule's NaN where it
+would multiply that 0 by an infinity.
+
 ``header`` is the full program's (:data:`implc.abi.PROGRAM_WORDS`); ``instructions``, ``length`` and
 ``output`` those of the program to run (the full one, or one simplified from it). ``slots``: the scratch
 of :func:`implc.tape_program.slot_scratch` (interval slots, then dual-number slots, then interval-gradient
@@ -55,12 +60,14 @@ V8 = ir.VectorType(DOUBLE, LANES)
 _P = ir.PointerType
 
 
-def _instruction_loop(b: ir.IRBuilder, program, length, cases):
+def _instruction_loop(b: ir.IRBuilder, program, length, cases, zeros: bool = False):
     """``for each instruction: cases[op](i, out, a, b, c)``, dispatched threaded: every case ends with its
     own jump to the next instruction's case (an indirect branch through a table of the cases' addresses),
     so the branch predictor learns which opcode follows which (a program's sequence repeats at every
     octant) instead of guessing every opcode at one shared switch. Every case's emitter runs with the
-    builder in its own block; an opcode without a case is skipped."""
+    builder in its own block; an opcode without a case is skipped. With ``zeros``, each case also gets the
+    axes the instruction's value does not depend on (an i64, bit k: axis k; the first word's bits above
+    :data:`implc.abi.OPCODE_BITS`)."""
     fn = b.function
     pc = Local(b, I64, 0, "pc")
     finished = fn.append_basic_block("ops.finished")
@@ -83,7 +90,7 @@ def _instruction_loop(b: ir.IRBuilder, program, length, cases):
         go = fn.append_basic_block("op.next")
         b.cbranch(b.icmp_signed("<", i, length), go, finished)
         b.position_at_end(go)
-        code = b.zext(b.load(row_of(i)), I64)
+        code = b.and_(b.zext(b.load(row_of(i)), I64), ir.Constant(I64, (1 << abi.OPCODE_BITS) - 1))
         code = b.select(b.icmp_unsigned("<", code, ir.Constant(I64, codes)), code, ir.Constant(I64, codes))
         jump = b.branch_indirect(b.load(b.gep(table, [ir.Constant(I64, 0), code], inbounds=True)))
         for target in (*blocks.values(), skip):
@@ -95,9 +102,12 @@ def _instruction_loop(b: ir.IRBuilder, program, length, cases):
         i = pc.get()
         row = row_of(i)
         fields = b.load(b.bitcast(row, _P(ir.VectorType(I32, 4))), align=4)
-        _, out, a, c = [b.zext(b.extract_element(fields, ir.Constant(I32, k)), I64) for k in range(4)]
+        first, out, a, c = [b.zext(b.extract_element(fields, ir.Constant(I32, k)), I64) for k in range(4)]
         d = b.zext(b.load(b.gep(row, [ir.Constant(I64, 4)])), I64)
-        emit(i, out, a, c, d)
+        if zeros:
+            emit(i, out, a, c, d, b.lshr(first, ir.Constant(I64, abi.OPCODE_BITS)))
+        else:
+            emit(i, out, a, c, d)
         pc.set(b.add(i, ir.Constant(I64, 1)))
         dispatch()
     b.position_at_end(skip)
@@ -305,22 +315,37 @@ def emit_tape_dual(module: ir.Module, partials: bool = True) -> ir.Function:
     _variables(b, header, lambda a, slot: store(slot, [b.load(b.gep(vpoints, [ir.Constant(I64, a)]), align=8)]
                                                  + [one if k == a else zero for k in range(width - 1)]))
 
+    def store_zeroed(slot, dual, zeros):
+        """Store ``dual`` with its partials along the axes the value does not depend on (bits of ``zeros``)
+        made 0 (a branch around the selects: most values depend on every axis)."""
+        if not partials:
+            store(slot, dual)
+            return
+        with b.if_else(b.icmp_unsigned("==", zeros, ir.Constant(I64, 0))) as (every, some):
+            with every:
+                store(slot, dual)
+            with some:
+                store(slot, [dual[0]] + [b.select(b.icmp_unsigned("!=", b.and_(zeros, ir.Constant(I64, 1 << k)),
+                                                                   ir.Constant(I64, 0)), zero, p)
+                                         for k, p in enumerate(dual[1:])])
+
     def unary(rule):
-        def emit(i, out, a, c, d):
-            store(out, rule(load(a)))
+        def emit(i, out, a, c, d, zeros):
+            store_zeroed(out, rule(load(a)), zeros)
         return emit
 
     def binary(rule):
-        def emit(i, out, a, c, d):
-            store(out, rule(load(a), load(c)))
+        def emit(i, out, a, c, d, zeros):
+            store_zeroed(out, rule(load(a), load(c)), zeros)
         return emit
 
     def select(op):
-        def emit(i, out, a, c, d):  # the branch the condition takes at the point; NaN where it is NaN
+        def emit(i, out, a, c, d, zeros):  # the branch the condition takes at the point; NaN where it is NaN
             g, t, f = load(a), load(c), load(d)
             taken = vb.cmp("<" if op == "select_lt" else "<=", g[0], zero)
             undefined = vb.isnan(g[0])
-            store(out, [vb.select(undefined, vb.splat(float("nan")), vb.select(taken, p, q)) for p, q in zip(t, f)])
+            store_zeroed(out, [vb.select(undefined, vb.splat(float("nan")), vb.select(taken, p, q))
+                               for p, q in zip(t, f)], zeros)
         return emit
 
     def sqrt(x):
@@ -371,7 +396,7 @@ def emit_tape_dual(module: ir.Module, partials: bool = True) -> ir.Function:
              "min": binary(pick("min")), "max": binary(pick("max")),
              "select_lt": select("select_lt"), "select_le": select("select_le")}
     assert set(cases) == set(OPCODES), "every opcode has a dual-number case"
-    _instruction_loop(b, program, length, cases)
+    _instruction_loop(b, program, length, cases, zeros=True)
     dual = load(output)
     vresult = b.bitcast(result, _P(V8))
     for k, value in enumerate(dual):
@@ -407,6 +432,25 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
         for a in range(3):
             store_at(b, const(DOUBLE, 1.0 if k == a else 0.0), axes, const(I64, 3 * k + a))
     directions = b.select(b.icmp_unsigned("!=", seeds, ir.Constant(seeds.type, None)), seeds, axes)
+    support = []  # per direction, the axes it moves along (bit a: axis a)
+    for k in range(3):
+        bits = [b.select(b.fcmp_unordered("!=", load_at(b, directions, const(I64, 3 * k + a)), const(DOUBLE, 0.0)),
+                         ir.Constant(I64, 1 << a), ir.Constant(I64, 0)) for a in range(3)]
+        support.append(b.or_(b.or_(bits[0], bits[1]), bits[2]))
+
+    def store_zeroed(slot, pairs, zeros):
+        """Store ``pairs`` with the partials along the directions that move only along axes the value does
+        not depend on (bits of ``zeros``) made [0, 0]: the value is constant along them."""
+        with b.if_else(b.icmp_unsigned("==", zeros, ir.Constant(I64, 0))) as (every, some):
+            with every:
+                store(slot, pairs)
+            with some:
+                out = [pairs[0]]
+                for k, p in enumerate(pairs[1:]):
+                    constant = b.icmp_unsigned("==", b.and_(support[k], b.xor(zeros, ir.Constant(I64, -1))),
+                                               ir.Constant(I64, 0))
+                    out.append((b.select(constant, zero, p[0]), b.select(constant, zero, p[1])))
+                store(slot, out)
 
     def variable(a, slot):
         value = (b.load(b.gep(vbox, [ir.Constant(I64, a)]), align=8),
@@ -425,10 +469,10 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
         return vb.minimum(p[0], q[0]), vb.maximum(p[1], q[1])
 
     def unary(rule):
-        return lambda i, out, a, c, d: store(out, rule(load(a)))
+        return lambda i, out, a, c, d, zeros: store_zeroed(out, rule(load(a)), zeros)
 
     def binary(rule):
-        return lambda i, out, a, c, d: store(out, rule(load(a), load(c)))
+        return lambda i, out, a, c, d, zeros: store_zeroed(out, rule(load(a), load(c)), zeros)
 
     def power(n):
         def rule(x):
@@ -469,11 +513,11 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
         return rule
 
     def select(op):
-        def emit(i, out, a, c, d):
+        def emit(i, out, a, c, d, zeros):
             g, t, f = load(a), load(c), load(d)
             rule = getattr(em, f"i_{op}")
-            store(out, [rule([g[0], t[0], f[0]], None)]
-                  + [rule([g[0], p, q], "jump") for p, q in zip(t[1:], f[1:])])
+            store_zeroed(out, [rule([g[0], t[0], f[0]], None)]
+                         + [rule([g[0], p, q], "jump") for p, q in zip(t[1:], f[1:])], zeros)
         return emit
 
     def mul(x, y):
@@ -506,7 +550,7 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
              "min": binary(pick("min")), "max": binary(pick("max")),
              "select_lt": select("select_lt"), "select_le": select("select_le")}
     assert set(cases) == set(OPCODES), "every opcode has an interval-gradient case"
-    _instruction_loop(b, program, length, cases)
+    _instruction_loop(b, program, length, cases, zeros=True)
     vresult = b.bitcast(result, _P(V8))
     for k, value in enumerate(x for pair in load(output) for x in pair):
         b.store(value, b.gep(vresult, [ir.Constant(I64, k)]), align=8)

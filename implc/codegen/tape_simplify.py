@@ -64,6 +64,13 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
     def field(i, k):
         return b.zext(load_at(b, program, b.add(b.mul(i, const(I64, abi.INSTRUCTION_WORDS)), const(I64, k))), I64)
 
+    def fields(i):
+        """The instruction's opcode, its slots, and its first word's bits above the opcode (kept as they are
+        where it is written: a value independent of an axis stays so below the box)."""
+        first = field(i, 0)
+        return (b.and_(first, const(I64, (1 << abi.OPCODE_BITS) - 1)), *(field(i, f) for f in range(1, 5)),
+                b.and_(first, const(I64, -(1 << abi.OPCODE_BITS))))
+
     def need_operands(code, a, c, d, ternary):
         store_at(b, stamp, need, a)
         with if_(b, b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))):
@@ -76,7 +83,7 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
 
     with for_range(b, length) as k:  # backward: i = length - 1 - k
         i = b.sub(last, k)
-        code, out_slot, a, c, d = (field(i, f) for f in range(5))
+        code, out_slot, a, c, d, _ = fields(i)
         ternary = b.icmp_unsigned(">=", code, const(I64, FIRST_TERNARY))
         first, second = b.select(ternary, c, a), b.select(ternary, d, c)  # the value operands a choice picks from
         store_at(b, const(I8, DROP), mark, i)
@@ -117,18 +124,18 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
 
     count = Local(b, I64, 0, "count")
 
-    def write(code, out_slot, operands):
-        """Append an instruction (``operands``: its last three words, already renamed); its value is named by
-        its own slot from here on."""
+    def write(code, out_slot, operands, high):
+        """Append an instruction (``operands``: its last three words, already renamed; ``high``: its first
+        word's bits above the opcode); its value is named by its own slot from here on."""
         row = b.mul(count.get(), const(I64, abi.INSTRUCTION_WORDS))
-        for k, word in enumerate([b.trunc(plain(code), I32), b.trunc(out_slot, I32), *operands]):
+        for k, word in enumerate([b.trunc(b.or_(plain(code), high), I32), b.trunc(out_slot, I32), *operands]):
             store_at(b, word, out, b.add(row, const(I64, k)))
         store_at(b, b.trunc(out_slot, I32), remap, out_slot)
         count.set(b.add(count.get(), const(I64, 1)))
 
     with for_range(b, length) as i:  # forward: write what is kept, operands renamed through the aliases
         m = load_at(b, mark, i)
-        code, out_slot, a, c, d = (field(i, f) for f in range(5))
+        code, out_slot, a, c, d, high = fields(i)
         ternary = b.icmp_unsigned(">=", code, const(I64, FIRST_TERNARY))
         with if_(b, b.icmp_unsigned("==", m, const(I8, KEEP))):
             binary = b.icmp_unsigned(">=", code, const(I64, FIRST_BINARY))
@@ -147,14 +154,15 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
                 with kept:
                     # a substituting call's sums watch nothing: what it writes is only enclosed, never simplified
                     fourth = const(I32, 0) if substitute else b.trunc(d, I32)
-                    write(code, out_slot, [first, second, b.select(ternary, load_at(b, remap, d), fourth)])
+                    write(code, out_slot, [first, second, b.select(ternary, load_at(b, remap, d), fourth)], high)
         if substitute:
             with if_(b, b.icmp_unsigned("==", m, const(I8, SUBSTITUTE))):
                 tiny = choice_byte(i)
                 second_operand = b.icmp_unsigned(">=", tiny, const(I8, 64))
                 constant = b.zext(b.sub(b.and_(tiny, const(I8, 63)), const(I8, 1)), I32)  # its slot: its index
                 write(code, out_slot, [b.select(second_operand, load_at(b, remap, a), constant),
-                                       b.select(second_operand, constant, load_at(b, remap, c)), const(I32, 0)])
+                                       b.select(second_operand, constant, load_at(b, remap, c)), const(I32, 0)],
+                      high)
                 b.store(const(I64, 1), substituted)
         with if_(b, b.icmp_unsigned("==", m, const(I8, ALIAS_FIRST))):
             store_at(b, load_at(b, remap, b.select(ternary, c, a)), remap, out_slot)
