@@ -116,6 +116,28 @@ def _instruction_loop(b: ir.IRBuilder, program, length, cases, zeros: bool = Fal
     b.position_at_end(finished)
 
 
+def _zero_partials(module: ir.Module, vectors: int, name: str) -> ir.Function:
+    """``name(slots, slot, zeros, supports)`` (internal, out of line: called only for the values that ignore
+    some axis): in slot ``slot`` of ``vectors`` vectors (the value's, then each partial's: one vector each
+    in 4, a (lo, hi) pair each in 8), the partials along each direction k that moves only along axes the
+    value does not depend on (``supports`` bits 3k..3k+2: the axes direction k moves along; ``zeros``: the
+    axes the value ignores) set to 0."""
+    fn, b = define_internal(module, name, ir.VoidType(), [_P(V8), I64, I64, I64])
+    fn.attributes.add("noinline")
+    slots, slot, zeros, supports = fn.args
+    width = (vectors - 1) // 3 if vectors == 4 else 2  # vectors per partial, after the value's as many
+    base = b.mul(slot, ir.Constant(I64, vectors))
+    ignored = b.xor(zeros, ir.Constant(I64, -1))
+    for k in range(3):
+        moves = b.and_(b.lshr(supports, ir.Constant(I64, 3 * k)), ir.Constant(I64, 0b111))
+        with if_(b, b.icmp_unsigned("==", b.and_(moves, ignored), ir.Constant(I64, 0))):
+            for w in range(width):
+                b.store(ir.Constant(V8, [0.0] * LANES),
+                        b.gep(slots, [b.add(base, ir.Constant(I64, width * (k + 1) + w))], inbounds=True), align=8)
+    b.ret_void()
+    return fn
+
+
 def _header(b, header, word):
     return load_at(b, header, word)
 
@@ -315,19 +337,15 @@ def emit_tape_dual(module: ir.Module, partials: bool = True) -> ir.Function:
     _variables(b, header, lambda a, slot: store(slot, [b.load(b.gep(vpoints, [ir.Constant(I64, a)]), align=8)]
                                                  + [one if k == a else zero for k in range(width - 1)]))
 
+    clear = _zero_partials(module, 4, "implc.tape.dual_zeros") if partials else None
+
     def store_zeroed(slot, dual, zeros):
-        """Store ``dual`` with its partials along the axes the value does not depend on (bits of ``zeros``)
-        made 0 (a branch around the selects: most values depend on every axis)."""
-        if not partials:
-            store(slot, dual)
-            return
-        with b.if_else(b.icmp_unsigned("==", zeros, ir.Constant(I64, 0))) as (every, some):
-            with every:
-                store(slot, dual)
-            with some:
-                store(slot, [dual[0]] + [b.select(b.icmp_unsigned("!=", b.and_(zeros, ir.Constant(I64, 1 << k)),
-                                                                   ir.Constant(I64, 0)), zero, p)
-                                         for k, p in enumerate(dual[1:])])
+        """Store ``dual``, then make 0 its partials along the axes the value does not depend on (bits of
+        ``zeros``; most values depend on every axis: a branch around a call)."""
+        store(slot, dual)
+        if clear is not None:
+            with if_(b, b.icmp_unsigned("!=", zeros, ir.Constant(I64, 0))):
+                b.call(clear, [vslots, slot, zeros, ir.Constant(I64, 0b100_010_001)])
 
     def unary(rule):
         def emit(i, out, a, c, d, zeros):
@@ -432,25 +450,19 @@ def emit_tape_box_gradient(module: ir.Module, directed: bool) -> ir.Function:
         for a in range(3):
             store_at(b, const(DOUBLE, 1.0 if k == a else 0.0), axes, const(I64, 3 * k + a))
     directions = b.select(b.icmp_unsigned("!=", seeds, ir.Constant(seeds.type, None)), seeds, axes)
-    support = []  # per direction, the axes it moves along (bit a: axis a)
+    supports = ir.Constant(I64, 0)  # bits 3k..3k+2: the axes direction k moves along
     for k in range(3):
-        bits = [b.select(b.fcmp_unordered("!=", load_at(b, directions, const(I64, 3 * k + a)), const(DOUBLE, 0.0)),
-                         ir.Constant(I64, 1 << a), ir.Constant(I64, 0)) for a in range(3)]
-        support.append(b.or_(b.or_(bits[0], bits[1]), bits[2]))
+        for a in range(3):
+            moves = b.fcmp_unordered("!=", load_at(b, directions, const(I64, 3 * k + a)), const(DOUBLE, 0.0))
+            supports = b.or_(supports, b.select(moves, ir.Constant(I64, 1 << (3 * k + a)), ir.Constant(I64, 0)))
+    clear = _zero_partials(module, 8, "implc.tape.box_gradient_zeros")
 
     def store_zeroed(slot, pairs, zeros):
-        """Store ``pairs`` with the partials along the directions that move only along axes the value does
-        not depend on (bits of ``zeros``) made [0, 0]: the value is constant along them."""
-        with b.if_else(b.icmp_unsigned("==", zeros, ir.Constant(I64, 0))) as (every, some):
-            with every:
-                store(slot, pairs)
-            with some:
-                out = [pairs[0]]
-                for k, p in enumerate(pairs[1:]):
-                    constant = b.icmp_unsigned("==", b.and_(support[k], b.xor(zeros, ir.Constant(I64, -1))),
-                                               ir.Constant(I64, 0))
-                    out.append((b.select(constant, zero, p[0]), b.select(constant, zero, p[1])))
-                store(slot, out)
+        """Store ``pairs``, then make [0, 0] the partials along the directions that move only along axes the
+        value does not depend on (bits of ``zeros``): the value is constant along them."""
+        store(slot, pairs)
+        with if_(b, b.icmp_unsigned("!=", zeros, ir.Constant(I64, 0))):
+            b.call(clear, [vslots, slot, zeros, supports])
 
     def variable(a, slot):
         value = (b.load(b.gep(vbox, [ir.Constant(I64, a)]), align=8),
