@@ -26,6 +26,9 @@ def broadcast(builder: ir.IRBuilder, value, width: int):
                                   ir.Constant(ir.VectorType(ir.IntType(32), width), [0] * width))
 
 
+_SPLATS: dict[tuple[int, str], ir.Constant] = {}
+"""The vector constants :meth:`VectorBuilder.splat` made, by width and value (its bits: -0.0 is not 0.0)."""
+
 class VectorBuilder:
     """Wraps an IRBuilder with the vector operations the point and interval emitters need."""
 
@@ -56,9 +59,14 @@ class VectorBuilder:
 
     # -- values ------------------------------------------------------------------------------------
     def splat(self, value: float):
-        if math.isnan(value):
-            value = float("nan")
-        return ir.Constant(self.vtype, [ir.Constant(DOUBLE, float(value))] * self.width)
+        """``value`` in every lane (a constant made once per width and value: llvmlite's vector constants
+        are slow to make, about a fifth of building the tape engine's IR when each was made anew)."""
+        value = float("nan") if math.isnan(value) else float(value)
+        key = (self.width, value.hex())
+        constant = _SPLATS.get(key)
+        if constant is None:
+            constant = _SPLATS[key] = ir.Constant(self.vtype, [ir.Constant(DOUBLE, value)] * self.width)
+        return constant
 
     def add(self, a, b):
         return self.b.fadd(a, b)
