@@ -165,3 +165,39 @@ def test_a_third_evaluator_runs_through_the_one_walk(ball_walk, refine):
         np.testing.assert_array_equal(coords, theirs[0])
         np.testing.assert_allclose(normals, theirs[1], atol=1e-6)
         np.testing.assert_array_equal(inside, theirs[2])
+
+
+@pytest.mark.parametrize("solid", [False, True])
+def test_drop_marked_keeps_the_unmarked_rows_in_order(solid):
+    """``implc_drop_marked`` after a second look: the rows not marked OUTSIDE or INSIDE (coordinates,
+    live-term masks, normals) moved down in their order, the flagged and marked counts added to the stats,
+    and for a solid the rows marked INSIDE appended to the inside octants with the depth, after those
+    already there; against numpy's selection of the same random rows."""
+    from implc.codegen.leaf_split import INSIDE, OUTSIDE
+    from implc.runtime import Runtime
+    rng = np.random.default_rng(11)
+    n = 10_007
+    kinds = np.array([0, abi.TIGHTEN_ABOVE, abi.TIGHTEN_BELOW, OUTSIDE, INSIDE], np.int8)
+    flags = rng.choice(kinds, n).astype(np.int8)
+    coords = rng.integers(0, 1 << 9, (n, 3)).astype(np.int32)
+    masks = rng.integers(0, 1 << 62, n).astype(np.int64)
+    normals = rng.standard_normal((n, 3)).astype(np.float32)
+    before = coords.copy(), masks.copy(), normals.copy()
+    inside = np.full((n + 3, abi.INSIDE_WORDS), -1, np.int32)
+    inside_count, stats = np.array([3], np.int64), np.array([5, 7], np.int64)
+    kept = Runtime.shared().drop_marked(9, coords.ctypes.data, masks.ctypes.data, normals.ctypes.data,
+                                        flags.ctypes.data, n, inside.ctypes.data if solid else None,
+                                        inside_count.ctypes.data, stats.ctypes.data)
+    keep = (flags != OUTSIDE) & (flags != INSIDE)
+    assert kept == keep.sum()
+    assert (coords[:kept] == before[0][keep]).all() and (masks[:kept] == before[1][keep]).all()
+    assert (normals[:kept] == before[2][keep]).all()
+    flagged = np.isin(flags, [abi.TIGHTEN_ABOVE, abi.TIGHTEN_BELOW, OUTSIDE, INSIDE]).sum()
+    assert list(stats) == [5 + flagged, 7 + (~keep).sum()]
+    below = flags == INSIDE
+    if solid:
+        assert inside_count[0] == 3 + below.sum()
+        assert (inside[3:3 + below.sum(), :3] == before[0][below]).all() and (inside[3:3 + below.sum(), 3] == 9).all()
+        assert (inside[:3] == -1).all() and (inside[3 + below.sum():] == -1).all()
+    else:
+        assert inside_count[0] == 3 and (inside == -1).all()

@@ -129,16 +129,16 @@ def emit_drop_marked(module: ir.Module):
             b.store(b.add(b.load(inside_count), const(I64, 1)), inside_count)
         dropped = b.or_(b.icmp_unsigned("==", flag, const(I8, OUTSIDE)), b.icmp_unsigned("==", flag, const(I8, INSIDE)))
         marked.set(b.add(marked.get(), b.zext(dropped, I64)))
-        with if_(b, b.not_(dropped)):
-            k = kept.get()
-            with if_(b, b.icmp_signed("!=", k, i)):
-                for a in range(3):
-                    store_at(b, load_at(b, coords, b.add(b.mul(i, const(I64, 3)), const(I64, a))), coords,
-                             b.add(b.mul(k, const(I64, 3)), const(I64, a)))
-                    store_at(b, load_at(b, normals, b.add(b.mul(i, const(I64, 3)), const(I64, a))), normals,
-                             b.add(b.mul(k, const(I64, 3)), const(I64, a)))
-                store_at(b, load_at(b, masks, i), masks, k)
-            kept.set(b.add(k, const(I64, 1)))
+        # every leaf is copied down to the next kept row and only a kept one advances it: no branch on the
+        # marks, which fall as the surface does (k <= i: row k was read before, or is row i itself)
+        k = kept.get()
+        for a in range(3):
+            store_at(b, load_at(b, coords, b.add(b.mul(i, const(I64, 3)), const(I64, a))), coords,
+                     b.add(b.mul(k, const(I64, 3)), const(I64, a)))
+            store_at(b, load_at(b, normals, b.add(b.mul(i, const(I64, 3)), const(I64, a))), normals,
+                     b.add(b.mul(k, const(I64, 3)), const(I64, a)))
+        store_at(b, load_at(b, masks, i), masks, k)
+        kept.set(b.add(k, b.zext(b.not_(dropped), I64)))
     for word, count in enumerate((flagged, marked)):
         store_at(b, b.add(load_at(b, stats, word), count.get()), stats, word)
     b.ret(kept.get())
