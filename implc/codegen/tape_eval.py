@@ -125,7 +125,7 @@ def _zero_partials(module: ir.Module, vectors: int, name: str) -> ir.Function:
     fn, b = define_internal(module, name, ir.VoidType(), [_P(V8), I64, I64, I64])
     fn.attributes.add("noinline")
     slots, slot, zeros, supports = fn.args
-    width = (vectors - 1) // 3 if vectors == 4 else 2  # vectors per partial, after the value's as many
+    width = vectors // 4  # vectors per partial, after the value's as many
     base = b.mul(slot, ir.Constant(I64, vectors))
     ignored = b.xor(zeros, ir.Constant(I64, -1))
     for k in range(3):

@@ -29,6 +29,7 @@ def broadcast(builder: ir.IRBuilder, value, width: int):
 _SPLATS: dict[tuple[int, str], ir.Constant] = {}
 """The vector constants :meth:`VectorBuilder.splat` made, by width and value (its bits: -0.0 is not 0.0)."""
 
+
 class VectorBuilder:
     """Wraps an IRBuilder with the vector operations the point and interval emitters need."""
 
