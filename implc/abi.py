@@ -209,6 +209,8 @@ INSTRUCTION_WORDS = 5
 not depend on, bit 0 for x), output slot, three operand slots (unused ones 0; a watched sum's third word says
 which of its operands an exponential gives: :data:`implc.tape_program.TINY_EXPONENTS`)."""
 OPCODE_BITS = 8
+OPCODE_MASK = (1 << OPCODE_BITS) - 1
+"""The opcode's bits of an instruction's first word."""
 WALK_LEVELS = MAX_DEPTH + 2
 """Levels the walk keeps a frame (and an evaluator a context) for (0 to MAX_DEPTH + 1)."""
 WALK_FRAME_WORDS = 5

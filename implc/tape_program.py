@@ -109,7 +109,7 @@ class TapeProgram:
     @property
     def opcodes(self) -> np.ndarray:
         """Each instruction's opcode."""
-        return self.instructions[:, 0] & ((1 << abi.OPCODE_BITS) - 1)
+        return self.instructions[:, 0] & abi.OPCODE_MASK
 
     @property
     def zeros(self) -> np.ndarray:

@@ -90,7 +90,7 @@ def _instruction_loop(b: ir.IRBuilder, program, length, cases, zeros: bool = Fal
         go = fn.append_basic_block("op.next")
         b.cbranch(b.icmp_signed("<", i, length), go, finished)
         b.position_at_end(go)
-        code = b.and_(b.zext(b.load(row_of(i)), I64), ir.Constant(I64, (1 << abi.OPCODE_BITS) - 1))
+        code = b.and_(b.zext(b.load(row_of(i)), I64), ir.Constant(I64, abi.OPCODE_MASK))
         code = b.select(b.icmp_unsigned("<", code, ir.Constant(I64, codes)), code, ir.Constant(I64, codes))
         jump = b.branch_indirect(b.load(b.gep(table, [ir.Constant(I64, 0), code], inbounds=True)))
         for target in (*blocks.values(), skip):

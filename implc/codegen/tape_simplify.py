@@ -68,8 +68,8 @@ def emit_tape_simplify(module: ir.Module, substitute: bool = False) -> ir.Functi
         """The instruction's opcode, its slots, and its first word's bits above the opcode (kept as they are
         where it is written: a value independent of an axis stays so below the box)."""
         first = field(i, 0)
-        return (b.and_(first, const(I64, (1 << abi.OPCODE_BITS) - 1)), *(field(i, f) for f in range(1, 5)),
-                b.and_(first, const(I64, -(1 << abi.OPCODE_BITS))))
+        return (b.and_(first, const(I64, abi.OPCODE_MASK)), *(field(i, f) for f in range(1, 5)),
+                b.and_(first, const(I64, ~abi.OPCODE_MASK)))
 
     def need_operands(code, a, c, d, ternary):
         store_at(b, stamp, need, a)
