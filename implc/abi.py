@@ -240,7 +240,8 @@ TAPE_GRID_DEPTH = 8
 """... then the depth of the voxelization's grid (a walk may stop above it: a plan's)..."""
 TAPE_SUBSTITUTED = 9
 """... then whether the program of the octant in hand two levels above the grid's leaves has a negligible
-term replaced by a constant (:mod:`implc.codegen.tape_simplify`): then it serves enclosures only..."""
+term replaced by a constant (:mod:`implc.codegen.tape_simplify`): then it serves enclosures and a first
+second look, not normals..."""
 TAPE_PROGRAMS = 10
 """... then each level's program: the instructions' address (WALK_LEVELS words), their count, the output
 slot (WALK_LEVELS words each)."""

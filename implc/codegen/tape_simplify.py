@@ -12,8 +12,9 @@ Its variant ``tape_simplify_substituting(..., substituted)`` also makes a watche
 was negligible over the box read the constant [0, 2^-e] that encloses it there
 (:data:`implc.tape_program.TINY_EXPONENTS`), so that what only fed the term is dropped too, and sets
 ``*substituted`` to 1 where it did: the program encloses F below the box (the term's value at every point of
-it lies in the constant) but its partials are not F's, so only ``tape_interval`` may run it; its sums are
-plain (nothing below simplifies it again).
+it lies in the constant) but its partials are not F's (those of a family F_t, t the constant: enough for the
+second look's proofs, not for normals, docs/soundness.md); its sums are plain (nothing below simplifies it
+again).
 
 Two passes, both linear in the program: backward from the output, marking what the result needs
 (``need``, one int32 per slot: a slot is needed when it holds this call's ``stamp``, so nothing is cleared

@@ -85,13 +85,9 @@ class Evaluator:
         evaluator keeps per voxel (``walk.out_masks``)."""
 
     def size(self, walk: Walk, level):
-        """The length of the context at ``level`` (an i64, for the statistics), or None."""
+        """The length of the context at ``level`` (an i64: for the statistics, and where the context is per
+        octant, which of two levels' the second look takes), or None."""
         return None
-
-    def look_size(self, walk: Walk, level):
-        """The length of the context the normals and the second look use at ``level`` (where it is per
-        octant: which of two levels' the second look takes)."""
-        return self.size(walk, level)
 
     def normals(self, walk: Walk, level, first, count) -> None:
         """Unit normals of the ``count`` voxels from row ``first`` (and their flags where
@@ -220,8 +216,8 @@ def emit_walk(module: ir.Module, entry, evaluator: Evaluator) -> ir.Function:
         context, where that is a fifth shorter than the one at ``look_level`` or more (fuller batches do
         not pay for that: Min/Max models such as Prospero), after the voxels of its siblings still waiting."""
         flush_normals()
-        shorter = b.icmp_signed("<", b.mul(evaluator.look_size(walk, normals_level), const(I64, 5)),
-                                b.mul(evaluator.look_size(walk, look_level), const(I64, 4)))
+        shorter = b.icmp_signed("<", b.mul(evaluator.size(walk, normals_level), const(I64, 5)),
+                                b.mul(evaluator.size(walk, look_level), const(I64, 4)))
         with if_(b, shorter):
             flush_look(octant_start.get(), look_level)
             flush_look(normals_done.get(), normals_level)
