@@ -311,6 +311,14 @@ def test_derivatives_along_directions_prove_a_crease_the_partials_cannot():
         s.gradient_enclosures(lo, hi, directions=np.eye(2))
 
 
+def ellipsoid(centre, axes, turn):
+    """An ellipsoid's implicit function: centre and semi-axes in tenths, turned by ``turn`` about z."""
+    (cx, cy, cz), (ax, ay, az) = ([Rational(v, 10) for v in t] for t in (centre, axes))
+    u = cos(turn) * (x - cx) - sin(turn) * (y - cy)
+    v = sin(turn) * (x - cx) + cos(turn) * (y - cy)
+    return sqrt((u / ax)**2 + (v / ay)**2 + ((z - cz) / az)**2) - 1
+
+
 def smooth_blend():
     """Three rotated ellipsoids joined by log-sum-exp smooth minima (as fidget's bear is built): natural
     enclosures of it are loose (each exp magnifies its argument's width) and its leaves' partials need a
@@ -318,11 +326,6 @@ def smooth_blend():
     def smooth_min(a, b, k=11):
         return -sympy.log(sympy.exp(-k * a) + sympy.exp(-k * b)) / k
 
-    def ellipsoid(centre, axes, turn):
-        (cx, cy, cz), (ax, ay, az) = ([Rational(v, 10) for v in t] for t in (centre, axes))
-        u = cos(turn) * (x - cx) - sin(turn) * (y - cy)
-        v = sin(turn) * (x - cx) + cos(turn) * (y - cy)
-        return sqrt((u / ax)**2 + (v / ay)**2 + ((z - cz) / az)**2) - 1
     body = ellipsoid((0, 0, 0), (5, 3, 3), Rational(1, 2))
     arm = ellipsoid((4, 2, 1), (2, 4, 2), 1)
     leg = ellipsoid((-4, 3, -1), (2.5, 1.7, 4), -Rational(3, 5))
@@ -367,11 +370,6 @@ def test_the_second_look_proves_with_negligible_terms_replaced():
     programs two levels above the leaves are shorter than their parents' (terms replaced), and every leaf the
     look drops has F of one strict sign at 5³ points spread over its cell, numpy's F (lambdify), so none
     of them meets the surface, and no sign-change cell is missed."""
-    def ellipsoid(centre, axes, turn):
-        (cx, cy, cz), (ax, ay, az) = ([Rational(v, 10) for v in t] for t in (centre, axes))
-        u = cos(turn) * (x - cx) - sin(turn) * (y - cy)
-        v = sin(turn) * (x - cx) + cos(turn) * (y - cy)
-        return sqrt((u / ax)**2 + (v / ay)**2 + ((z - cz) / az)**2) - 1
     expr = _smooth_unions(11, [ellipsoid((-5, -5, -4), (3, 2, 2), 1), ellipsoid((5, -4, 5), (2, 3, 2), -1),
                                ellipsoid((-4, 5, 5), (2, 2, 3), Rational(1, 2)), ellipsoid((4, 5, -5), (3, 2, 2), 2)])
     bounds, depth = ((-1, 1),) * 3, 7

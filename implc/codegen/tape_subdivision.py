@@ -245,9 +245,10 @@ class TapeEvaluator(Evaluator):
 
     def second_look(self, walk: Walk, level, first, count) -> None:
         """The look with the octant's own program (where a negligible term reads a constant, its proofs
-        still hold: docs/soundness.md), then where that program has one, with the exact one
+        still hold: docs/soundness.md), then, where that program has a term replaced, with the exact one
         (:meth:`exact_level`) at the leaves it left flagged: never a voxel more than the exact program's
-        look alone keeps (bear's default at 512³, one worker: 3.64 -> 3.20 s of CPU, 567,149 -> 566,814 voxels)."""
+        look alone keeps (bear's default at 512³, one worker: 3.64 -> 3.20 s of CPU, 567,149 -> 566,814
+        voxels)."""
         b = walk.b
 
         def look(at_level):
