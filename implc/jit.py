@@ -8,11 +8,15 @@ lives. Calls through them release the GIL.
 
 from __future__ import annotations
 
+import struct
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from functools import cache
+from typing import Any
 
 import llvmlite.binding as llvm
 
-from . import kernel_cache
+from . import kernel_cache, parallel_compile
 from .abi import Entry
 
 
@@ -36,48 +40,93 @@ vectorised and unrolled (the tape engine's interpreters): LLVM's level-1 pipelin
 them many times for nothing measurable."""
 
 
-class NativeModule:
-    """One JIT-compiled LLVM module and the execution engine that keeps its code alive.
+@dataclass(frozen=True)
+class Source:
+    """What a :class:`NativeModule` compiles: ``text()`` gives its LLVM IR (called only on a cache miss), or
+    where ``split``, ``text(parts)`` gives a writer of the IR of each of that many parts (``writer(part)``,
+    :func:`implc.codegen.split.writer`); ``key`` names it in
+    the disk cache with what decides its code, ``opt_level`` is LLVM's pipeline at that speed level (0-3)
+    or ``"light"`` (:data:`LIGHT_PASSES`); ``weight`` its expected compile time against other sources', so
+    that processes compiling several at once share the work evenly."""
 
-    ``llvm_ir`` is a callable producing the module's text; it is only called on a cache miss.
-    ``opt_level``: LLVM's pipeline at that speed level (0-3), or ``"light"`` (:data:`LIGHT_PASSES`).
+    text: Callable[..., Any]
+    key: str
+    opt_level: int | str = 2
+    split: bool = False
+    weight: float = 1.0
+
+
+def _target_machine(opt_level: int | str):
+    cpu, features = _host()
+    return llvm.Target.from_default_triple().create_target_machine(
+        cpu=cpu, features=features, opt=2 if opt_level == "light" else opt_level, reloc="static",
+        codemodel="jitdefault")
+
+
+def _compile(text: str, opt_level: int | str) -> bytes:
+    """The host object file of one module's (or part's) IR text."""
+    target_machine = _target_machine(opt_level)
+    module = llvm.parse_assembly(text)
+    module.triple = llvm.get_process_triple()
+    module.data_layout = str(target_machine.target_data)
+    module.verify()
+    light = opt_level == "light"
+    tuning = llvm.create_pipeline_tuning_options(speed_level=2 if light else opt_level)
+    builder = llvm.create_pass_builder(target_machine, tuning)
+    if light:
+        passes = llvm.create_new_module_pass_manager()
+        for name in LIGHT_PASSES:
+            getattr(passes, f"add_{name}_pass")()
+        passes.run(module, builder)
+    else:
+        builder.getModulePassManager().run(module, builder)
+    return target_machine.emit_object(module)
+
+
+_COUNT = struct.Struct("<Q")
+
+
+def _bundle(objects: Sequence[bytes]) -> bytes:
+    """Objects as one cache entry: their count, then each one's length and bytes."""
+    return b"".join([_COUNT.pack(len(objects))] + [_COUNT.pack(len(o)) + o for o in objects])
+
+
+def _unbundle(data: bytes) -> list[bytes]:
+    (count,), at, objects = _COUNT.unpack_from(data, 0), _COUNT.size, []
+    for _ in range(count):
+        (length,), at = _COUNT.unpack_from(data, at), at + _COUNT.size
+        objects.append(data[at:at + length])
+        at += length
+    return objects
+
+
+class NativeModule:
+    """One JIT-compiled LLVM module (its objects) and the execution engine that keeps its code alive.
+
+    ``llvm_ir``, ``source_key``, ``opt_level`` and ``split``: the :class:`Source`'s ``text``, ``key``,
+    ``opt_level`` and ``split``.
     """
 
-    def __init__(self, llvm_ir, source_key: str, opt_level: int | str = 2):
-        cpu, features = _host()
-        target = llvm.Target.from_default_triple()
-        self._target_machine = target.create_target_machine(cpu=cpu, features=features,
-                                                            opt=2 if opt_level == "light" else opt_level,
-                                                            reloc="pic", codemodel="jitdefault")
+    def __init__(self, llvm_ir, source_key: str, opt_level: int | str = 2, *, split: bool = False,
+                 _compiled: tuple[str, bytes, bool] | None = None):
+        source = Source(llvm_ir, source_key, opt_level, split)
+        self.key, bundle, self.from_cache = _compiled or _compile_all([source])[0]
+        # from_cache: True when the objects came from the disk cache, no LLVM run
         self.opt_level = opt_level
-        self.key = kernel_cache.key(source_key, cpu, features, opt_level)
-        obj = kernel_cache.load(self.key)
-        self.from_cache = obj is not None  # True: the object came from the disk cache, no LLVM run
-        if obj is None:
-            obj = self._compile(llvm_ir())
-            kernel_cache.store(self.key, obj)
+        self._target_machine = _target_machine(opt_level)
         empty = llvm.parse_assembly("")
         empty.triple = llvm.get_process_triple()
         self._engine = llvm.create_mcjit_compiler(empty, self._target_machine)
-        self._engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
+        for obj in _unbundle(bundle):
+            self._engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
         self._engine.finalize_object()
 
-    def _compile(self, text: str) -> bytes:
-        module = llvm.parse_assembly(text)
-        module.triple = llvm.get_process_triple()
-        module.data_layout = str(self._target_machine.target_data)
-        module.verify()
-        light = self.opt_level == "light"
-        tuning = llvm.create_pipeline_tuning_options(speed_level=2 if light else self.opt_level)
-        builder = llvm.create_pass_builder(self._target_machine, tuning)
-        if light:
-            passes = llvm.create_new_module_pass_manager()
-            for name in LIGHT_PASSES:
-                getattr(passes, f"add_{name}_pass")()
-            passes.run(module, builder)
-        else:
-            builder.getModulePassManager().run(module, builder)
-        return self._target_machine.emit_object(module)
+    @classmethod
+    def together(cls, sources: Sequence[Source]) -> list[NativeModule]:
+        """A NativeModule for each source; those not in the disk cache compiled at once, their parts
+        spread over processes."""
+        return [cls(s.text, s.key, s.opt_level, split=s.split, _compiled=c)
+                for s, c in zip(sources, _compile_all(sources))]
 
     def address(self, name: str) -> int:
         """The address of the exported function ``name`` (valid while this object lives)."""
@@ -89,3 +138,35 @@ class NativeModule:
     def bind(self, entry: Entry):
         """The exported function ``entry`` as a ctypes function with the ABI's prototype."""
         return entry.ctypes_type()(self.address(entry.name))
+
+
+def _compile_all(sources: Sequence[Source]) -> list[tuple[str, bytes, bool]]:
+    """(cache key, objects bundled, whether from the cache) for each source: the missing ones compiled,
+    every part of every one a job of :func:`implc.parallel_compile.run`, then stored."""
+    cpu, features = _host()
+    keys = [kernel_cache.key(s.key, cpu, features, s.opt_level) for s in sources]
+    bundles = [kernel_cache.load(k) for k in keys]
+    parts = parallel_compile.workers()
+    jobs = [(i, part, parts if s.split else 1) for i, s in enumerate(sources) if bundles[i] is None
+            for part in range(parts if s.split else 1)]
+
+    writers: dict[int, Callable[[int], str]] = {}  # a split source's, in the process that runs its parts
+
+    def job(j: int) -> bytes:
+        i, part, count = jobs[j]
+        if not sources[i].split:
+            return _compile(sources[i].text(), sources[i].opt_level)
+        if i not in writers:
+            writers[i] = sources[i].text(count)
+        return _compile(writers[i](part), sources[i].opt_level)
+
+    objects = parallel_compile.run(job, len(jobs), [sources[i].weight / count for i, _, count in jobs])
+    out = []
+    for i, (key, bundle) in enumerate(zip(keys, bundles)):
+        if bundle is None:
+            bundle = _bundle([o for (k, _, _), o in zip(jobs, objects) if k == i])
+            kernel_cache.store(key, bundle)
+            out.append((key, bundle, False))
+        else:
+            out.append((key, bundle, True))
+    return out

@@ -1,7 +1,8 @@
 """The on-disk cache of compiled kernel objects: where it lives, what a key covers, how big it may grow.
 
-One file per key, ``<key>.o``, holding the object's SHA-256 and then the object, so that a damaged entry
-is recompiled rather than loaded (LLVM would crash on a bad object file). Writes go to a temporary file
+One file per key, ``<key>.o``, holding its content's SHA-256 and then the content (a module's object files,
+bundled by :mod:`implc.jit`), so that a damaged entry is recompiled rather than loaded (LLVM would crash
+on a bad object file). Writes go to a temporary file
 in the same folder and are renamed into place: a concurrent reader sees the old entry or the whole new one.
 
 A key covers what decides the machine code: the source key of the module (the tapes and the compile

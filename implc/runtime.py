@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import functools
 import threading
-from concurrent.futures import ThreadPoolExecutor
 
 from . import abi
-from .codegen.runtime_module import build_contouring, build_kernel_walk, build_mesh_simplify, build_runtime
-from .codegen.tape_engine_module import build_tape_engine
-from .jit import NativeModule
+from .codegen.runtime_module import build_contouring, build_kernel_walk, build_mesh_simplify, runtime_parts
+from .codegen.tape_engine_module import tape_engine_parts
+from .jit import NativeModule, Source
 
 TAPE_ENGINE_OPT: int | str = "light"
 """LLVM's optimisation of the tape engine (:data:`implc.jit.LIGHT_PASSES`): its IR is written vectorised
@@ -26,16 +25,24 @@ at 512³ and meshed at 256³, within the noise against level 1) and spent most o
 module's optimisation 0.42 -> 0.08 s of the 0.9 s its compile took at level 1."""
 
 
+def _tape_engine_source(directed: bool) -> Source:
+    """The tape engine's module, in parts (its compile takes six times the runtime's)."""
+    return Source(functools.partial(tape_engine_parts, directed),
+                  f"implc-tape-engine-{'directed' if directed else 'widened'}", TAPE_ENGINE_OPT, split=True,
+                  weight=6.0)
+
+
+RUNTIME_SOURCE = Source(runtime_parts, "implc-runtime", split=True)
+
+
 class TapeEngine:
     """The tape-engine module's entry points for one rounding mode: ``interval``, ``gradient``, ``point``,
     ``subdivide``, ``box_gradient`` and ``grouped`` (signatures in :mod:`implc.abi`; programs from
-    :mod:`implc.tape_program`)."""
+    :mod:`implc.tape_program`). ``native``: the module, compiled already (else compiled here)."""
 
-    def __init__(self, directed: bool):
+    def __init__(self, directed: bool, native: NativeModule | None = None):
         self.directed = directed
-        self.native = NativeModule(lambda: build_tape_engine(directed),
-                                   source_key=f"implc-tape-engine-{'directed' if directed else 'widened'}",
-                                   opt_level=TAPE_ENGINE_OPT)
+        self.native = native or NativeModule.together([_tape_engine_source(directed)])[0]
         self.interval = self.native.bind(abi.TAPE_INTERVAL)
         self.gradient = self.native.bind(abi.TAPE_GRADIENT)
         self.point = self.native.bind(abi.TAPE_POINT)
@@ -66,8 +73,9 @@ class Runtime:
     _shared: Runtime | None = None
     _lock = threading.Lock()
 
-    def __init__(self):
-        self.native = NativeModule(build_runtime, source_key="implc-runtime")
+    def __init__(self, native: NativeModule | None = None):
+        """``native``: the runtime module, compiled already (else compiled here)."""
+        self.native = native or NativeModule.together([RUNTIME_SOURCE])[0]
         self._walk: NativeModule | None = None  # the compiled kernels' walk, built on first use
         self._simplify: NativeModule | None = None  # the meshes' simplification, built on first use
         self._contouring: Contouring | None = None  # the mesher's, built on first use
@@ -106,28 +114,24 @@ class Runtime:
     def subdivide(self):
         return self._walk_entry(abi.SUBDIVIDE)
 
-    def tape_engine(self, directed: bool, built: TapeEngine | None = None) -> TapeEngine:
+    def tape_engine(self, directed: bool) -> TapeEngine:
         """The tape engine for one rounding mode, compiled on first use (from the disk cache after the
-        first time); ``built``: one already compiled, kept unless the runtime has its own."""
+        first time)."""
         with self._lock:
             if directed not in self._tape_engines:
-                self._tape_engines[directed] = built or TapeEngine(directed)
+                self._tape_engines[directed] = TapeEngine(directed)
             return self._tape_engines[directed]
 
     @classmethod
     def shared_tape_engine(cls, directed: bool) -> TapeEngine:
         """``Runtime.shared().tape_engine(directed)``. Where neither is built yet (a first compile), the
-        runtime's module is compiled on a second thread while this one writes the engine's IR: llvmlite
-        lets one thread into LLVM at a time, so what overlaps is the writing of one module's IR with the
-        compiling of the other."""
+        runtime's module and the engine's parts are compiled at once (:meth:`NativeModule.together`)."""
         with cls._lock:
-            first = cls._shared is None
-        if not first:
-            return cls.shared().tape_engine(directed)
-        with ThreadPoolExecutor(1) as pool:
-            pending = pool.submit(cls.shared)
-            engine = TapeEngine(directed)
-            return pending.result().tape_engine(directed, engine)
+            if cls._shared is None:
+                runtime, engine = NativeModule.together([RUNTIME_SOURCE, _tape_engine_source(directed)])
+                cls._shared = cls(runtime)
+                cls._shared._tape_engines[directed] = TapeEngine(directed, engine)
+        return cls._shared.tape_engine(directed)
 
     @classmethod
     def shared(cls) -> Runtime:

@@ -16,7 +16,7 @@ import pytest
 import sympy
 
 import implc
-from implc import kernel_cache, x, y, z
+from implc import kernel_cache, parallel_compile, x, y, z
 from implc.cli import main
 
 PROBE = textwrap.dedent("""
@@ -56,25 +56,36 @@ def test_another_process_reuses_the_cache(tmp_path):
     assert [_probe(tmp_path)[1] for _ in range(2)] == [False, True]
 
 
-def test_a_first_voxelization_compiles_no_mesher(tmp_path):
+def test_a_first_voxelization_compiles_no_mesher_and_its_parts_compute_what_the_whole_does(tmp_path):
     """A cold start that only voxelizes a tape-engine surface compiles the runtime module and the tape engine,
-    nothing more (the mesher's module, a fifth of a colonnade's first compile, waits for a first mesh)."""
-    cache = tmp_path / "kernels"
+    nothing more (the mesher's module, a fifth of a colonnade's first compile, waits for a first mesh).
+    Compiled in parts at once (implc.parallel_compile: one object per part in the cache entry), the engine
+    gives the same voxels and normals, bit for bit, as compiled whole."""
     probe = textwrap.dedent("""
-        import sys, sympy, implc
+        import hashlib, sys, sympy, implc
         from pathlib import Path
-        from implc import x, y, z
+        from implc import jit, kernel_cache, parallel_compile, x, y, z
+        parallel_compile.MAX_WORKERS = int(sys.argv[2])
         s = implc.compile(sympy.Min(x**2 + y**2 + z**2 - 0.5, x + y - 0.25), engine="tape")
-        implc.voxelize(s, 4)
+        v = implc.voxelize(s, 6)
         print(len(list(Path(sys.argv[1]).glob("*.o"))))
+        print(len(jit._unbundle(kernel_cache.load(s._engine.native.key))))
+        print(len(v), hashlib.sha256(v.coords.tobytes() + v.normals.tobytes()).hexdigest())
         implc.mesh(s, 4)
         print(len(list(Path(sys.argv[1]).glob("*.o"))))
     """)
-    env = {"IMPLC_CACHE_DIR": str(cache), "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
-           "PYTHONDONTWRITEBYTECODE": "1"}
-    run = subprocess.run([sys.executable, "-c", probe, str(cache)], env=env, capture_output=True, text=True,
-                         check=True, cwd=tmp_path)
-    assert run.stdout.split() == ["2", "3"]  # runtime and tape engine; then the contouring module
+    runs = []
+    for workers in (1, parallel_compile.MAX_WORKERS):
+        cache = tmp_path / f"kernels-{workers}"
+        env = {"IMPLC_CACHE_DIR": str(cache), "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
+               "PYTHONDONTWRITEBYTECODE": "1"}
+        run = subprocess.run([sys.executable, "-c", probe, str(cache), str(workers)], env=env,
+                             capture_output=True, text=True, check=True, cwd=tmp_path)
+        runs.append(run.stdout.splitlines())
+    whole, parts = runs
+    assert whole[0] == parts[0] == "2" and whole[3] == parts[3] == "3"  # runtime and engine; then contouring
+    assert whole[1] == "1" and parts[1] == str(min(parallel_compile.MAX_WORKERS, len(os.sched_getaffinity(0))))
+    assert int(whole[2].split()[0]) > 1000 and whole[2] == parts[2]
 
 
 @pytest.mark.slow  # twelve fresh processes, 9 s; test_another_process_reuses_the_cache stays in the default run

@@ -36,6 +36,7 @@ from .octree_index import (
     emit_octree_traverse,
 )
 from .splat import emit_splat
+from .split import writer
 from .subdivision import emit_subdivide
 from .tighten import emit_drop_marked
 
@@ -56,6 +57,16 @@ def build_mesh_simplify() -> str:
 
 def build_runtime() -> str:
     """The LLVM IR text of the runtime module."""
+    return str(runtime_module())
+
+
+def runtime_parts(parts: int):
+    """The writer of the runtime module's IR text in ``parts`` parts (:func:`.split.writer`)."""
+    return writer(runtime_module(), parts)
+
+
+def runtime_module() -> ir.Module:
+    """The runtime module."""
     module = ir.Module(name="implc_runtime")
     emit_drop_marked(module)
     emit_octree_insert(module)
@@ -64,7 +75,7 @@ def build_runtime() -> str:
     emit_octree_subtree_rows(module)
     emit_splat(module)
     emit_arrange_groups(module)
-    return str(module)
+    return module
 
 
 def build_contouring() -> str:
