@@ -14,7 +14,9 @@ contouring, which runs on one thread), the count column then being triangles; ``
 what a user calls, ``implc.mesh(surface, depth)`` (its voxelization and the contouring, CPU seconds).
 With ``--task compile`` each process finds the kernel cache empty (Python's bytecode cached, as after an
 install) and times loading and compiling the case (wall seconds: a first compile spreads its parts over
-processes), the count column then being voxels at ``--depth`` from that compile; ``--repeats`` is ignored.
+processes), the count column then being voxels at ``--depth`` from that compile; ``--task first-voxelize``
+times the same and the first voxelization at ``--depth`` (what compiled kernels compile on their first
+voxelization included); ``--repeats`` is ignored by both.
 
 A case is a scene name, "union of 50 spheres", "blend of 90 blobs" or the path of a ``.vm`` model (read
 with ``implc.load_vm`` where the revision has it, else converted to SymPy with ``evaluate=False``, keeping
@@ -92,8 +94,9 @@ else:
     s = implc.compile(sc.surface, sc.bounds)
 compiled = time.perf_counter() - started
 v = implc.voxelize(s, depth, workers=1)  # warm: runtime module, memory
-if task == "compile":
-    print(json.dumps({"seconds": {workers[0]: compiled}, "voxels": len(v)}))
+if task in ("compile", "first-voxelize"):
+    seconds = compiled if task == "compile" else time.perf_counter() - started
+    print(json.dumps({"seconds": {workers[0]: seconds}, "voxels": len(v)}))
     sys.exit(0)
 times = {w: [] for w in workers}
 if task == "implc.mesh":
@@ -136,10 +139,11 @@ def main(argv=None) -> int:
     p.add_argument("--rounds", type=int, default=3, help="processes per revision and case, interleaved")
     p.add_argument("--cases", default=",".join(CASES))
     p.add_argument("--workers", default="1", help="worker counts, comma-separated (e.g. 1,2: adds the yield)")
-    p.add_argument("--task", choices=("voxelize", "mesh", "implc.mesh", "compile"), default="voxelize",
+    p.add_argument("--task", choices=("voxelize", "mesh", "implc.mesh", "compile", "first-voxelize"),
+                   default="voxelize",
                    help="what is timed: voxelize (wall seconds), mesh (Voxels.mesh(), CPU seconds), implc.mesh "
-                        "(voxelizing and meshing, CPU seconds) or compile (loading and compiling with an empty "
-                        "kernel cache, wall seconds)")
+                        "(voxelizing and meshing, CPU seconds), compile (loading and compiling with an empty "
+                        "kernel cache, wall seconds) or first-voxelize (the same and a first voxelization)")
     args = p.parse_args(argv)
     workers = [int(w) for w in args.workers.split(",")]
     if args.task != "voxelize":
@@ -153,12 +157,12 @@ def main(argv=None) -> int:
             for case in args.cases.split(","):
                 times = {(label, w): [] for label in ("old", "new") for w in workers}
                 voxels = {}
-                if args.task == "compile":  # untimed: each tree's bytecode written once
+                fresh = args.task in ("compile", "first-voxelize")
+                if fresh:  # untimed: each tree's bytecode written once
                     for label, tree in (("old", old), ("new", ROOT)):
                         run(tree, case, 1, 1, workers, Path(tempfile.mkdtemp(dir=tmp)), args.task)
                 for _ in range(args.rounds):
                     for label, tree in (("old", old), ("new", ROOT)):
-                        fresh = args.task == "compile"
                         cache = Path(tempfile.mkdtemp(dir=tmp)) if fresh else Path(tmp) / f"cache-{label}"
                         r = run(tree, case, args.depth, args.repeats, workers, cache, args.task)
                         for w in workers:
@@ -170,7 +174,8 @@ def main(argv=None) -> int:
             subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, capture_output=True,
                            check=False)  # best effort: the temporary folder goes anyway
     what = {"voxelize": "Voxelize (wall s)", "mesh": "Mesh (CPU s)", "implc.mesh": "implc.mesh (CPU s)",
-            "compile": "Load and compile, empty kernel cache (wall s)"}[args.task]
+            "compile": "Load and compile, empty kernel cache (wall s)",
+            "first-voxelize": "Load, compile and voxelize once, empty kernel cache (wall s)"}[args.task]
     print(f"### {what} at {1 << args.depth}³: {args.revision} against this tree "
           f"(medians of {args.rounds} processes x {args.repeats} runs)\n")
     header = ["case"]
@@ -178,7 +183,7 @@ def main(argv=None) -> int:
         header += [f"{w}w {args.revision} s", f"{w}w now s", f"{w}w speedup"]
         if w > 1 and workers[0] == 1:
             header += [f"{w}w yield {args.revision}", f"{w}w yield now"]
-    count = "voxels" if args.task in ("voxelize", "compile") else "triangles"
+    count = "triangles" if args.task in ("mesh", "implc.mesh") else "voxels"
     print("| " + " | ".join(header + [f"{count} then", f"{count} now"]) + " |")
     print("|" + "---|" * (len(header) + 2))
     for case, m, v_old, v_new in rows:

@@ -12,12 +12,13 @@ import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache
-from typing import Any
 
 import llvmlite.binding as llvm
+from llvmlite import ir
 
 from . import kernel_cache, parallel_compile
 from .abi import Entry
+from .codegen import split
 
 
 @cache
@@ -42,17 +43,18 @@ them many times for nothing measurable."""
 
 @dataclass(frozen=True)
 class Source:
-    """What a :class:`NativeModule` compiles: ``text()`` gives its LLVM IR (called only on a cache miss), or
-    where ``split``, ``text(parts)`` gives a writer of the IR of each of that many parts (``writer(part)``,
-    :func:`implc.codegen.split.writer`); ``key`` names it in
-    the disk cache with what decides its code, ``opt_level`` is LLVM's pipeline at that speed level (0-3)
-    or ``"light"`` (:data:`LIGHT_PASSES`); ``weight`` its expected compile time against other sources', so
-    that processes compiling several at once share the work evenly."""
+    """What a :class:`NativeModule` compiles: ``build()`` gives its LLVM module (an ``llvmlite.ir.Module``, or
+    its IR text; called only on a cache miss, once in each process that compiles a part of it), ``key``
+    names it in the disk cache with what decides its code, ``opt_level`` is LLVM's pipeline at that speed
+    level (0-3) or ``"light"`` (:data:`LIGHT_PASSES`), ``max_parts`` how many parts it may be compiled in
+    at once (:mod:`implc.codegen.split`; a module given as text is one part), ``weight`` its expected
+    compile time against other sources', so that processes compiling several at once share the work
+    evenly."""
 
-    text: Callable[..., Any]
+    build: Callable[[], ir.Module | str]
     key: str
     opt_level: int | str = 2
-    split: bool = False
+    max_parts: int = 1
     weight: float = 1.0
 
 
@@ -103,13 +105,13 @@ def _unbundle(data: bytes) -> list[bytes]:
 class NativeModule:
     """One JIT-compiled LLVM module (its objects) and the execution engine that keeps its code alive.
 
-    ``llvm_ir``, ``source_key``, ``opt_level`` and ``split``: the :class:`Source`'s ``text``, ``key``,
-    ``opt_level`` and ``split``.
+    ``build``, ``source_key``, ``opt_level`` and ``max_parts``: the :class:`Source`'s ``build``, ``key``,
+    ``opt_level`` and ``max_parts``.
     """
 
-    def __init__(self, llvm_ir, source_key: str, opt_level: int | str = 2, *, split: bool = False,
+    def __init__(self, build, source_key: str, opt_level: int | str = 2, *, max_parts: int = 1,
                  _compiled: tuple[str, bytes, bool] | None = None):
-        source = Source(llvm_ir, source_key, opt_level, split)
+        source = Source(build, source_key, opt_level, max_parts)
         self.key, bundle, self.from_cache = _compiled or _compile_all([source])[0]
         # from_cache: True when the objects came from the disk cache, no LLVM run
         self.opt_level = opt_level
@@ -125,7 +127,7 @@ class NativeModule:
     def together(cls, sources: Sequence[Source]) -> list[NativeModule]:
         """A NativeModule for each source; those not in the disk cache compiled at once, their parts
         spread over processes."""
-        return [cls(s.text, s.key, s.opt_level, split=s.split, _compiled=c)
+        return [cls(s.build, s.key, s.opt_level, max_parts=s.max_parts, _compiled=c)
                 for s, c in zip(sources, _compile_all(sources))]
 
     def address(self, name: str) -> int:
@@ -146,18 +148,16 @@ def _compile_all(sources: Sequence[Source]) -> list[tuple[str, bytes, bool]]:
     cpu, features = _host()
     keys = [kernel_cache.key(s.key, cpu, features, s.opt_level) for s in sources]
     bundles = [kernel_cache.load(k) for k in keys]
-    parts = parallel_compile.workers()
-    jobs = [(i, part, parts if s.split else 1) for i, s in enumerate(sources) if bundles[i] is None
-            for part in range(parts if s.split else 1)]
-
-    writers: dict[int, Callable[[int], str]] = {}  # a split source's, in the process that runs its parts
+    workers = parallel_compile.workers()
+    jobs = [(i, part, min(workers, s.max_parts)) for i, s in enumerate(sources) if bundles[i] is None
+            for part in range(min(workers, s.max_parts))]
+    writers: dict[int, Callable[[int], str]] = {}  # each source's, built once in the process that needs it
 
     def job(j: int) -> bytes:
         i, part, count = jobs[j]
-        if not sources[i].split:
-            return _compile(sources[i].text(), sources[i].opt_level)
         if i not in writers:
-            writers[i] = sources[i].text(count)
+            module = sources[i].build()
+            writers[i] = (lambda part: module) if isinstance(module, str) else split.writer(module, count)
         return _compile(writers[i](part), sources[i].opt_level)
 
     objects = parallel_compile.run(job, len(jobs), [sources[i].weight / count for i, _, count in jobs])

@@ -1,21 +1,24 @@
 """The generic native routines (subdivision, normals, octree, splatting, contouring) as callable functions.
 
-A :class:`Runtime` owns the JIT-compiled runtime module (:mod:`implc.codegen.runtime_module`) and its
-entry points, bound from :mod:`implc.abi`, and the modules compiled on first use (the kernels' walk, the
-contouring, the meshes' simplification). The module is the same for every surface, so a process needs
-one: :meth:`Runtime.shared` builds it on first use (from the disk cache after the first time) and hands
-the same one to every caller, which keeps its code alive for the life of the process. The tape engine
-(:class:`TapeEngine`, one interpreter for every program) is compiled on first use by a surface that needs it.
+A :class:`Runtime` owns the JIT-compiled generic modules (:mod:`implc.codegen.runtime_module`: the
+runtime module, the kernels' walk, the contouring, the meshes' simplification; and the tape engine,
+:class:`TapeEngine`, one interpreter for every program) and their entry points, bound from
+:mod:`implc.abi`. Each module is compiled on first use (from the disk cache after the first time), those
+first needed together at once, with a surface's own where it asks (a first voxelization over compiled
+kernels: the runtime module, the walk and the surface's bound kernel). They are the same for every
+surface, so a process needs one runtime: :meth:`Runtime.shared` hands the same one to every caller,
+which keeps its code alive for the life of the process.
 """
 
 from __future__ import annotations
 
 import functools
 import threading
+from collections.abc import Sequence
 
 from . import abi
-from .codegen.runtime_module import build_contouring, build_kernel_walk, build_mesh_simplify, runtime_parts
-from .codegen.tape_engine_module import tape_engine_parts
+from .codegen.runtime_module import build_contouring, build_kernel_walk, build_mesh_simplify, build_runtime
+from .codegen.tape_engine_module import build_tape_engine
 from .jit import NativeModule, Source
 
 TAPE_ENGINE_OPT: int | str = "light"
@@ -27,12 +30,14 @@ module's optimisation 0.42 -> 0.08 s of the 0.9 s its compile took at level 1.""
 
 def _tape_engine_source(directed: bool) -> Source:
     """The tape engine's module, in parts (its compile takes six times the runtime's)."""
-    return Source(functools.partial(tape_engine_parts, directed),
-                  f"implc-tape-engine-{'directed' if directed else 'widened'}", TAPE_ENGINE_OPT, split=True,
+    return Source(functools.partial(build_tape_engine, directed),
+                  f"implc-tape-engine-{'directed' if directed else 'widened'}", TAPE_ENGINE_OPT, max_parts=4,
                   weight=6.0)
 
 
-RUNTIME_SOURCE = Source(runtime_parts, "implc-runtime", split=True)
+RUNTIME_SOURCE = Source(build_runtime, "implc-runtime", max_parts=4)
+KERNEL_WALK_SOURCE = Source(build_kernel_walk, "implc-kernel-walk", max_parts=2, weight=2.0)
+MESH_SIMPLIFY_SOURCE = Source(build_mesh_simplify, "implc-mesh-simplify")
 
 
 class TapeEngine:
@@ -63,30 +68,56 @@ class Contouring:
             setattr(self, entry.name.removeprefix("implc_"), self.native.bind(entry))
 
 
+def _entry(entry: abi.Entry, source: Source):
+    """A :class:`Runtime` attribute: ``entry`` of ``source``'s module, bound on first use (the module compiled
+    then, or loaded from the disk cache)."""
+
+    def bound(self: Runtime):
+        return self.modules(source)[0].bind(entry)
+
+    bound.__doc__ = f"``{entry.name}`` (:mod:`implc.abi`), from the module ``{source.key}``."
+    return functools.cached_property(bound)
+
+
 class Runtime:
-    """The runtime module's entry points: ``drop_marked``, ``octree_insert``, ``octree_traverse``,
-    ``octree_mark_inside``, ``octree_subtree_rows``, ``splat`` and ``arrange_groups``; the walk over compiled kernels,
-    ``subdivide``, from a module of its own compiled on first use, and likewise ``contouring`` (the
-    mesher's, :class:`Contouring`) and ``flat_collapse`` (meshes' simplification; signatures in
-    :mod:`implc.abi`)."""
+    """The generic native routines, each module compiled on first use (from the disk cache after the first
+    time): the runtime module's entry points ``drop_marked``, ``octree_insert``, ``octree_traverse``,
+    ``octree_mark_inside``, ``octree_subtree_rows``, ``splat`` and ``arrange_groups``; the walk over compiled
+    kernels, ``subdivide``; ``flat_collapse`` (meshes' simplification); ``contouring`` (the mesher's,
+    :class:`Contouring`) and the tape engine per rounding mode (signatures in :mod:`implc.abi`). Modules
+    first needed together are compiled at once (:meth:`modules`)."""
 
     _shared: Runtime | None = None
     _lock = threading.Lock()
 
-    def __init__(self, native: NativeModule | None = None):
-        """``native``: the runtime module, compiled already (else compiled here)."""
-        self.native = native or NativeModule.together([RUNTIME_SOURCE])[0]
-        self._walk: NativeModule | None = None  # the compiled kernels' walk, built on first use
-        self._simplify: NativeModule | None = None  # the meshes' simplification, built on first use
+    def __init__(self):
+        self._modules: dict[str, NativeModule] = {}  # by source key
         self._contouring: Contouring | None = None  # the mesher's, built on first use
-        self.drop_marked = self.native.bind(abi.DROP_MARKED)
-        self.octree_insert = self.native.bind(abi.OCTREE_INSERT)
-        self.octree_traverse = self.native.bind(abi.OCTREE_TRAVERSE)
-        self.octree_mark_inside = self.native.bind(abi.OCTREE_MARK_INSIDE)
-        self.octree_subtree_rows = self.native.bind(abi.OCTREE_SUBTREE_ROWS)
-        self.splat = self.native.bind(abi.SPLAT)
-        self.arrange_groups = self.native.bind(abi.ARRANGE_GROUPS)
         self._tape_engines: dict[bool, TapeEngine] = {}
+
+    def modules(self, *sources: Source, extra: Sequence[Source] = ()) -> list[NativeModule]:
+        """The modules of ``sources`` (kept by this runtime, so built once) and then of ``extra`` (a
+        surface's, returned only), those not built yet compiled at once (:meth:`NativeModule.together`)."""
+        with self._lock:
+            missing = [s for s in dict.fromkeys(sources) if s.key not in self._modules]
+            built = NativeModule.together([*missing, *extra]) if missing or extra else []
+            self._modules.update((s.key, m) for s, m in zip(missing, built))
+            return [self._modules[s.key] for s in sources] + built[len(missing):]
+
+    drop_marked = _entry(abi.DROP_MARKED, RUNTIME_SOURCE)
+    octree_insert = _entry(abi.OCTREE_INSERT, RUNTIME_SOURCE)
+    octree_traverse = _entry(abi.OCTREE_TRAVERSE, RUNTIME_SOURCE)
+    octree_mark_inside = _entry(abi.OCTREE_MARK_INSIDE, RUNTIME_SOURCE)
+    octree_subtree_rows = _entry(abi.OCTREE_SUBTREE_ROWS, RUNTIME_SOURCE)
+    splat = _entry(abi.SPLAT, RUNTIME_SOURCE)
+    arrange_groups = _entry(abi.ARRANGE_GROUPS, RUNTIME_SOURCE)
+    subdivide = _entry(abi.SUBDIVIDE, KERNEL_WALK_SOURCE)
+    flat_collapse = _entry(abi.FLAT_COLLAPSE, MESH_SIMPLIFY_SOURCE)
+
+    def kernel_walk(self, extra: Sequence[Source] = ()) -> list[NativeModule]:
+        """Built at once where missing: what a voxelization over compiled kernels runs (the runtime module,
+        the walk) and ``extra`` (the surface's modules it calls, returned)."""
+        return self.modules(RUNTIME_SOURCE, KERNEL_WALK_SOURCE, extra=extra)[2:]
 
     @property
     def contouring(self) -> Contouring:
@@ -97,41 +128,16 @@ class Runtime:
                 self._contouring = Contouring()
             return self._contouring
 
-    def _walk_entry(self, entry: abi.Entry):
-        with self._lock:
-            if self._walk is None:
-                self._walk = NativeModule(build_kernel_walk, source_key="implc-kernel-walk")
-        return self._walk.bind(entry)
-
-    @functools.cached_property
-    def flat_collapse(self):
-        with self._lock:
-            if self._simplify is None:
-                self._simplify = NativeModule(build_mesh_simplify, source_key="implc-mesh-simplify")
-        return self._simplify.bind(abi.FLAT_COLLAPSE)
-
-    @functools.cached_property
-    def subdivide(self):
-        return self._walk_entry(abi.SUBDIVIDE)
-
     def tape_engine(self, directed: bool) -> TapeEngine:
         """The tape engine for one rounding mode, compiled on first use (from the disk cache after the
-        first time)."""
+        first time) at once with the runtime module where that is not built yet either."""
         with self._lock:
-            if directed not in self._tape_engines:
-                self._tape_engines[directed] = TapeEngine(directed)
-            return self._tape_engines[directed]
-
-    @classmethod
-    def shared_tape_engine(cls, directed: bool) -> TapeEngine:
-        """``Runtime.shared().tape_engine(directed)``. Where neither is built yet (a first compile), the
-        runtime's module and the engine's parts are compiled at once (:meth:`NativeModule.together`)."""
-        with cls._lock:
-            if cls._shared is None:
-                runtime, engine = NativeModule.together([RUNTIME_SOURCE, _tape_engine_source(directed)])
-                cls._shared = cls(runtime)
-                cls._shared._tape_engines[directed] = TapeEngine(directed, engine)
-        return cls._shared.tape_engine(directed)
+            engine = self._tape_engines.get(directed)
+        if engine is None:
+            native = self.modules(RUNTIME_SOURCE, _tape_engine_source(directed))[1]
+            with self._lock:
+                engine = self._tape_engines.setdefault(directed, TapeEngine(directed, native))
+        return engine
 
     @classmethod
     def shared(cls) -> Runtime:

@@ -185,6 +185,7 @@ class KernelWalk(WalkEvaluator):
     (:data:`implc.abi.KERNEL_EVALUATOR_WORDS`), the same for every worker."""
 
     def __init__(self, surface, runtime: Runtime, mean_value_levels: int, fine_level: int, tightens: bool):
+        surface.prepare_kernel_walk(tightens)
         self.walk = runtime.subdivide
         self.words = np.zeros(abi.KERNEL_EVALUATOR_WORDS, dtype=np.int64)
         box = surface.kernel_address(abi.OCTANT)

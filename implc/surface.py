@@ -19,6 +19,7 @@ from functools import partial
 from typing import Any
 
 import numpy as np
+from llvmlite.ir import Module as LLVMModule
 from numpy.typing import ArrayLike
 
 from . import abi
@@ -34,7 +35,7 @@ from .codegen.kernels import (
 from .errors import CompileError
 from .gradient import with_gradient
 from .ir import Tape
-from .jit import NativeModule, host_has_avx512
+from .jit import NativeModule, Source, host_has_avx512
 from .regions import plan_regions
 from .runtime import Runtime
 from .tape_program import TapeProgram, encode, slot_scratch, unsupported_ops
@@ -295,10 +296,10 @@ class Surface:
         self._gradient_tape: Tape | None = None
         self._native: NativeModule | None = None  # compiled on first use
         self._mean_value_native: NativeModule | None = None  # compiled on first use
-        self._bound_native: NativeModule | None = None  # compiled on first use
+        self._bound_native: NativeModule | None = None  # compiled on the first voxelization
         self._box_gradient_native: NativeModule | None = None  # compiled on the first mesh
         self._bound: dict[str, object] = {}
-        self._engine = Runtime.shared_tape_engine(directed) if engine == "tape" else None  # shared, cached
+        self._engine = Runtime.shared().tape_engine(directed) if engine == "tape" else None  # shared, cached
         if engine == "jit":
             self._module_of(abi.POINT)  # this surface's kernels: compiled now, or loaded from the cache
 
@@ -338,16 +339,26 @@ class Surface:
         the process's one :class:`~implc.runtime.Runtime`."""
         return Runtime.shared()
 
+    def _bound_source(self) -> Source:
+        return Source(lambda: build_bound_module(self.tape, self.gradient_tape, width=self.width,
+                                                 directed=self.directed), "bound" + self._key)
+
+    def prepare_kernel_walk(self, tightens: bool) -> None:
+        """Build at once what a voxelization over this surface's compiled kernels runs and is missing: the
+        runtime's module and walk, and where the second look ``tightens``, the surface's bound kernel."""
+        extra = [self._bound_source()] if tightens and self._bound_native is None else []
+        built = self.runtime.kernel_walk(extra)
+        if extra:
+            self._bound_native = built[0]
+
     def _module_of(self, entry: abi.Entry) -> NativeModule:
         if entry in abi.SURFACE_ENTRIES:
             if self._native is None:
-                self._native = NativeModule(self._build, source_key=self._key)
+                self._native = NativeModule(self._build, self._key, max_parts=4)
             return self._native
         if entry in abi.BOUND_ENTRIES:
-            if self._bound_native is None:  # the voxelizer's: compiled on the first voxelization
-                self._bound_native = NativeModule(
-                    lambda: build_bound_module(self.tape, self.gradient_tape, width=self.width, directed=self.directed),
-                    source_key="bound" + self._key)
+            if self._bound_native is None:  # the voxelizer's: built by prepare_kernel_walk, or here
+                self._bound_native = NativeModule.together([self._bound_source()])[0]
             return self._bound_native
         if entry in abi.BOX_GRADIENT_ENTRIES:
             if self._box_gradient_native is None:  # the mesher's: compiled on the first mesh
@@ -361,7 +372,7 @@ class Surface:
             self._mean_value_native = NativeModule(
                 lambda: build_mean_value_module(self.tape, self.gradient_tape, width=self.width,
                                                 directed=self.directed),
-                source_key="mvf" + self._key)
+                source_key="mvf" + self._key, max_parts=4)
         return self._mean_value_native
 
     def kernel(self, entry: abi.Entry) -> Any:
@@ -383,13 +394,13 @@ class Surface:
         """The value tape, printed."""
         return str(self.tape)
 
-    def _build(self) -> str:
+    def _build(self) -> LLVMModule:
         return build_module(self.tape, self.gradient_tape, width=self.width, directed=self.directed)
 
     @property
     def llvm_ir(self) -> str:
         """The LLVM IR of the kernels as generated (before optimisation)."""
-        return self._build()
+        return str(self._build())
 
     def __repr__(self) -> str:
         return f"Surface({self.expr}, bounds={self.bounds}, {len(self.tape)} ops)"

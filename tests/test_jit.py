@@ -58,21 +58,25 @@ def test_another_process_reuses_the_cache(tmp_path):
 
 def test_a_first_voxelization_compiles_no_mesher_and_its_parts_compute_what_the_whole_does(tmp_path):
     """A cold start that only voxelizes a tape-engine surface compiles the runtime module and the tape engine,
-    nothing more (the mesher's module, a fifth of a colonnade's first compile, waits for a first mesh).
-    Compiled in parts at once (implc.parallel_compile: one object per part in the cache entry), the engine
-    gives the same voxels and normals, bit for bit, as compiled whole."""
+    nothing more (the mesher's module, a fifth of a colonnade's first compile, waits for a first mesh); a
+    surface with compiled kernels adds its kernels, the walk over them and its bound kernel. Compiled in
+    parts at once (implc.parallel_compile: one object per part in the cache entry), the modules give the
+    same voxels and normals, bit for bit, as compiled whole."""
     probe = textwrap.dedent("""
         import hashlib, sys, sympy, implc
         from pathlib import Path
         from implc import jit, kernel_cache, parallel_compile, x, y, z
         parallel_compile.MAX_WORKERS = int(sys.argv[2])
+        entries = lambda: len(list(Path(sys.argv[1]).glob("*.o")))
+        digest = lambda v: hashlib.sha256(v.coords.tobytes() + v.normals.tobytes()).hexdigest()
         s = implc.compile(sympy.Min(x**2 + y**2 + z**2 - 0.5, x + y - 0.25), engine="tape")
         v = implc.voxelize(s, 6)
-        print(len(list(Path(sys.argv[1]).glob("*.o"))))
-        print(len(jit._unbundle(kernel_cache.load(s._engine.native.key))))
-        print(len(v), hashlib.sha256(v.coords.tobytes() + v.normals.tobytes()).hexdigest())
+        print(entries(), len(jit._unbundle(kernel_cache.load(s._engine.native.key))), len(v), digest(v))
+        k = implc.compile(sympy.sin(3 * x) * y + z**2 - 0.3, engine="jit")
+        w = implc.voxelize(k, 6)
+        print(entries(), len(w), digest(w))
         implc.mesh(s, 4)
-        print(len(list(Path(sys.argv[1]).glob("*.o"))))
+        print(entries())
     """)
     runs = []
     for workers in (1, parallel_compile.MAX_WORKERS):
@@ -81,11 +85,15 @@ def test_a_first_voxelization_compiles_no_mesher_and_its_parts_compute_what_the_
                "PYTHONDONTWRITEBYTECODE": "1"}
         run = subprocess.run([sys.executable, "-c", probe, str(cache), str(workers)], env=env,
                              capture_output=True, text=True, check=True, cwd=tmp_path)
-        runs.append(run.stdout.splitlines())
+        runs.append([line.split() for line in run.stdout.splitlines()])
     whole, parts = runs
-    assert whole[0] == parts[0] == "2" and whole[3] == parts[3] == "3"  # runtime and engine; then contouring
-    assert whole[1] == "1" and parts[1] == str(min(parallel_compile.MAX_WORKERS, len(os.sched_getaffinity(0))))
-    assert int(whole[2].split()[0]) > 1000 and whole[2] == parts[2]
+    assert whole[0][0] == parts[0][0] == "2"  # the runtime module and the tape engine
+    assert whole[1][0] == parts[1][0] == "5"  # and the kernels, the walk over them and the bound kernel
+    assert whole[2] == parts[2] == ["6"]  # the contouring's, on the first mesh
+    assert whole[0][1] == "1" and parts[0][1] == str(min(parallel_compile.MAX_WORKERS,
+                                                         len(os.sched_getaffinity(0))))
+    assert int(whole[0][2]) > 1000 and int(whole[1][1]) > 1000
+    assert whole[0][2:] == parts[0][2:] and whole[1][1:] == parts[1][1:]
 
 
 @pytest.mark.slow  # twelve fresh processes, 9 s; test_another_process_reuses_the_cache stays in the default run

@@ -100,7 +100,7 @@ def test_a_module_in_parts_computes_what_numpy_does(parts, tmp_path, monkeypatch
         '@"split_test.big.dispatch" =' in t for t in texts]  # the table goes with its blocks
     assert all(defines(t, "split_test.helper") for t in texts if defines(t, "split_test_e1")
                or defines(t, "split_test_e2"))  # copied into each part that calls it
-    native = jit.NativeModule(lambda count: split.writer(module, count), f"split-test-{parts}", split=True)
+    native = jit.NativeModule(lambda: module, f"split-test-{parts}", max_parts=parts)
     assert len(jit._unbundle(jit.kernel_cache.load(native.key))) == parts
     v = np.random.default_rng(parts).uniform(-1, 1, 8)
     for name, order in (("split_test_e1", ("helper", "big")), ("split_test_e2", ("big", "helper"))):

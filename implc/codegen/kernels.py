@@ -195,8 +195,8 @@ def _natural(value_tape, plan):
 
 
 def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", width: int = WIDTH,
-                 directed: bool = False) -> str:
-    """The LLVM IR text of the point, gradient and interval kernels for a surface; ``directed``: round
+                 directed: bool = False) -> ir.Module:
+    """The LLVM module of the point, gradient and interval kernels for a surface; ``directed``: round
     interval arithmetic with AVX-512 embedded rounding (see :class:`~implc.codegen.vector.VectorBuilder`)."""
     module = ir.Module(name=name)
 
@@ -240,12 +240,12 @@ def build_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface", w
     enclose = _natural(value_tape, plan)
     _interval_kernel(module, abi.INTERVAL, width, directed, outline, enclose)
     _octant_kernel(module, abi.OCTANT, width, directed, outline, enclose)
-    return str(module)
+    return module
 
 
 def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface_mvf",
-                            width: int = WIDTH, directed: bool = False) -> str:
-    """The LLVM IR of the mean-value and monotonicity-form kernels, a module of its own: it is about three
+                            width: int = WIDTH, directed: bool = False) -> ir.Module:
+    """The LLVM module of the mean-value and monotonicity-form kernels, a module of its own: it is about three
     times the size of the others together, so it is compiled only when first used."""
     module = ir.Module(name=name)
     plan = plan_regions(value_tape)
@@ -263,12 +263,12 @@ def build_mean_value_module(value_tape: Tape, gradient_tape: Tape, name: str = "
     _interval_kernel(module, abi.INTERVAL_MVF, width, directed, outline, enclose)
     _octant_kernel(module, abi.OCTANT_MVF, width, directed, outline, enclose)
     _interval_kernel(module, abi.INTERVAL_MONOTONE, width, directed, outline, monotone)
-    return str(module)
+    return module
 
 
 def build_bound_module(value_tape: Tape, gradient_tape: Tape, name: str = "surface_bound", width: int = WIDTH,
-                       directed: bool = False) -> str:
-    """The LLVM IR of ``implc_bound_monotone``, the one kernel the voxelizer's second look at leaves needs,
+                       directed: bool = False) -> ir.Module:
+    """The LLVM module of ``implc_bound_monotone``, the one kernel the voxelizer's second look at leaves needs,
     in a module of its own: compiled on a surface's first voxelization (a fraction of the mean-value
     module's time), or never where no voxelization asks for it."""
     module = ir.Module(name=name)
@@ -288,12 +288,12 @@ def build_bound_module(value_tape: Tape, gradient_tape: Tape, name: str = "surfa
             value = emit_monotone_bound(vb, value_tape, gradient_tape, lo_coords, hi_coords, above)
         store_lanes(b, out, i, value, width)
     b.ret_void()
-    return str(module)
+    return module
 
 
 def build_box_gradient_module(gradient_tape: Tape, name: str = "surface_box_gradient", width: int = WIDTH,
-                              directed: bool = False) -> str:
-    """The LLVM IR of ``implc_box_gradient``: enclosures of F and of its three partials over boxes (eight
+                              directed: bool = False) -> ir.Module:
+    """The LLVM module of ``implc_box_gradient``: enclosures of F and of its three partials over boxes (eight
     doubles per box: F's lo, hi, then each partial's), by the interval rules over the gradient tape; in a
     module of its own, compiled on a surface's first mesh (which proves where its cells are regular)."""
     module = ir.Module(name=name)
@@ -308,4 +308,4 @@ def build_box_gradient_module(gradient_tape: Tape, name: str = "surface_box_grad
                 b.store(b.extract_element(value, ir.Constant(ir.IntType(32), j)),
                         b.gep(rows, [ir.Constant(I64, 8 * j + k)]))
     b.ret_void()
-    return str(module)
+    return module

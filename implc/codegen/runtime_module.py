@@ -36,36 +36,25 @@ from .octree_index import (
     emit_octree_traverse,
 )
 from .splat import emit_splat
-from .split import writer
 from .subdivision import emit_subdivide
 from .tighten import emit_drop_marked
 
 
-def build_kernel_walk() -> str:
-    """The LLVM IR text of the kernel-walk module."""
+def build_kernel_walk() -> ir.Module:
+    """The kernel-walk module."""
     module = ir.Module(name="implc_kernel_walk")
     emit_subdivide(module)
-    return str(module)
+    return module
 
 
-def build_mesh_simplify() -> str:
-    """The LLVM IR text of the mesh-simplification module."""
+def build_mesh_simplify() -> ir.Module:
+    """The mesh-simplification module."""
     module = ir.Module(name="implc_mesh_simplify")
     emit_flat_collapse(module)
-    return str(module)
+    return module
 
 
-def build_runtime() -> str:
-    """The LLVM IR text of the runtime module."""
-    return str(runtime_module())
-
-
-def runtime_parts(parts: int):
-    """The writer of the runtime module's IR text in ``parts`` parts (:func:`.split.writer`)."""
-    return writer(runtime_module(), parts)
-
-
-def runtime_module() -> ir.Module:
+def build_runtime() -> ir.Module:
     """The runtime module."""
     module = ir.Module(name="implc_runtime")
     emit_drop_marked(module)
@@ -78,8 +67,8 @@ def runtime_module() -> ir.Module:
     return module
 
 
-def build_contouring() -> str:
-    """The LLVM IR text of the contouring module."""
+def build_contouring() -> ir.Module:
+    """The contouring module."""
     module = ir.Module(name="implc_contouring")
     emit_hash_index(module)
     emit_cell_corners(module)
@@ -91,4 +80,4 @@ def build_contouring() -> str:
     emit_edge_ends(module)
     emit_edge_roots(module)
     emit_corner_points(module)
-    return str(module)
+    return module

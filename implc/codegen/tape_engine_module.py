@@ -19,7 +19,6 @@ from .. import abi
 from .control import I64, define, for_range, load_at, local_array
 from .interval_rules import whole_line_if_undefined
 from .kernels import load_xyz, store_lanes, store_xyz
-from .split import writer
 from .tape_eval import LANES, V8, emit_tape_box_gradient, emit_tape_dual, emit_tape_interval, emit_tape_prefill
 from .tape_points import emit_tape_grouped
 from .tape_simplify import emit_tape_simplify
@@ -37,19 +36,8 @@ def _soa(b, base, block, target):
         b.store(axis, b.gep(vtarget, [ir.Constant(I64, a)]), align=8)
 
 
-def build_tape_engine(directed: bool) -> str:
-    """The LLVM IR text of the tape-engine module (``directed``: see
-    :class:`~implc.codegen.vector.VectorBuilder`)."""
-    return str(tape_engine(directed))
-
-
-def tape_engine_parts(directed: bool, parts: int):
-    """The writer of the tape-engine module's IR text in ``parts`` parts (:func:`.split.writer`)."""
-    return writer(tape_engine(directed), parts)
-
-
-def tape_engine(directed: bool) -> ir.Module:
-    """The tape-engine module."""
+def build_tape_engine(directed: bool) -> ir.Module:
+    """The tape-engine module (``directed``: see :class:`~implc.codegen.vector.VectorBuilder`)."""
     module = ir.Module(name="implc_tape_engine")
     prefill = emit_tape_prefill(module)
     interval = emit_tape_interval(module, directed)
