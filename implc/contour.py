@@ -353,6 +353,7 @@ class _Grid:
 
     def __init__(self, surface, depth: int, bounds):
         self.surface = surface
+        surface.prepare_mesher()
         self.runtime = surface.runtime.contouring  # the mesher's native routines
         self._corners: _KeyIndex | None = None  # the corners sampled so far, and F there
         self._corner_values = np.zeros(0)

@@ -38,6 +38,7 @@ def _tape_engine_source(directed: bool) -> Source:
 RUNTIME_SOURCE = Source(build_runtime, "implc-runtime", max_parts=4)
 KERNEL_WALK_SOURCE = Source(build_kernel_walk, "implc-kernel-walk", max_parts=2, weight=2.0)
 MESH_SIMPLIFY_SOURCE = Source(build_mesh_simplify, "implc-mesh-simplify")
+CONTOURING_SOURCE = Source(build_contouring, "implc-contouring", max_parts=4, weight=2.0)
 
 
 class TapeEngine:
@@ -62,8 +63,8 @@ class Contouring:
     ``kuhn_triangles``, ``fan_triangles``, ``qef``, ``bent_cells``, ``edge_ends``, ``edge_roots`` and
     ``corner_points``."""
 
-    def __init__(self):
-        self.native = NativeModule(build_contouring, source_key="implc-contouring")
+    def __init__(self, native: NativeModule):
+        self.native = native
         for entry in abi.CONTOURING_ENTRIES:
             setattr(self, entry.name.removeprefix("implc_"), self.native.bind(entry))
 
@@ -92,14 +93,13 @@ class Runtime:
 
     def __init__(self):
         self._modules: dict[str, NativeModule] = {}  # by source key
-        self._contouring: Contouring | None = None  # the mesher's, built on first use
         self._tape_engines: dict[bool, TapeEngine] = {}
 
     def modules(self, *sources: Source, extra: Sequence[Source] = ()) -> list[NativeModule]:
         """The modules of ``sources`` (kept by this runtime, so built once) and then of ``extra`` (a
         surface's, returned only), those not built yet compiled at once (:meth:`NativeModule.together`)."""
         with self._lock:
-            missing = [s for s in dict.fromkeys(sources) if s.key not in self._modules]
+            missing = list({s.key: s for s in sources if s.key not in self._modules}.values())
             built = NativeModule.together([*missing, *extra]) if missing or extra else []
             self._modules.update((s.key, m) for s, m in zip(missing, built))
             return [self._modules[s.key] for s in sources] + built[len(missing):]
@@ -119,14 +119,16 @@ class Runtime:
         the walk) and ``extra`` (the surface's modules it calls, returned)."""
         return self.modules(RUNTIME_SOURCE, KERNEL_WALK_SOURCE, extra=extra)[2:]
 
-    @property
+    def mesher(self, extra: Sequence[Source] = ()) -> list[NativeModule]:
+        """Built at once where missing: the contouring module and ``extra`` (the surface's modules the
+        mesher calls, returned)."""
+        return self.modules(CONTOURING_SOURCE, extra=extra)[1:]
+
+    @functools.cached_property
     def contouring(self) -> Contouring:
         """The contouring module's entry points, compiled on first use (from the disk cache after the first
         time)."""
-        with self._lock:
-            if self._contouring is None:
-                self._contouring = Contouring()
-            return self._contouring
+        return Contouring(self.modules(CONTOURING_SOURCE)[0])
 
     def tape_engine(self, directed: bool) -> TapeEngine:
         """The tape engine for one rounding mode, compiled on first use (from the disk cache after the

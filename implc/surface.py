@@ -341,7 +341,7 @@ class Surface:
 
     def _bound_source(self) -> Source:
         return Source(lambda: build_bound_module(self.tape, self.gradient_tape, width=self.width,
-                                                 directed=self.directed), "bound" + self._key)
+                                                 directed=self.directed), "bound" + self._key, weight=2.0)
 
     def prepare_kernel_walk(self, tightens: bool) -> None:
         """Build at once what a voxelization over this surface's compiled kernels runs and is missing: the
@@ -350,6 +350,19 @@ class Surface:
         built = self.runtime.kernel_walk(extra)
         if extra:
             self._bound_native = built[0]
+
+    def _box_gradient_source(self) -> Source:
+        return Source(lambda: build_box_gradient_module(self.gradient_tape, width=self.width,
+                                                        directed=self.directed), "box-gradient" + self._key,
+                      weight=2.0)
+
+    def prepare_mesher(self) -> None:
+        """Build at once what meshing this surface runs and is missing: the runtime's contouring module and,
+        over compiled kernels, the surface's box-gradient kernel."""
+        extra = [self._box_gradient_source()] if self.engine == "jit" and self._box_gradient_native is None else []
+        built = self.runtime.mesher(extra)
+        if extra:
+            self._box_gradient_native = built[0]
 
     def _module_of(self, entry: abi.Entry) -> NativeModule:
         if entry in abi.SURFACE_ENTRIES:
@@ -361,10 +374,8 @@ class Surface:
                 self._bound_native = NativeModule.together([self._bound_source()])[0]
             return self._bound_native
         if entry in abi.BOX_GRADIENT_ENTRIES:
-            if self._box_gradient_native is None:  # the mesher's: compiled on the first mesh
-                self._box_gradient_native = NativeModule(
-                    lambda: build_box_gradient_module(self.gradient_tape, width=self.width, directed=self.directed),
-                    source_key="box-gradient" + self._key)
+            if self._box_gradient_native is None:  # the mesher's: built by prepare_mesher, or here
+                self._box_gradient_native = NativeModule.together([self._box_gradient_source()])[0]
             return self._box_gradient_native
         if entry not in abi.MEAN_VALUE_ENTRIES:
             raise LookupError(f"{entry.name} is not a surface kernel")

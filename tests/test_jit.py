@@ -59,9 +59,10 @@ def test_another_process_reuses_the_cache(tmp_path):
 def test_a_first_voxelization_compiles_no_mesher_and_its_parts_compute_what_the_whole_does(tmp_path):
     """A cold start that only voxelizes a tape-engine surface compiles the runtime module and the tape engine,
     nothing more (the mesher's module, a fifth of a colonnade's first compile, waits for a first mesh); a
-    surface with compiled kernels adds its kernels, the walk over them and its bound kernel. Compiled in
-    parts at once (implc.parallel_compile: one object per part in the cache entry), the modules give the
-    same voxels and normals, bit for bit, as compiled whole."""
+    surface with compiled kernels adds its kernels, the walk over them and its bound kernel, and its
+    box-gradient kernel on its first mesh. Compiled in parts at once (implc.parallel_compile: one object
+    per part in the cache entry), the modules give the same voxels, normals and meshes, bit for bit, as
+    compiled whole."""
     probe = textwrap.dedent("""
         import hashlib, sys, sympy, implc
         from pathlib import Path
@@ -77,6 +78,8 @@ def test_a_first_voxelization_compiles_no_mesher_and_its_parts_compute_what_the_
         print(entries(), len(w), digest(w))
         implc.mesh(s, 4)
         print(entries())
+        mesh = implc.mesh(k, 5)
+        print(entries(), len(mesh.faces), hashlib.sha256(mesh.vertices.tobytes() + mesh.faces.tobytes()).hexdigest())
     """)
     runs = []
     for workers in (1, parallel_compile.MAX_WORKERS):
@@ -90,10 +93,12 @@ def test_a_first_voxelization_compiles_no_mesher_and_its_parts_compute_what_the_
     assert whole[0][0] == parts[0][0] == "2"  # the runtime module and the tape engine
     assert whole[1][0] == parts[1][0] == "5"  # and the kernels, the walk over them and the bound kernel
     assert whole[2] == parts[2] == ["6"]  # the contouring's, on the first mesh
+    assert whole[3][0] == parts[3][0] == "7"  # and the compiled kernels' box gradients, on theirs
     assert whole[0][1] == "1" and parts[0][1] == str(min(parallel_compile.MAX_WORKERS,
                                                          len(os.sched_getaffinity(0))))
     assert int(whole[0][2]) > 1000 and int(whole[1][1]) > 1000
-    assert whole[0][2:] == parts[0][2:] and whole[1][1:] == parts[1][1:]
+    assert int(whole[3][1]) > 1000
+    assert whole[0][2:] == parts[0][2:] and whole[1][1:] == parts[1][1:] and whole[3][1:] == parts[3][1:]
 
 
 @pytest.mark.slow  # twelve fresh processes, 9 s; test_another_process_reuses_the_cache stays in the default run
