@@ -7,8 +7,7 @@ layout of rows grouped by box (:mod:`.grouped_rows`). The contouring module: the
 surface's compiled kernels (:mod:`.subdivision`, with their normals and second look), which the tape engine
 does not use (its module holds the walk over itself). The mesh-simplification module: the collapse of flat regions'
 interior vertices (:mod:`.flat_collapse`). :class:`implc.runtime.Runtime` compiles each once per process,
-all but the runtime module on first use: a cold start that voxelizes a tape-engine model compiles no
-mesher and no kernel walk.
+on first use: a cold start that voxelizes a tape-engine model compiles no mesher and no kernel walk.
 """
 
 from __future__ import annotations
