@@ -44,11 +44,11 @@ CONTOURING_SOURCE = Source(build_contouring, "implc-contouring", max_parts=4, we
 class TapeEngine:
     """The tape-engine module's entry points for one rounding mode: ``interval``, ``gradient``, ``point``,
     ``subdivide``, ``box_gradient`` and ``grouped`` (signatures in :mod:`implc.abi`; programs from
-    :mod:`implc.tape_program`). ``native``: the module, compiled already (else compiled here)."""
+    :mod:`implc.tape_program`); ``native``: the module (:meth:`Runtime.tape_engine` builds it)."""
 
-    def __init__(self, directed: bool, native: NativeModule | None = None):
+    def __init__(self, directed: bool, native: NativeModule):
         self.directed = directed
-        self.native = native or NativeModule.together([_tape_engine_source(directed)])[0]
+        self.native = native
         self.interval = self.native.bind(abi.TAPE_INTERVAL)
         self.gradient = self.native.bind(abi.TAPE_GRADIENT)
         self.point = self.native.bind(abi.TAPE_POINT)
@@ -113,16 +113,6 @@ class Runtime:
     arrange_groups = _entry(abi.ARRANGE_GROUPS, RUNTIME_SOURCE)
     subdivide = _entry(abi.SUBDIVIDE, KERNEL_WALK_SOURCE)
     flat_collapse = _entry(abi.FLAT_COLLAPSE, MESH_SIMPLIFY_SOURCE)
-
-    def kernel_walk(self, extra: Sequence[Source] = ()) -> list[NativeModule]:
-        """Built at once where missing: what a voxelization over compiled kernels runs (the runtime module,
-        the walk) and ``extra`` (the surface's modules it calls, returned)."""
-        return self.modules(RUNTIME_SOURCE, KERNEL_WALK_SOURCE, extra=extra)[2:]
-
-    def mesher(self, extra: Sequence[Source] = ()) -> list[NativeModule]:
-        """Built at once where missing: the contouring module and ``extra`` (the surface's modules the
-        mesher calls, returned)."""
-        return self.modules(CONTOURING_SOURCE, extra=extra)[1:]
 
     @functools.cached_property
     def contouring(self) -> Contouring:

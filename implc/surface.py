@@ -37,7 +37,7 @@ from .gradient import with_gradient
 from .ir import Tape
 from .jit import NativeModule, Source, host_has_avx512
 from .regions import plan_regions
-from .runtime import Runtime
+from .runtime import CONTOURING_SOURCE, KERNEL_WALK_SOURCE, RUNTIME_SOURCE, Runtime
 from .tape_program import TapeProgram, encode, slot_scratch, unsupported_ops
 from .vm import VmModel
 
@@ -343,13 +343,19 @@ class Surface:
         return Source(lambda: build_bound_module(self.tape, self.gradient_tape, width=self.width,
                                                  directed=self.directed), "bound" + self._key, weight=2.0)
 
+    def _build_with(self, generic: tuple[Source, ...], own: str, source: Callable[[], Source] | None) -> None:
+        """Build at once where missing: the runtime's ``generic`` modules and, where ``source`` is given, this
+        surface's module of that source, kept in the attribute ``own``."""
+        extra = [source()] if source is not None and getattr(self, own) is None else []
+        built = self.runtime.modules(*generic, extra=extra)
+        if extra:
+            setattr(self, own, built[-1])
+
     def prepare_kernel_walk(self, tightens: bool) -> None:
         """Build at once what a voxelization over this surface's compiled kernels runs and is missing: the
         runtime's module and walk, and where the second look ``tightens``, the surface's bound kernel."""
-        extra = [self._bound_source()] if tightens and self._bound_native is None else []
-        built = self.runtime.kernel_walk(extra)
-        if extra:
-            self._bound_native = built[0]
+        self._build_with((RUNTIME_SOURCE, KERNEL_WALK_SOURCE), "_bound_native",
+                         self._bound_source if tightens else None)
 
     def _box_gradient_source(self) -> Source:
         return Source(lambda: build_box_gradient_module(self.gradient_tape, width=self.width,
@@ -359,10 +365,8 @@ class Surface:
     def prepare_mesher(self) -> None:
         """Build at once what meshing this surface runs and is missing: the runtime's contouring module and,
         over compiled kernels, the surface's box-gradient kernel."""
-        extra = [self._box_gradient_source()] if self.engine == "jit" and self._box_gradient_native is None else []
-        built = self.runtime.mesher(extra)
-        if extra:
-            self._box_gradient_native = built[0]
+        self._build_with((CONTOURING_SOURCE,), "_box_gradient_native",
+                         self._box_gradient_source if self.engine == "jit" else None)
 
     def _module_of(self, entry: abi.Entry) -> NativeModule:
         if entry in abi.SURFACE_ENTRIES:

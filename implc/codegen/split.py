@@ -36,6 +36,13 @@ def _block_owner(value: ir.GlobalVariable) -> str | None:
     return None
 
 
+def _placed(module: ir.Module) -> set[str]:
+    """The functions defined in one part only: every exported one, and internal ones of
+    :data:`SHARED_MAX` instructions or more."""
+    return {fn.name for fn in module.functions
+            if fn.blocks and (fn.linkage != "internal" or _instructions(fn) >= SHARED_MAX)}
+
+
 def _helpers(functions: dict[str, ir.Function], name: str, placed: set[str]) -> set[str]:
     """The internal functions ``name`` calls, transitively, that are copied rather than placed."""
     found: set[str] = set()
@@ -53,8 +60,7 @@ def plan(module: ir.Module, parts: int) -> list[set[str]]:
     balanced by instructions (each placed function, the largest first, goes where the part's total with it
     and the helpers it would add is least)."""
     functions = {fn.name: fn for fn in module.functions if fn.blocks}
-    placed = {name for name, fn in functions.items()
-              if fn.linkage != "internal" or _instructions(fn) >= SHARED_MAX}
+    placed = _placed(module)
     defined: list[set[str]] = [set() for _ in range(parts)]
     for name in sorted(placed, key=lambda n: (-_instructions(functions[n]), n)):
         added = [{name} | (_helpers(functions, name, placed) - defined[k]) for k in range(parts)]
@@ -69,9 +75,7 @@ def writer(module: ir.Module, parts: int) -> Callable[[int], str]:
     ``str(module)``."""
     if parts == 1:
         return lambda part: str(module)
-    defined = plan(module, parts)
-    placed = {fn.name for fn in module.functions
-              if fn.blocks and (fn.linkage != "internal" or _instructions(fn) >= SHARED_MAX)}
+    defined, placed = plan(module, parts), _placed(module)
 
     def part_text(part: int) -> str:
         lines = [f'; ModuleID = "{module.name}" part {part} of {parts}', f'target triple = "{module.triple}"',
