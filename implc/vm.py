@@ -70,17 +70,20 @@ def load_vm(path: str | os.PathLike[str]) -> VmModel:
     """Read a ``.vm`` file; :class:`VmError` for an unknown op, an undefined or redefined name, a bad
     argument count or constant, an empty file.
 
-    >>> import os, tempfile, implc
-    >>> path = os.path.join(tempfile.mkdtemp(), "ball.vm")
+    >>> import tempfile, implc
+    >>> from pathlib import Path
+    >>> folder = tempfile.TemporaryDirectory()
+    >>> path = Path(folder.name) / "ball.vm"
     >>> lines = ["# --scale 0.5", "x var-x", "y var-y", "z var-z", "xx square x", "yy square y", "zz square z",
     ...          "s add xx yy", "t add s zz", "c const 1", "out sub t c"]
-    >>> _ = open(path, "w").write(chr(10).join(lines))
+    >>> _ = path.write_text(chr(10).join(lines))
     >>> model = implc.load_vm(path)
     >>> model.instructions, model.bounds[0]                 # the header's --scale 0.5: bounds [-2, 2]³
     (10, (-2.0, 2.0))
     >>> voxels = implc.voxelize(implc.compile(model), depth=5)   # the unit sphere on a 32³ grid over [-2, 2]³
     >>> bool(abs(voxels.centers()).max() < 1.2)              # every kept cell lies near it
     True
+    >>> folder.cleanup()
     """
     path = Path(path)
     text = read_text(path, MAX_BYTES, VmError, "model file")

@@ -44,7 +44,8 @@ def test_voxelize_info_render_round_trip(tmp_path, capsys):
     png = tmp_path / "blobs.png"
     assert main(["render", str(out), "-o", str(png), "--size", "128", "--view", "10,60", "--lod", "5"]) == 0
     from PIL import Image
-    assert Image.open(png).size == (128, 128)
+    with Image.open(png) as image:
+        assert image.size == (128, 128)
 
 
 def test_voxelize_expr_and_formats(tmp_path):

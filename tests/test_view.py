@@ -230,20 +230,23 @@ def test_other_methods_are_not_served(server):
 
 
 def test_the_cli_prints_its_url_serves_and_stops_on_ctrl_c(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "implc", "view", "torus", "--depth", "6", "--no-browser",
-                             "--port", "0", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=tmp_path)
-    try:
-        url = next(line.strip() for line in proc.stdout if line.startswith("http://"))
-        host, _, rest = url[len("http://"):].partition("/")
-        conn = http.client.HTTPConnection(*host.split(":"), timeout=10)
-        conn.request("GET", "/" + rest + "meta.json")
-        assert json.loads(conn.getresponse().read())["name"] == "torus"
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=10) == 130
-    finally:
-        proc.kill()
-        proc.wait()
+    with subprocess.Popen([sys.executable, "-m", "implc", "view", "torus", "--depth", "6", "--no-browser",
+                           "--port", "0", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                          cwd=tmp_path) as proc:
+        try:
+            url = next(line.strip() for line in proc.stdout if line.startswith("http://"))
+            host, _, rest = url[len("http://"):].partition("/")
+            conn = http.client.HTTPConnection(*host.split(":"), timeout=10)
+            try:
+                conn.request("GET", "/" + rest + "meta.json")
+                assert json.loads(conn.getresponse().read())["name"] == "torus"
+            finally:
+                conn.close()
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(timeout=10) == 130
+        finally:
+            proc.kill()
+            proc.wait()
     assert os.listdir(tmp_path) == []
 
 
