@@ -1,7 +1,7 @@
 """Build hook: a wheel carries the top-level scenes/ folder inside the package, as implc/scene_files/.
 
 Everything else about the build is declared in pyproject.toml. A source checkout (and an editable
-install) reads scenes/ where it is; see implc.scene.
+install) reads scenes/ where it is; see implc.files.scene.
 """
 
 import shutil

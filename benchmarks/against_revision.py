@@ -39,7 +39,11 @@ ROOT = Path(__file__).resolve().parent.parent
 PROBE = r"""
 import json, random, statistics, sys, time
 import sympy, implc
-from implc import scene, shapes
+from implc import shapes
+try:
+    from implc.files import scene  # the layout by concern
+except ImportError:
+    from implc import scene  # revisions before it
 case, depth, repeats = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 workers = [int(w) for w in sys.argv[4].split(",")]
 task = sys.argv[5]

@@ -14,7 +14,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 import implc
-from implc import scene
+from implc.files import scene
 
 PANELS = (("csg_part", 4), ("paper_blobs", 5), ("torus", 4))
 SIZE = 520

@@ -22,8 +22,9 @@ from pathlib import Path
 import numpy as np
 
 import implc
-from implc import scene
-from implc.surface import ALL_TERMS, default_workers
+from implc.common.threads import default_workers
+from implc.engines.surface import ALL_TERMS
+from implc.files import scene
 
 PAPER_SCENES = ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4")
 PAPER_TABLE1 = {  # seconds on the SGI Challenge, 1..7 slaves (Stolte & Kaufman, Table 1)
@@ -93,7 +94,7 @@ def dense_sign_changes(evaluate, bounds, depth) -> int:
 def numpy_evaluator(expr):
     import sympy
 
-    from implc.symbols import cartesian_form, x, y, z
+    from implc.compiler.symbols import cartesian_form, x, y, z
     fn = sympy.lambdify((x, y, z), cartesian_form(expr), modules="numpy")
 
     def evaluate(pts):
@@ -108,7 +109,7 @@ def symengine_evaluator(expr):
         import symengine
     except ImportError:
         return None
-    from implc.symbols import cartesian_form, x, y, z
+    from implc.compiler.symbols import cartesian_form, x, y, z
     fn = symengine.Lambdify([x, y, z], [cartesian_form(expr)], backend="llvm")
     return lambda pts: fn(pts)[:, 0]
 
@@ -193,7 +194,7 @@ def baselines(args, out):
 
 GROWTH_SCRIPT = """
 import json, resource, statistics, sys, time, implc
-from implc import scene
+from implc.files import scene
 sc = scene.load(sys.argv[1]); s = implc.compile(sc.surface, sc.bounds)
 implc.voxelize(s, 5)  # load the runtime module: the figure is the voxelization alone
 times = []
@@ -298,8 +299,8 @@ def kernels(args, out):
         sc = scene.load(name)
         s = implc.compile(sc.surface, sc.bounds)
         out_lo, out_hi, values, grads = np.empty(n), np.empty(n), np.empty(n), np.empty((n, 3))
-        interval, gradient = s.kernel(implc.abi.INTERVAL), s.kernel(implc.abi.GRADIENT)
-        vector_gradient = s.kernel(implc.abi.GRADIENT_LIVE)  # Surface.value_and_gradient(..., fast=True)
+        interval, gradient = s.kernel(implc.native.abi.INTERVAL), s.kernel(implc.native.abi.GRADIENT)
+        vector_gradient = s.kernel(implc.native.abi.GRADIENT_LIVE)  # Surface.value_and_gradient(..., fast=True)
         interval_s, _ = median_time(lambda: interval(lo.ctypes.data, hi.ctypes.data, out_lo.ctypes.data,
                                                      out_hi.ctypes.data, n, None, None), args.repeats)
         gradient_s, _ = median_time(lambda: gradient(lo.ctypes.data, values.ctypes.data, grads.ctypes.data, n),
@@ -499,7 +500,8 @@ def techniques(args, out):
           "|---|---|---|---|---|---|"]
     md += [f"| {r['case']} | {r['variant']} | {r['seconds']:.3f} | {r['speedup_vs_all_off']:.1f}× | {r['voxels']} "
            f"| {r['over_inclusion']:.3f} |" for r in rows]
-    md += ["", "pruning: terms dead below an octant skipped (implc/regions.py); scalar kernels: compile(..., "
+    md += ["", "pruning: terms dead below an octant skipped (implc/engines/compiled/plan.py); "
+           "scalar kernels: compile(..., "
            "vector_width=1) instead of 8 lanes; widened rounding: compile(..., rounding='widen'), bounds rounded "
            "to nearest and then widened instead of rounded outward by AVX-512 instructions (the default where the "
            "CPU has them; elsewhere the default widens too); natural leaves: voxelize(..., **implc.NATURAL), no second "
@@ -517,8 +519,8 @@ def solids(args, out):
     """Solid voxelization (inside octants kept whole) against the shell, all cores, at --solid-depths:
     medians of interleaved runs, the extra cost, inside octants, the width of the guaranteed volume bounds,
     and the exports: .vdb from the voxels in memory, .zarr voxelized straight into the store (voxelization included)."""
-    from implc.vdb_file import save_vdb
-    from implc.zarr_store import write_zarr
+    from implc.files.vdb import save_vdb
+    from implc.files.zarr_store import write_zarr
     rows = []
     for name in args.solid_scenes.split(","):
         sc = scene.load(name)
@@ -558,11 +560,11 @@ def solids(args, out):
 SCALE_RUN = """
 import json, resource, sys, time
 import implc
-from implc.scene import load
+from implc.files.scene import load
 sc = load(sys.argv[1])
 surface = implc.compile(sc.surface, bounds=sc.bounds)
-import implc.subdivide
-implc.subdivide.Subdivider(surface, 4, 1, surface.runtime)  # its kernels built before the clock starts
+import implc.engines.walk
+implc.engines.walk.Subdivider(surface, 4, 1, surface.runtime)  # its kernels built before the clock starts
 t0 = time.perf_counter()
 v = implc.voxelize(surface, int(sys.argv[2]), workers=int(sys.argv[3]))
 wall = time.perf_counter() - t0
@@ -615,8 +617,8 @@ def viewer(args, out):
     after navigation starts and the time until the page has fetched what the camera needs."""
     import shutil
 
-    from implc.view_server import ViewServer
-    from implc.viewer import lod_chunks
+    from implc.view.page import lod_chunks
+    from implc.view.server import ViewServer
     chromium = shutil.which("chromium")
     try:
         from playwright.sync_api import sync_playwright
@@ -875,8 +877,8 @@ def cluster(args, out):
     the depth (the plan at the task level)."""
     import distributed
 
-    from implc import zarr_store
-    from implc.cluster import local_cluster, plan_tasks
+    from implc.cluster.tasks import local_cluster, plan_tasks
+    from implc.files import zarr_store
     sc = scene.load(args.cluster_scene)
     s = implc.compile(sc.surface, sc.bounds)
     workers = args.cluster_workers

@@ -7,7 +7,7 @@ import os
 
 import implc
 from implc import shapes
-from implc.render import render_voxels, save_png
+from implc.view.render import render_voxels, save_png
 
 depth = int(os.environ.get("IMPLC_EXAMPLE_DEPTH", 8))
 centers = [(-0.4, 0, 0), (0.4, 0, 0), (0, 0.45, 0.1), (0, -0.3, 0.35)]

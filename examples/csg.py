@@ -9,7 +9,7 @@ import sympy
 
 import implc
 from implc import shapes
-from implc.render import render_voxels, save_png
+from implc.view.render import render_voxels, save_png
 
 depth = int(os.environ.get("IMPLC_EXAMPLE_DEPTH", 8))
 part = shapes.union(shapes.difference(shapes.box((0.6, 0.6, 0.6)), shapes.sphere(0.75)),

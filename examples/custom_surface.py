@@ -9,7 +9,7 @@ import sympy
 
 import implc
 from implc import x, y, z
-from implc.render import render_voxels, save_png
+from implc.view.render import render_voxels, save_png
 
 depth = int(os.environ.get("IMPLC_EXAMPLE_DEPTH", 8))
 # a wobbly sphere: F < 0 inside

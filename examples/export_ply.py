@@ -6,8 +6,9 @@ Voxelize a torus and export it as a binary PLY point cloud with normals (and as 
 import os
 
 import implc
-from implc import shapes, voxel_files
-from implc.render import render_voxels, save_png
+from implc import shapes
+from implc.files import voxel_files
+from implc.view.render import render_voxels, save_png
 
 depth = int(os.environ.get("IMPLC_EXAMPLE_DEPTH", 8))
 voxels = implc.voxelize(implc.compile(shapes.torus(0.6, 0.25)), depth)

@@ -9,7 +9,7 @@ import sympy
 
 import implc
 from implc import phi, r, theta
-from implc.render import View, render_voxels, save_png
+from implc.view.render import View, render_voxels, save_png
 
 depth = int(os.environ.get("IMPLC_EXAMPLE_DEPTH", 9))
 surface = implc.compile(sympy.sin(4 * theta) * sympy.sin(8 * phi) - r)  # the paper's Scene 2

@@ -11,7 +11,7 @@ from typing import Any
 
 import sympy
 
-from .symbols import cartesian_form, x, y, z
+from .compiler.symbols import cartesian_form, x, y, z
 
 Number = Any
 """A number: int, float or a SymPy number (exact where it is a Rational or an Integer)."""

@@ -1,4 +1,4 @@
-"""One ABI: every entry point declared in implc/abi.py is exported by its module with exactly the
+"""One ABI: every entry point declared in implc/native/abi.py is exported by its module with exactly the
 declared LLVM signature, its ctypes prototype has the same parameters, and nothing else is exported."""
 
 import ctypes
@@ -9,10 +9,16 @@ import pytest
 import sympy
 
 import implc
-from implc import abi, x, y, z
-from implc.codegen.kernels import build_bound_module, build_mean_value_module, build_module
-from implc.codegen.runtime_module import build_contouring, build_kernel_walk, build_mesh_simplify, build_runtime
-from implc.codegen.tape_engine_module import build_tape_engine
+from implc import x, y, z
+from implc.engines.compiled.evaluator_native import build_kernel_walk
+from implc.engines.compiled.kernels_native import build_bound_module, build_mean_value_module, build_module
+from implc.engines.rows_native import build_rows
+from implc.engines.tape.engine_native import build_tape_engine
+from implc.meshing.contour_native import build_contouring
+from implc.meshing.simplify_native import build_mesh_simplify
+from implc.native import abi
+from implc.view.splat_native import build_splat
+from implc.voxelizer.storage.octree_native import build_octree_index
 
 DEFINE = re.compile(r'^define\s+(.*?)\s*@"?([\w.]+)"?\((.*?)\)', re.M)
 
@@ -35,8 +41,8 @@ def surface():
     return implc.compile(sympy.Min(x**2 + y**2 - 1, sympy.exp(z) - 2) + sympy.sin(x))
 
 
-@pytest.mark.parametrize("module_entries", ["surface", "mean_value", "bound", "tape", "runtime", "contouring",
-                                            "walk", "simplify"])
+@pytest.mark.parametrize("module_entries", ["surface", "mean_value", "bound", "tape", "rows", "octree",
+                                            "splat", "contouring", "walk", "simplify"])
 def test_every_entry_is_exported_with_its_declared_signature(module_entries, surface):
     if module_entries == "surface":
         text, entries = str(build_module(surface.tape, surface.gradient_tape)), abi.SURFACE_ENTRIES
@@ -46,8 +52,12 @@ def test_every_entry_is_exported_with_its_declared_signature(module_entries, sur
         text, entries = str(build_bound_module(surface.tape, surface.gradient_tape)), abi.BOUND_ENTRIES
     elif module_entries == "tape":
         text, entries = str(build_tape_engine(directed=False)), abi.TAPE_ENTRIES
-    elif module_entries == "runtime":
-        text, entries = str(build_runtime()), abi.RUNTIME_ENTRIES
+    elif module_entries == "rows":
+        text, entries = str(build_rows()), abi.ROWS_ENTRIES
+    elif module_entries == "octree":
+        text, entries = str(build_octree_index()), abi.OCTREE_ENTRIES
+    elif module_entries == "splat":
+        text, entries = str(build_splat()), abi.SPLAT_ENTRIES
     elif module_entries == "contouring":
         text, entries = str(build_contouring()), abi.CONTOURING_ENTRIES
     elif module_entries == "walk":
@@ -62,7 +72,8 @@ def test_every_entry_is_exported_with_its_declared_signature(module_entries, sur
 
 def test_ctypes_prototypes_follow_the_declarations():
     for entry in (*abi.SURFACE_ENTRIES, *abi.MEAN_VALUE_ENTRIES, *abi.BOUND_ENTRIES, *abi.TAPE_ENTRIES,
-                  *abi.RUNTIME_ENTRIES, *abi.CONTOURING_ENTRIES, *abi.KERNEL_WALK_ENTRIES, *abi.MESH_SIMPLIFY_ENTRIES):
+                  *abi.ROWS_ENTRIES, *abi.OCTREE_ENTRIES, *abi.SPLAT_ENTRIES,
+                  *abi.CONTOURING_ENTRIES, *abi.KERNEL_WALK_ENTRIES, *abi.MESH_SIMPLIFY_ENTRIES):
         proto = entry.ctypes_type()
         assert len(proto._argtypes_) == len(entry.params)
         for (name, kind), ctype in zip(entry.params, proto._argtypes_):
@@ -81,5 +92,5 @@ def test_every_surface_entry_binds(surface):
 
 
 def test_one_runtime_per_process(surface):
-    from implc.runtime import Runtime
+    from implc.native.runtime import Runtime
     assert surface.runtime is Runtime.shared() is implc.compile(x - y).runtime

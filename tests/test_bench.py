@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from implc.cli import main
+from implc.cli.commands import main
 
 
 @pytest.mark.slow

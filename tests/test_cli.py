@@ -11,8 +11,8 @@ from PIL import Image
 from plyfile import PlyData
 
 import implc
-from implc import scene, voxel_files
-from implc.cli import main
+from implc.cli.commands import main
+from implc.files import scene, voxel_files
 
 
 def run(*argv):
@@ -126,13 +126,13 @@ def test_demo_writes_the_three_renders(tmp_path, capsys):
 
 def test_console_script_is_declared():
     text = (Path(__file__).parent.parent / "pyproject.toml").read_text()
-    assert 'implc = "implc.cli:console"' in text  # main() for a process that ends when it returns
+    assert 'implc = "implc.cli.commands:console"' in text  # main() for a process that ends when it returns
 
 
 def test_tightness_option_spells_the_presets_and_changes_the_leaves(tmp_path):
     """--tightness natural / default / tightest are implc.NATURAL, the default and implc.TIGHTEST: the
     natural mode keeps the most voxels, the tightest the fewest, each file the same as the API's."""
-    from implc import cli
+    from implc.cli import commands as cli
     assert cli.TIGHTNESS == {"natural": implc.NATURAL, "default": {}, "tightest": implc.TIGHTEST}
     counts = {}
     for mode in ("natural", "default", "tightest"):

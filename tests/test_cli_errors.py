@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import implc
-from implc import voxel_files
-from implc.cli import main
+from implc.cli.commands import main
+from implc.files import voxel_files
 
 from .test_cli import run
 
@@ -118,7 +118,7 @@ BAD_INPUTS = [  # (argv, words the message must contain); {d} is the folder of t
 
 @pytest.mark.parametrize("argv, words", BAD_INPUTS, ids=[f"{k}-{a[0]}" for k, (a, _) in enumerate(BAD_INPUTS)])
 def test_a_bad_input_is_one_line_with_exit_2_and_writes_nothing(argv, words, files, capsys):
-    """In this process, through implc.cli.main (an exception escaping it would fail the test with its
+    """In this process, through implc.cli.commands.main (an exception escaping it would fail the test with its
     traceback); the start-up path of a real process is tested with interrupts in test_interrupt.py."""
     before = {p.name: digest(p) for p in files.iterdir()}
     status = main([a.replace("{d}", str(files)) for a in argv])
@@ -208,7 +208,7 @@ def test_a_signal_while_main_restores_its_handlers_is_no_traceback(tmp_path, mon
     the output is whole. Sent here, deterministically, from the first restoring call."""
     import os
 
-    from implc import cli
+    from implc.cli import commands as cli
     real = signal.signal
     sent = []
 
@@ -233,7 +233,7 @@ def test_a_signal_after_the_command_of_a_process_is_only_noted(tmp_path, sig):
     signal that lands after the outcome is decided, on the way out of the process, is noted, not raised."""
     import os
 
-    from implc import cli
+    from implc.cli import commands as cli
     before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
     try:
         out = tmp_path / "a.npz"
@@ -252,7 +252,7 @@ def test_a_signal_in_a_finalizer_is_sent_again_not_lost(sig):
     """A signal that lands in a callback whose exceptions Python prints and drops (a finalizer, an import
     lock's weakref callback: a CI run's SIGTERM did, and 'Exception ignored ... Traceback' was all it left)
     is not raised there: it is sent again a moment later, and raised where it can stop the command."""
-    from implc import cli
+    from implc.cli import commands as cli
     dropped = []
     before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM), sys.unraisablehook
     sys.unraisablehook = dropped.append

@@ -18,10 +18,10 @@ import pytest
 import zarr
 
 import implc
-from implc import scene, zarr_store
-from implc.cli import main
-from implc.recipe import TravelError, build, recipe_of
-from implc.vm import parse_vm
+from implc.cli.commands import main
+from implc.cluster.recipe import TravelError, build, recipe_of
+from implc.compiler.vm import parse_vm
+from implc.files import scene, zarr_store
 
 pytestmark = pytest.mark.slow
 

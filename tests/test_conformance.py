@@ -3,12 +3,12 @@ running every case against the numpy reference, each op with its declared tolera
 
 Tolerances (:data:`OP_BUDGET`): the IEEE-exact ops (+, −, ×, ÷, sqrt, integer powers, min, max, abs,
 selects, ...) must agree **bit for bit** with the reference, in widened kernels, where both compute the
-same rounded operations and the same widening (:mod:`implc.rounding`). Ops that call a math library may
+same rounded operations and the same widening (:mod:`implc.compiler.rounding`). Ops that call a math library may
 differ by what the two libraries differ by (numpy's and the C library's results are each within 1-2 ulps
 of the true value; the widening of either is 4 ulps): a budget of :data:`LIBM_ULPS` ulps of the size of
 the values computed in the case. sin, cos and atan2 run in vector registers in the kernels
-(:mod:`implc.codegen.elementary`: error proven below 1.1e-15, interval bounds widened by 2^-45 absolute,
-:data:`implc.rounding.SIN_ERROR`) and in numpy in the reference: their budget is that absolute widening
+(:mod:`implc.compiler.llvm.elementary`: error proven below 1.1e-15, interval bounds widened by 2^-45 absolute,
+:data:`implc.compiler.rounding.SIN_ERROR`) and in numpy in the reference: their budget is that absolute widening
 twice. A case's budget adds its nodes' budgets (a case that multiplies an elementary result by a constant
 states the factor, :data:`AMPLIFICATION`). Kernels compiled with directed rounding are checked separately:
 they nest inside the widened ones and hold the high-precision truth. Truth tests (40 digits) check
@@ -44,15 +44,16 @@ from sympy import (
 )
 
 import implc
-from implc import abi, ir, reference
-from implc import rounding as R
-from implc.codegen.interval_rules import IntervalEmitter
-from implc.gradient import DERIVATIVE_RULES
-from implc.jit import host_has_avx512
-from implc.reference import INTERVAL_RULES
-from implc.symbols import phi, r, theta, x, y, z
-from implc.tape_program import OPCODES, unsupported_ops
-from implc.vm import parse_vm
+from implc.compiler import ir, reference
+from implc.compiler import rounding as R
+from implc.compiler.gradient import DERIVATIVE_RULES
+from implc.compiler.llvm.interval_rules import IntervalEmitter
+from implc.compiler.reference import INTERVAL_RULES
+from implc.compiler.symbols import phi, r, theta, x, y, z
+from implc.compiler.vm import parse_vm
+from implc.engines.tape.program import OPCODES, unsupported_ops
+from implc.native import abi
+from implc.native.jit import host_has_avx512
 
 from .truth import TrueValues, adversarial_boxes, assert_encloses
 
@@ -110,7 +111,7 @@ LIBM_ULPS = 4
 """ulps (of the case's scale) two math libraries may differ by per call, widening included."""
 
 VECTOR_OPS = ("sin", "cos", "atan2", "atan2_wrapped")
-"""Ops the kernels compute with :mod:`implc.codegen.elementary` in interval kernels and normals, with an
+"""Ops the kernels compute with :mod:`implc.compiler.llvm.elementary` in interval kernels and normals, with an
 absolute widening; exp and log (below) have a relative one."""
 RELATIVE_VECTOR_OPS = ("exp", "log")
 
@@ -442,7 +443,7 @@ def test_directed_rounding_is_never_looser_than_widening(name, compiled):
 def test_directed_rounding_is_refused_without_avx512(monkeypatch):
     """On a CPU without AVX-512F, asking for directed rounding is a CompileError that says why, and
     "auto" widens (simulated here by hiding the host's AVX-512 features)."""
-    from implc import surface
+    from implc.engines import surface
     monkeypatch.setattr(surface, "host_has_avx512", lambda: False)
     with pytest.raises(implc.CompileError, match="AVX-512"):
         implc.compile(x + y, rounding="directed")

@@ -11,12 +11,31 @@ import pytest
 import implc
 
 ROOT = Path(__file__).resolve().parent.parent
-DOCTESTED = ["implc.surface", "implc.voxelization", "implc.vm", "implc.triangle_mesh", "implc.shapes"]
+DOCTESTED = [
+    "implc.engines.surface",
+    "implc.voxelizer.voxelize",
+    "implc.compiler.vm",
+    "implc.meshing.triangle_mesh",
+    "implc.shapes",
+]
 """Modules whose docstring examples run: compile, Surface.eval/gradient/interval, voxelize, Voxels and its
 methods, mesh, load_vm (the issue names these)."""
-PUBLIC_MODULES = ["implc.surface", "implc.voxelization", "implc.vm", "implc.triangle_mesh", "implc.shapes",
-                  "implc.voxel_files", "implc.zarr_store", "implc.slices", "implc.render", "implc.scene",
-                  "implc.errors", "implc.untrusted", "implc.cluster", "implc.recipe"]
+PUBLIC_MODULES = [
+    "implc.engines.surface",
+    "implc.voxelizer.voxelize",
+    "implc.compiler.vm",
+    "implc.meshing.triangle_mesh",
+    "implc.shapes",
+    "implc.files.voxel_files",
+    "implc.files.zarr_store",
+    "implc.files.slices",
+    "implc.view.render",
+    "implc.files.scene",
+    "implc.errors",
+    "implc.common.untrusted",
+    "implc.cluster.tasks",
+    "implc.cluster.recipe",
+]
 
 
 @pytest.mark.parametrize("name", DOCTESTED)
@@ -92,9 +111,20 @@ def test_notebooks_run(path, tmp_path):
     assert errors == []
 
 
-ANNOTATED = ["implc.surface", "implc.voxelization", "implc.vm", "implc.triangle_mesh", "implc.shapes",
-             "implc.voxel_files", "implc.zarr_store", "implc.slices", "implc.render", "implc.scene",
-             "implc.cluster", "implc.recipe"]
+ANNOTATED = [
+    "implc.engines.surface",
+    "implc.voxelizer.voxelize",
+    "implc.compiler.vm",
+    "implc.meshing.triangle_mesh",
+    "implc.shapes",
+    "implc.files.voxel_files",
+    "implc.files.zarr_store",
+    "implc.files.slices",
+    "implc.view.render",
+    "implc.files.scene",
+    "implc.cluster.tasks",
+    "implc.cluster.recipe",
+]
 
 
 @pytest.mark.parametrize("name", ANNOTATED)

@@ -6,13 +6,14 @@ import numpy as np
 import pytest
 from llvmlite import ir
 
-from implc import abi, rounding
-from implc.codegen import elementary
-from implc.codegen.control import define, for_range
-from implc.codegen.vector import VectorBuilder
-from implc.jit import NativeModule
+from implc.compiler import rounding
+from implc.compiler.llvm import elementary
+from implc.compiler.llvm.control import define, for_range
+from implc.compiler.llvm.vector import VectorBuilder
+from implc.native import abi
+from implc.native.jit import NativeModule
 
-PROVEN_ATAN2 = 1.1e-15  # the bounds derived in implc/codegen/elementary.py
+PROVEN_ATAN2 = 1.1e-15  # the bounds derived in implc/compiler/llvm/elementary.py
 PROVEN_SIN = 5e-16
 
 
@@ -111,8 +112,8 @@ def test_outlined_vector_functions_compute_what_expanded_ones_do(monkeypatch):
     import sympy
 
     import implc
-    from implc import abi
-    from implc.symbols import phi, r, theta, x, y
+    from implc.compiler.symbols import phi, r, theta, x, y
+    from implc.native import abi
     monkeypatch.setenv("IMPLC_CACHE_DIR", "off")  # the two builds share a cache key
     expr = sum(sympy.sin(k * x + y) / k for k in range(1, 8)) + sympy.cos(3 * phi) * sympy.sin(2 * theta) - r
     assert elementary.outlines(implc.compile(expr).gradient_tape)
@@ -135,7 +136,7 @@ def test_outlined_vector_functions_compute_what_expanded_ones_do(monkeypatch):
     np.testing.assert_array_equal(results[0][1], results[1][1])
 
 
-PROVEN_EXP = 6.2e-15  # relative, the bounds derived in implc/codegen/elementary.py
+PROVEN_EXP = 6.2e-15  # relative, the bounds derived in implc/compiler/llvm/elementary.py
 PROVEN_LOG = 2.9e-15
 
 

@@ -8,7 +8,7 @@ import pytest
 from PIL import Image
 from plyfile import PlyData
 
-from implc import voxel_files
+from implc.files import voxel_files
 
 EXAMPLES = sorted((Path(__file__).parent.parent / "examples").glob("*.py"))
 

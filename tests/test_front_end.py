@@ -8,7 +8,7 @@ import sympy
 
 import implc
 from implc import x, y, z
-from implc.lower import lower
+from implc.compiler.lower import lower
 
 
 def test_a_deep_unevaluated_chain_lowers_and_evaluates():

@@ -22,13 +22,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import implc
-from implc import shapes, voxel_files
-from implc.cli import main
-from implc.triangle_mesh import MeshFileError
-from implc.triangle_mesh import load as load_mesh
-from implc.untrusted import decimal, printable
-from implc.vdb_file import describe_vdb
-from implc.vm import VmError, parse_vm
+from implc import shapes
+from implc.cli.commands import main
+from implc.common.untrusted import decimal, printable
+from implc.compiler.vm import VmError, parse_vm
+from implc.files import voxel_files
+from implc.files.vdb import describe_vdb
+from implc.meshing.triangle_mesh import MeshFileError
+from implc.meshing.triangle_mesh import load as load_mesh
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -78,7 +79,7 @@ def test_a_constant_too_large_to_evaluate_is_built_from_its_parts():
 def test_astronomic_constant_bounds():
     from sympy import exp
 
-    from implc.lower import number_bounds
+    from implc.compiler.lower import number_bounds
     nearest, lo, hi = number_bounds(exp(exp(exp(9))))
     assert lo == sys.float_info.max and hi == float("inf")
     nearest, lo, hi = number_bounds(exp(-exp(exp(9))))  # within the evaluation's own error of 1e-300
@@ -283,7 +284,7 @@ def test_forged_vdb_grid_count_and_offsets(tmp_path, solid, capsys):
 
 @pytest.mark.parametrize("type_name, size", [("int64", 3), ("int32", 7), ("vec3i", 4), ("bool", 0), ("double", 2)])
 def test_vdb_metadata_of_the_wrong_length(tmp_path, capsys, type_name, size):
-    from implc.vdb_file import MAGIC
+    from implc.files.vdb import MAGIC
     meta = struct.pack("<I", 1) + struct.pack("<I", 3) + b"bad" + struct.pack("<I", len(type_name))
     meta += type_name.encode() + struct.pack("<I", size) + b"\1" * size
     data = struct.pack("<qIII?", MAGIC, 224, 10, 0, True) + b"0" * 36 + meta + struct.pack("<i", 0)
@@ -292,7 +293,7 @@ def test_vdb_metadata_of_the_wrong_length(tmp_path, capsys, type_name, size):
 
 
 def test_escape_sequences_are_not_printed(tmp_path, capsys):
-    from implc.vdb_file import MAGIC
+    from implc.files.vdb import MAGIC
     creator = b"\x1b[2J\x1b[31mforged\nline"
     meta = struct.pack("<I", 1) + struct.pack("<I", 7) + b"creator" + struct.pack("<I", 6) + b"string"
     meta += struct.pack("<I", len(creator)) + creator
@@ -307,7 +308,7 @@ def test_escape_sequences_are_not_printed(tmp_path, capsys):
 def test_zarr_attributes_are_checked(tmp_path, capsys):
     import zarr
     surface = implc.compile(shapes.sphere(0.7, (0, 0, 0)))
-    from implc.zarr_store import write_zarr
+    from implc.files.zarr_store import write_zarr
     write_zarr(surface, 4, tmp_path / "v.zarr")
     group = zarr.open_group(str(tmp_path / "v.zarr"), mode="r+")
     written = dict(group.attrs["implc"])
@@ -409,7 +410,7 @@ def test_fuzz_expr_formulas(text):
     CLI's one line), never another exception (SymPy evaluates numbers as it builds: fuzzing of this kind
     found cosh of a huge number running for minutes, 0.5 / 0.0, SymPy's own AttributeError and a non-real
     exponent; each is a case of test_cli_errors' table now)."""
-    from implc.expr import ExprError, parse
+    from implc.compiler.expr import ExprError, parse
     try:
         implc.voxelize(implc.compile(parse(text)), 3)
     except (ExprError, implc.CompileError):
@@ -449,8 +450,8 @@ def test_options_are_named_and_empty_values_refused(tmp_path, capsys, argv, word
 
 
 def test_render_size_beyond_memory_is_refused_with_the_estimate(tmp_path, capsys, monkeypatch):
-    import implc.voxelization
-    monkeypatch.setattr(implc.voxelization, "available_memory", lambda: 1 << 30)
+    import implc.voxelizer.voxelize
+    monkeypatch.setattr(implc.voxelizer.voxelize, "available_memory", lambda: 1 << 30)
     err = one_line_error(capsys, ["render", "torus", "--size", "4096", "-o", tmp_path / "v.png"])
     assert "--size 4096 needs about 1.6 GiB" in err
 
@@ -468,7 +469,7 @@ def test_a_full_disk_names_the_output(tmp_path, capsys, monkeypatch):
 def test_a_signal_after_the_output_is_in_place_is_not_a_failure(tmp_path, capsys, monkeypatch, late):
     """Ctrl-C that arrives once the output replaced the old one: exit 0, the output complete; one that
     arrives before: exit 130 and the old file untouched."""
-    import implc.atomic_file as atomic_file
+    import implc.common.atomic_file as atomic_file
     target = tmp_path / "v.npz"
     target.write_bytes(b"old")
     real = atomic_file._put_in_place
@@ -511,7 +512,7 @@ def test_outputs_get_the_umask_or_keep_the_old_mode(tmp_path):
 def test_fuzz_zarr_reader(tmp_path_factory, mutation):
     """The store's metadata (zarr.json: shape, chunks, shards, the implc attributes) mutated: implc info
     describes a valid store or says in one line what is wrong."""
-    from implc.zarr_store import describe_zarr, write_zarr
+    from implc.files.zarr_store import describe_zarr, write_zarr
     folder = tmp_path_factory.mktemp("z")
     write_zarr(implc.compile(shapes.sphere(0.7, (0, 0, 0))), 3, folder / "v.zarr", solid=False)
     meta = folder / "v.zarr" / "zarr.json"

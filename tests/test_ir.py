@@ -3,10 +3,10 @@
 import pytest
 import sympy
 
-from implc.gradient import with_gradient
-from implc.ir import Tape
-from implc.lower import is_periodic_in_phi, lower
-from implc.symbols import phi, r, theta, x, y, z
+from implc.compiler.gradient import with_gradient
+from implc.compiler.ir import Tape
+from implc.compiler.lower import is_periodic_in_phi, lower
+from implc.compiler.symbols import phi, r, theta, x, y, z
 
 
 def ops(tape):

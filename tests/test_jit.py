@@ -16,8 +16,9 @@ import pytest
 import sympy
 
 import implc
-from implc import kernel_cache, parallel_compile, x, y, z
-from implc.cli import main
+from implc import x, y, z
+from implc.cli.commands import main
+from implc.native import kernel_cache, parallel_compile
 
 PROBE = textwrap.dedent("""
     import sympy, implc
@@ -57,16 +58,20 @@ def test_another_process_reuses_the_cache(tmp_path):
 
 
 def test_a_first_voxelization_compiles_no_mesher_and_its_parts_compute_what_the_whole_does(tmp_path):
-    """A cold start that only voxelizes a tape-engine surface compiles the runtime module and the tape engine,
-    nothing more (the mesher's module, a fifth of a colonnade's first compile, waits for a first mesh); a
+    """A cold start that only voxelizes a tape-engine surface compiles the tape engine, the walk's rows and the
+    octree's index, nothing more (the mesher's module, a fifth of a colonnade's first compile, waits for a first
+    mesh); a
     surface with compiled kernels adds its kernels, the walk over them and its bound kernel, and its
-    box-gradient kernel on its first mesh. Compiled in parts at once (implc.parallel_compile: one object
+    box-gradient kernel on its first mesh. Compiled in parts at once (implc.native.parallel_compile: one object
     per part in the cache entry), the modules give the same voxels, normals and meshes, bit for bit, as
     compiled whole."""
     probe = textwrap.dedent("""
         import hashlib, sys, sympy, implc
         from pathlib import Path
-        from implc import jit, kernel_cache, parallel_compile, x, y, z
+        from implc import x, y, z
+        from implc.native import jit
+        from implc.native import kernel_cache
+        from implc.native import parallel_compile
         parallel_compile.MAX_WORKERS = int(sys.argv[2])
         entries = lambda: len(list(Path(sys.argv[1]).glob("*.o")))
         digest = lambda v: hashlib.sha256(v.coords.tobytes() + v.normals.tobytes()).hexdigest()
@@ -90,15 +95,37 @@ def test_a_first_voxelization_compiles_no_mesher_and_its_parts_compute_what_the_
                              capture_output=True, text=True, check=True, cwd=tmp_path)
         runs.append([line.split() for line in run.stdout.splitlines()])
     whole, parts = runs
-    assert whole[0][0] == parts[0][0] == "2"  # the runtime module and the tape engine
-    assert whole[1][0] == parts[1][0] == "5"  # and the kernels, the walk over them and the bound kernel
-    assert whole[2] == parts[2] == ["6"]  # the contouring's, on the first mesh
-    assert whole[3][0] == parts[3][0] == "7"  # and the compiled kernels' box gradients, on theirs
+    assert whole[0][0] == parts[0][0] == "3"  # the tape engine, the walk's rows and the octree's index
+    assert whole[1][0] == parts[1][0] == "6"  # and the kernels, the walk over them and the bound kernel
+    assert whole[2] == parts[2] == ["7"]  # the contouring's, on the first mesh
+    assert whole[3][0] == parts[3][0] == "8"  # and the compiled kernels' box gradients, on theirs
     assert whole[0][1] == "1" and parts[0][1] == str(min(parallel_compile.MAX_WORKERS,
                                                          len(os.sched_getaffinity(0))))
     assert int(whole[0][2]) > 1000 and int(whole[1][1]) > 1000
     assert int(whole[3][1]) > 1000
     assert whole[0][2:] == parts[0][2:] and whole[1][1:] == parts[1][1:] and whole[3][1:] == parts[3][1:]
+
+
+def test_the_cache_key_covers_a_module_in_every_package(tmp_path):
+    """An edit to any module, in any package of the layout, gives another fingerprint of the package (a part
+    of every cache key), and so does a module moved to another folder."""
+    root = Path(implc.__file__).parent
+    copy = tmp_path / "implc"
+    shutil.copytree(root, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    packages = sorted(p.parent for p in copy.rglob("__init__.py"))
+    assert {p.relative_to(copy).as_posix() for p in packages} >= {".", "compiler", "compiler/llvm", "native", "engines",
+                                                                   "engines/compiled", "engines/tape", "voxelizer",
+                                                                   "meshing", "files", "view", "cluster", "cli"}
+    seen = {kernel_cache.source_fingerprint(copy)}
+    for package in packages:
+        module = sorted(package.glob("*.py"))[-1]
+        with open(module, "a") as f:
+            f.write("\n# edited\n")
+        seen.add(kernel_cache.source_fingerprint(copy))
+        assert len(seen) == packages.index(package) + 2, module
+    (copy / "meshing" / "formats.py").rename(copy / "files" / "formats.py")
+    assert kernel_cache.source_fingerprint(copy) not in seen
+    assert kernel_cache.source_fingerprint(root) == kernel_cache.package_fingerprint()
 
 
 @pytest.mark.slow  # twelve fresh processes, 9 s; test_another_process_reuses_the_cache stays in the default run
@@ -112,7 +139,8 @@ def test_editing_any_module_of_the_package_invalidates_the_cache(tmp_path):
     module, from_cache = _probe(cache, copy)
     assert module == copy / "implc" / "__init__.py" and not from_cache
     assert _probe(cache, copy)[1]
-    for name in ("regions.py", "ir.py", "gradient.py", "__init__.py", "storage/grid.py"):
+    for name in ("engines/compiled/plan.py", "compiler/ir.py", "compiler/gradient.py", "__init__.py",
+                 "voxelizer/storage/grid.py"):
         with open(copy / "implc" / name, "a") as f:
             f.write("\n# edited\n")
         assert not _probe(cache, copy)[1], name
@@ -207,7 +235,7 @@ def test_inspection_texts():
 def test_large_batches_spread_over_threads_give_numpys_values(engine):
     """Surface.eval and .gradient over many chunks (run on several threads at once) against numpy's own
     evaluation of the expression and of SymPy's derivatives, row for row."""
-    from implc.surface import CHUNK
+    from implc.common.threads import CHUNK
     expr = sympy.sin(3 * x) * y + sympy.exp(z / 2) - x * z
     surface = implc.compile(expr, engine=engine)
     points = np.random.default_rng(5).uniform(-1, 1, (5 * CHUNK + 13, 3))
@@ -218,7 +246,7 @@ def test_large_batches_spread_over_threads_give_numpys_values(engine):
 
 
 def test_parallel_jobs_raise_the_first_error_and_cancel_the_rest():
-    from implc.surface import in_parallel
+    from implc.common.threads import in_parallel
     ran = []
 
     def fails():

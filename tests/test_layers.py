@@ -6,6 +6,8 @@ import ast
 import tomllib
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "implc"
 
@@ -41,7 +43,7 @@ def imported_modules(path: Path) -> set[str]:
                 target = node.module or ""
             if not target.startswith("implc"):
                 continue
-            for alias in node.names:  # `from . import abi` imports the module implc.abi
+            for alias in node.names:  # `from . import abi` imports the module implc.native.abi
                 candidate = f"{target}.{alias.name}"
                 as_path = ROOT / candidate.replace(".", "/")
                 is_module = as_path.with_suffix(".py").is_file() or (as_path / "__init__.py").is_file()
@@ -69,18 +71,45 @@ def test_imports_flow_one_way():
     assert not wrong, "\n".join(wrong)
 
 
+def test_each_package_is_listed_in_one_piece():
+    """A package's modules (its subpackages' included) are one run of rows: with one-way imports between rows,
+    the packages themselves then import one way, in the order of their first rows."""
+    rows = documented_order()
+    folders = {row.rsplit("/", 1)[0] for row in rows}
+    for folder in sorted(folders - {"implc"}):
+        inside = [k for k, row in enumerate(rows) if row.startswith(folder + "/")]
+        assert inside == list(range(inside[0], inside[-1] + 1)), f"{folder}/ is listed in more than one piece"
+
+
 def test_the_checker_sees_a_wrong_import(tmp_path):
     """The walker resolves relative imports, `from . import name` and imports inside functions."""
-    module = PACKAGE / "codegen" / "kernels.py"
+    module = PACKAGE / "engines" / "compiled" / "kernels_native.py"
     found = imported_modules(module)
-    assert {"implc.abi", "implc.ir", "implc.regions", "implc.codegen.control"} <= found
-    found = imported_modules(PACKAGE / "cli.py")
-    assert {"implc.kernel_cache", "implc.voxel_files", "implc.scene"} <= found
+    assert {"implc.native.abi", "implc.compiler.ir", "implc.engines.compiled.plan",
+            "implc.compiler.llvm.control", "implc.compiler.llvm.elementary"} <= found
+    found = imported_modules(PACKAGE / "cli" / "commands.py")
+    assert {"implc.native.kernel_cache", "implc.files.voxel_files", "implc.files.scene"} <= found
+
+
+COUNTERPARTS = ("implc/engines/compiled", "implc/engines/tape")
+"""The two engines' folders, whose modules carry the same name for the same role."""
 
 
 def test_no_two_modules_share_a_file_name():
-    names = [p.name for p in PACKAGE.rglob("*.py") if p.name != "__init__.py" and "scene_files" not in p.parts]
+    """Except the engines' counterparts, each in one folder of :data:`COUNTERPARTS`."""
+    paths = [p.relative_to(ROOT).as_posix() for p in PACKAGE.rglob("*.py")
+             if p.name != "__init__.py" and "scene_files" not in p.parts]
+    names = [p.rsplit("/", 1)[1] for p in paths if p.rsplit("/", 1)[0] not in COUNTERPARTS]
     assert len(names) == len(set(names)), sorted(n for n in names if names.count(n) > 1)
+    for folder in COUNTERPARTS:  # a counterpart's name is not also a module elsewhere
+        mine = {p.rsplit("/", 1)[1] for p in paths if p.rsplit("/", 1)[0] == folder}
+        assert not mine & set(names), folder
+
+
+def test_the_engines_have_counterparts_by_name():
+    compiled, tape = ({p.name for p in (ROOT / folder).glob("*.py")} for folder in COUNTERPARTS)
+    assert {"evaluator.py", "evaluator_native.py", "tighten_native.py"} <= compiled & tape
+    assert "plan.py" in compiled and "plan_native.py" in tape
 
 
 def test_no_module_shadows_the_standard_library():
@@ -149,3 +178,43 @@ def test_the_checker_sees_a_temporary_address():
               "        native(np.ascontiguousarray(a).ctypes.data)\n"
               "        native(a[a > 0].ctypes.data)\n")
     assert temporary_addresses(source) == [8, 9, 10]
+
+
+def test_neither_engine_imports_the_other():
+    """What both engines use lives in engines/ or below it, not in either engine's folder."""
+    for mine, other in (COUNTERPARTS, COUNTERPARTS[::-1]):
+        for path in sorted((ROOT / mine).glob("*.py")):
+            theirs = {m for m in imported_modules(path) if m.startswith(other.replace("/", "."))}
+            assert not theirs, f"{path.relative_to(ROOT)} imports {sorted(theirs)}"
+
+
+def test_old_import_paths_warn_and_work():
+    """Every module path of 0.2 still imports for one release, with a DeprecationWarning naming its new home."""
+    import importlib
+    import sys
+    import warnings
+
+    from implc.common.moved import MOVED
+    for old, new in sorted(MOVED.items()):
+        sys.modules.pop(f"implc.{old}", None)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            module = importlib.import_module(f"implc.{old}")
+        assert any(issubclass(w.category, DeprecationWarning) and f"implc.{new[0]}" in str(w.message)
+                   for w in caught), old
+        target = importlib.import_module(f"implc.{new[0]}")
+        public = [n for n in dir(target) if not n.startswith("_") and getattr(target, n).__class__.__name__ != "module"]
+        assert all(getattr(module, n) is getattr(target, n) for n in public[:20]), old
+    with pytest.warns(DeprecationWarning, match="implc.files.zarr_store"):
+        sys.modules.pop("implc.zarr_store", None)
+        from implc.zarr_store import write_zarr
+    from implc.files.zarr_store import write_zarr as new
+    assert write_zarr is new
+    # two 0.2 modules became packages: their names are forwarded by the package
+    with pytest.warns(DeprecationWarning, match="implc.cluster.tasks.connect"):
+        from implc.cluster import connect
+    with pytest.warns(DeprecationWarning, match="implc.cli.commands.main"):
+        from implc.cli import main
+    from implc.cli.commands import main as new_main
+    from implc.cluster.tasks import connect as new_connect
+    assert connect is new_connect and main is new_main

@@ -24,13 +24,14 @@ from hypothesis import strategies as st
 
 import implc
 from benchmarks import vm_sampling
-from implc import contour as contour_module
 from implc import x, y, z
-from implc.cli import main
-from implc.scene import load as load_scene
-from implc.symbols import cartesian_form
-from implc.triangle_mesh import Mesh, is_mesh_file
-from implc.vm import parse_vm
+from implc.cli.commands import main
+from implc.compiler.symbols import cartesian_form
+from implc.compiler.vm import parse_vm
+from implc.files.scene import load as load_scene
+from implc.meshing import contour as contour_module
+from implc.meshing.contour_native import CONTOURING
+from implc.meshing.triangle_mesh import Mesh, is_mesh_file
 
 from .test_vm import CSG
 
@@ -366,11 +367,11 @@ def test_the_qef_point_is_where_the_planes_meet_and_the_mean_where_they_do_not_c
     (a crease) at the point of their line nearest the points' mean; one plane at the mean's projection on
     it; a face's 2D QEF (an axis projected out) keeps the mean's coordinate on that axis. Masked-out rows
     carry garbage that must not count."""
-    from implc.contour import _qef
-    from implc.runtime import Runtime
+    from implc.meshing.contour import _qef
+    from implc.native.runtime import Runtime
 
     rng = np.random.default_rng(7)
-    runtime = Runtime.shared().contouring
+    runtime = Runtime.shared().library(CONTOURING)
     for trial in range(200):
         count = trial % 3 + 1
         normals = rng.normal(size=(count, 3))
@@ -417,7 +418,7 @@ def test_vertices_lie_on_a_ball_and_their_normals_are_its_normals_near_them(dept
     the edge (measured: up to 0.49 of that); or, where the root
     lies within EDGE_MARGIN of an edge's end, at that margin. Its normal is the sphere's normal at a point at
     most ROOT_TOLERANCE of the edge away (within that distance over r, in radians)."""
-    from implc.contour import EDGE_MARGIN, NUDGE, ROOT_TOLERANCE
+    from implc.meshing.contour import EDGE_MARGIN, NUDGE, ROOT_TOLERANCE
     r = np.sqrt(0.5)
     mesh = implc.voxelize(implc.compile(x**2 + y**2 + z**2 - sympy.Rational(1, 2)), depth).mesh(witnesses=True)
     rows, length, t = edge_parameters(mesh)
@@ -435,7 +436,7 @@ def test_vertices_lie_on_a_ball_and_their_normals_are_its_normals_near_them(dept
 def test_a_face_on_a_grid_plane_keeps_its_vertices_at_the_edges_margin():
     """A box whose face x = 1/2 lies on a plane of the grid (F = 0 at those corners, taken as outside): every
     vertex of that face lies at the margin of its edge next to the plane, however the root search went."""
-    from implc.contour import EDGE_MARGIN, NUDGE
+    from implc.meshing.contour import EDGE_MARGIN, NUDGE
     box = sympy.Max(sympy.Abs(x) - sympy.Rational(1, 2), sympy.Abs(y) - sympy.Rational(2, 5),
                     sympy.Abs(z) - sympy.Rational(3, 10))
     mesh = implc.voxelize(implc.compile(box), 6).mesh(witnesses=True)
@@ -448,19 +449,20 @@ def test_a_face_on_a_grid_plane_keeps_its_vertices_at_the_edges_margin():
 
 # -- the native pieces ------------------------------------------------------------------------------------
 def test_the_key_index_numbers_keys_in_first_seen_order_as_it_grows():
-    from implc.contour import _KeyIndex
-    from implc.runtime import Runtime
+    from implc.meshing.contour import _KeyIndex
+    from implc.native.runtime import Runtime
     rng = np.random.default_rng(3)
     keys = rng.integers(0, 1 << 40, 50_000) * 1_000_003 % (1 << 50)
     keys = np.concatenate([keys, keys[::7]])  # repeats
-    index = _KeyIndex(Runtime.shared().contouring, 16)  # grows many times
+    index = _KeyIndex(Runtime.shared().library(CONTOURING), 16)  # grows many times
     numbers = np.concatenate([index.number(chunk) for chunk in np.array_split(keys, 13)])
     first = np.unique(keys, return_index=True)[1]
     assert np.array_equal(index.keys(), keys[np.sort(first)])  # first-seen order, each once
     assert np.array_equal(index.keys()[numbers], keys)
     absent = np.array([5, (1 << 50) + 1])
     assert np.array_equal(index.number(absent, insert=False), [-1, -1]) or 5 in keys
-    shown = _KeyIndex(Runtime.shared().contouring, 16)  # a table sized by the keys it holds, not by the repeats shown
+    # a table sized by the keys it holds, not by the repeats shown
+    shown = _KeyIndex(Runtime.shared().library(CONTOURING), 16)
     distinct = np.arange(5000, dtype=np.int64) * 7919
     assert np.array_equal(shown.number(np.tile(distinct, 40)), np.tile(np.arange(5000), 40))
     assert shown.count == 5000 and shown.limit == 8192
@@ -553,9 +555,9 @@ def test_the_same_mesh_for_every_worker_count(name, monkeypatch):
     """The mesh does not depend on how many threads make it: with calls of 64 rows (so that the samples,
     the enclosures and the tape engine's groups are shared out over the threads even at 64³), one, two and
     three workers give the same vertices, faces and normals, bit for bit."""
-    from implc import surface as surface_module
+    from implc.common import threads as threads_module
 
-    monkeypatch.setattr(surface_module, "MIN_CHUNK", 64)
+    monkeypatch.setattr(threads_module, "MIN_CHUNK", 64)
     if name == "vm":
         s = implc.compile(parse_vm(CSG, name="csg"), engine="tape")
     else:
@@ -571,9 +573,9 @@ def test_the_same_mesh_for_every_worker_count(name, monkeypatch):
 def test_contouring_runs_on_the_threads_it_is_given(monkeypatch):
     """``workers=1`` keeps the contouring's native calls on the calling thread; ``workers=2`` shares each
     batch of calls out over at most two threads of a pool (recorded by the thread each call runs on)."""
-    from implc import surface as surface_module
+    from implc.common.threads import fewest_rows
+    from implc.engines import surface as surface_module
 
-    monkeypatch.setattr(surface_module, "MIN_CHUNK", 64)
     batches: list[list[str]] = []
     original = surface_module.in_parallel
 
@@ -591,10 +593,12 @@ def test_contouring_runs_on_the_threads_it_is_given(monkeypatch):
     monkeypatch.setattr(surface_module, "in_parallel", recording)
     sc = load_scene("paper_blobs")
     voxels = implc.voxelize(implc.compile(sc.surface, sc.bounds), 6)
-    voxels.mesh(workers=1)
+    with fewest_rows(64):
+        voxels.mesh(workers=1)
     assert sum(map(len, batches)) > 10 and {name for names in batches for name in names} == {"MainThread"}
     batches.clear()
-    voxels.mesh(workers=2)
+    with fewest_rows(64):
+        voxels.mesh(workers=2)
     shared = [set(names) for names in batches if len(names) > 1]
     assert shared and all(len(names) <= 2 and "MainThread" not in names for names in shared)
 
@@ -613,7 +617,7 @@ def test_vertices_and_corners_done_in_chunks_keep_every_promise(name, monkeypatc
     memory follows the chunk): with chunks of 97 (creases fanned from cell and face points, caps on the
     bounds, the tape engine's grouped samples all cut across chunks) the mesh passes every check, and is
     the mesh made in one chunk."""
-    from implc import contour
+    from implc.meshing import contour
 
     s, f = surface_and_f(name)
     whole = implc.voxelize(s, 5, solid=True).mesh(witnesses=True)
@@ -653,7 +657,7 @@ def test_key_indexes_grown_from_their_smallest_give_the_same_mesh(name, monkeypa
     grows as the native routines fill it (they stop before a cell when it is full, and go on after it is
     rehashed: the corners' numbering, the Kuhn split, the fans): the mesh passes every check and is, bit for
     bit, the mesh made with indexes sized in advance (keys keep the numbers they were first given)."""
-    from implc import contour
+    from implc.meshing import contour
 
     s, f = surface_and_f(name)
     sized = implc.voxelize(s, 5, solid=True).mesh(witnesses=True)
@@ -698,7 +702,7 @@ def test_the_same_mesh_for_every_tightness(name):
 
 
 def test_the_mesh_command_voxelizes_in_the_natural_mode_unless_told(tmp_path, monkeypatch):
-    import implc.voxelization as voxelization
+    import implc.voxelizer.voxelize as voxelization
     seen = []
     real = voxelization.voxelize
 
@@ -733,7 +737,7 @@ def test_faces_of_the_bounds_proven_outside_are_not_sampled_unless_a_contoured_c
     its sign over it); where the cells the samples' signs add reach such a face after all (here: contouring
     from half the kept cells, the surface running on to the face), it is sampled then and capped: the same
     closed mesh as from every kept cell."""
-    from implc import contour as contour_module
+    from implc.meshing import contour as contour_module
     s = implc.compile(sympy.Rational(1, 10) - y + x**2 / 8, ((-1, 1),) * 3)  # the solid y > 0.1 + x²/8
     depth = 4
     voxels = implc.voxelize(s, depth)
@@ -774,7 +778,7 @@ def test_caps_merge_inside_squares_into_fans_and_stay_closed(monkeypatch):
     expr, bounds = SURFACES["heightfield"]
     surface = implc.compile(expr, bounds)
     merged = check_mesh(surface, 6, numpy_f(expr))
-    from implc import contour as contour_module
+    from implc.meshing import contour as contour_module
     monkeypatch.setattr(contour_module, "_cap_blocks", lambda whole: ([], np.zeros_like(whole)))
     square_by_square = implc.mesh(surface, 6)
     assert merged.stats.cap_triangles * 3 < square_by_square.stats.cap_triangles
@@ -800,8 +804,8 @@ def test_nothing_inside_gives_an_empty_mesh():
 def test_voxels_from_a_file_need_their_surface(tmp_path):
     expr, bounds = SURFACES["ball"]
     s = implc.compile(expr, bounds)
-    implc.voxel_files.save(implc.voxelize(s, 4), tmp_path / "b.npz")
-    loaded = implc.voxel_files.load_npz(tmp_path / "b.npz")
+    implc.files.voxel_files.save(implc.voxelize(s, 4), tmp_path / "b.npz")
+    loaded = implc.files.voxel_files.load_npz(tmp_path / "b.npz")
     with pytest.raises(ValueError, match="do not know their surface"):
         loaded.mesh()
     assert np.array_equal(loaded.mesh(s).faces, implc.mesh(s, 4).faces)
@@ -895,7 +899,7 @@ def test_area_and_volume_as_trimesh_measures_them(monkeypatch):
     with trimesh's to rounding, with chunks of 1000 triangles; a degenerate triangle is counted."""
     import trimesh
 
-    from implc import triangle_mesh
+    from implc.meshing import triangle_mesh
     expr, bounds = SURFACES["box_minus_ball"]
     mesh = implc.mesh(implc.compile(expr, bounds), 5)
     monkeypatch.setattr(triangle_mesh, "MEASURE_ROWS", 1000)
@@ -977,7 +981,7 @@ def test_3mf_as_lib3mf_reads_it(tmp_path, name):
 def test_obj_numbers_are_within_1e8_of_the_doubles(values):
     """The OBJ writer's numbers (nine significant digits, in 16 characters), read by Python's own float():
     within 1e-8 of each double relatively, zero exactly, subnormals and the largest doubles included."""
-    from implc.mesh_formats import _decimals
+    from implc.meshing.formats import _decimals
     text = _decimals(np.array(values))
     assert text.shape == (len(values), 16)
     for value, row in zip(values, text):
@@ -986,7 +990,7 @@ def test_obj_numbers_are_within_1e8_of_the_doubles(values):
 
 
 def test_obj_numbers_round_as_written():
-    from implc.mesh_formats import _decimals
+    from implc.meshing.formats import _decimals
     values = [9.9999999996, 9.999999994, 0.1, -1 / 3, 1e22, 5e-324, 1.7976931348623157e308, -0.0, 123456789012.0]
     assert [row.tobytes().decode() for row in _decimals(np.array(values))] == [
         " 1.00000000e+001", " 9.99999999e+000", " 1.00000000e-001", "-3.33333333e-001", " 1.00000000e+022",
@@ -1025,7 +1029,7 @@ def test_depths_beyond_the_mesher_are_refused_up_front(tmp_path, capsys):
 
 def test_a_voxel_point_cloud_ply_is_still_described_as_voxels(tmp_path, capsys):
     expr, bounds = SURFACES["ball"]
-    implc.voxel_files.save(implc.voxelize(implc.compile(expr, bounds), 4), tmp_path / "v.ply")
+    implc.files.voxel_files.save(implc.voxelize(implc.compile(expr, bounds), 4), tmp_path / "v.ply")
     assert not is_mesh_file(tmp_path / "v.ply")
     assert main(["info", str(tmp_path / "v.ply")]) == 0
     assert "triangle mesh" not in capsys.readouterr().out
@@ -1180,7 +1184,7 @@ def test_the_proof_looks_below_the_grid_where_a_cells_enclosures_are_too_wide(mo
     """Two levels of sub-boxes below the grid prove cells that their own enclosures leave open (Scene 1 at
     16³: 336 unproven without them, 48 with them), and in each cell they add F has at most one zero on
     each line along some axis, at a dense sample of lines (F through numpy, not implc's compiler)."""
-    from implc import contour
+    from implc.meshing import contour
     sc = load_scene("paper_blobs")
     surface = implc.compile(sc.surface, sc.bounds)
     depth, n = 4, 16
@@ -1222,7 +1226,7 @@ def test_the_proof_below_the_grid_tries_a_sample_first(monkeypatch):
     """The first level below the grid, given many cells, is tried on every PROOF_SAMPLE-th first: where the
     sample gains enough the others follow and the proof is the one without a sample (each box's enclosures
     are its own); where it does not (here forced), only the sample's cells can be added."""
-    from implc import contour
+    from implc.meshing import contour
     sc = load_scene("paper_blobs")
     surface = implc.compile(sc.surface, sc.bounds)
     voxels = implc.voxelize(surface, 4)

@@ -14,8 +14,8 @@ import sympy
 
 import implc
 from implc import shapes, x, y, z
-from implc.cli import main
-from implc.scene import load as load_scene
+from implc.cli.commands import main
+from implc.files.scene import load as load_scene
 
 from .test_mesh import (
     BOX_BALL,

@@ -11,8 +11,8 @@ import sympy
 
 import implc
 from implc import CompileError, x
-from implc.lower import is_periodic_in_phi, number_bounds
-from implc.symbols import phi, r, theta
+from implc.compiler.lower import is_periodic_in_phi, number_bounds
+from implc.compiler.symbols import phi, r, theta
 
 t, n = sympy.symbols("t n")
 

@@ -1,4 +1,4 @@
-"""A first compile's parts at once: a module's IR in parts (implc.codegen.split) computes what the whole
+"""A first compile's parts at once: a module's IR in parts (implc.native.split) computes what the whole
 module computes, and jobs spread over forked processes come back whole and in order, even when a worker
 dies, fails or the caller is interrupted; a process with other threads never forks."""
 
@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 from llvmlite import ir
 
-from implc import jit, parallel_compile
-from implc.codegen import split
+from implc.native import jit, parallel_compile, split
 
 DOUBLE = ir.DoubleType()
 V8 = ir.VectorType(DOUBLE, 8)
@@ -129,7 +128,7 @@ needs_two = pytest.mark.skipif(sys.platform != "linux" or _cpus() < 2,
 def test_jobs_spread_over_processes_come_back_in_order(tmp_path):
     out = _run("""
         import os
-        from implc import parallel_compile
+        from implc.native import parallel_compile
         answers = parallel_compile.run(lambda j: f"{j} {os.getpid()}".encode(), 7, [1.0] * 7)
         print(os.getpid(), parallel_compile.workers())
         print("\\n".join(a.decode() for a in answers))
@@ -146,7 +145,7 @@ def test_jobs_spread_over_processes_come_back_in_order(tmp_path):
 def test_a_worker_that_dies_or_fails_leaves_its_jobs_to_the_caller(tmp_path):
     out = _run("""
         import os, signal
-        from implc import parallel_compile
+        from implc.native import parallel_compile
         parent = os.getpid()
         def job(j):
             if os.getpid() != parent:
@@ -164,7 +163,7 @@ def test_a_worker_that_dies_or_fails_leaves_its_jobs_to_the_caller(tmp_path):
 def test_a_process_with_other_threads_never_forks(tmp_path):
     out = _run("""
         import os, threading
-        from implc import parallel_compile
+        from implc.native import parallel_compile
         stop = threading.Event()
         threading.Thread(target=stop.wait).start()
         pids = parallel_compile.run(lambda j: str(os.getpid()).encode(), 4, [1.0] * 4)
@@ -180,7 +179,7 @@ def test_an_interrupted_caller_takes_its_workers_down(tmp_path):
     the error, and no worker outlives it."""
     out = _run("""
         import os, time
-        from implc import parallel_compile
+        from implc.native import parallel_compile
         parent = os.getpid()
         def job(j):
             if os.getpid() == parent:

@@ -8,9 +8,10 @@ import pytest
 import sympy
 
 import implc
-from implc import reference, x, y, z
-from implc.jit import host_has_avx512
-from implc.rounding import POWI_MAX
+from implc import x, y, z
+from implc.compiler import reference
+from implc.compiler.rounding import POWI_MAX
+from implc.native.jit import host_has_avx512
 
 EXPONENTS = [2, 3, 5, 21, 22, 31, 32, 63, 64, 100, 255, 256, 1000, 4097, POWI_MAX - 1, POWI_MAX,
              -2, -3, -32, -63, -1000, -POWI_MAX]

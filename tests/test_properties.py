@@ -13,9 +13,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import implc
-from implc.jit import host_has_avx512
-from implc.rounding import POWI_MAX
-from implc.symbols import phi, r, theta, x, y, z
+from implc.compiler.rounding import POWI_MAX
+from implc.compiler.symbols import phi, r, theta, x, y, z
+from implc.native.jit import host_has_avx512
 
 from .truth import adversarial_boxes, assert_encloses
 

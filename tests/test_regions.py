@@ -4,9 +4,10 @@ import pytest
 import sympy
 from sympy import Rational
 
-from implc import scene, shapes, x, y, z
-from implc.lower import lower
-from implc.regions import plan_regions
+from implc import shapes, x, y, z
+from implc.compiler.lower import lower
+from implc.engines.compiled.plan import plan_regions
+from implc.files import scene
 
 
 def test_blend_sum_terms_are_found_and_self_contained():
@@ -40,7 +41,7 @@ def test_gradient_over_all_terms_is_the_full_gradient():
     import numpy as np
 
     import implc
-    from implc import abi
+    from implc.native import abi
     rng = np.random.default_rng(4)
     pts = np.ascontiguousarray(rng.uniform(-1, 1, (64, 3)))
     union = shapes.union(*[shapes.sphere(Rational(1, 5), (Rational(k, 5), 0, 0)) for k in range(-2, 3)])
@@ -64,8 +65,8 @@ def test_normals_kernel_without_terms_matches_the_gradient():
     import numpy as np
 
     import implc
-    from implc import abi
-    from implc.symbols import phi, r, theta
+    from implc.compiler.symbols import phi, r, theta
+    from implc.native import abi
     rng = np.random.default_rng(5)
     pts = np.ascontiguousarray(rng.uniform(-1, 1, (256, 3)))
     pts = pts[np.hypot(pts[:, 0], pts[:, 1]) > 0.05][:200]
@@ -84,7 +85,7 @@ def test_mean_value_form_over_the_live_terms_encloses_and_never_loosens(case):
     import numpy as np
 
     import implc
-    from implc import abi
+    from implc.native import abi
     if case == "paper_blobs":
         expr = scene.load("paper_blobs").surface
     else:

@@ -6,7 +6,7 @@ import sympy
 
 import implc
 from implc import x, y, z
-from implc.render import Style, View, render_points, render_voxels
+from implc.view.render import Style, View, render_points, render_voxels
 
 
 def test_nearest_point_wins_its_pixel():

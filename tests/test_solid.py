@@ -10,9 +10,9 @@ from sympy import Max, Min, Rational, cos, sin, sqrt
 
 import implc
 from implc import phi, r, shapes, theta, x, y, z
-from implc import subdivide as subdivide_module
-from implc.cli import main
-from implc.symbols import cartesian_form
+from implc.cli.commands import main
+from implc.compiler.symbols import cartesian_form
+from implc.engines import walk as subdivide_module
 
 from .test_tape_engine import smooth_blend
 
@@ -107,7 +107,7 @@ def test_a_solid_saves_loads_and_is_described(tmp_path, capsys):
     out = tmp_path / "torus.npz"
     assert main(["voxelize", "torus", "--depth", "6", "--solid", "-o", str(out)]) == 0
     assert "inside octants, volume in [" in capsys.readouterr().out
-    from implc import voxel_files
+    from implc.files import voxel_files
     loaded = voxel_files.load_npz(out)
     direct = implc.voxelize(implc.compile(TORUS), 6, solid=True)
     np.testing.assert_array_equal(loaded.inside, direct.inside)
@@ -122,7 +122,7 @@ def test_a_solid_saves_loads_and_is_described(tmp_path, capsys):
 def test_slices_are_the_dense_solid_layer_by_layer(tmp_path, fmt):
     from PIL import Image
 
-    from implc.slices import save_slices
+    from implc.files.slices import save_slices
     v = implc.voxelize(implc.compile(HOLLOW), 5, solid=True)
     dense = v.to_dense(solid=True)
     folder = save_slices(v, tmp_path / "layers", fmt)
@@ -150,7 +150,7 @@ def test_the_cli_writes_slices_and_names_a_bad_target(tmp_path, capsys):
 def test_zarr_holds_the_dense_solid_and_the_cli_writes_it(tmp_path, capsys):
     import zarr
 
-    from implc import voxel_files
+    from implc.files import voxel_files
     v = implc.voxelize(implc.compile(HOLLOW), 6, solid=True)
     path = voxel_files.save(v, tmp_path / "hollow.zarr")
     group = zarr.open_group(path, mode="r")
@@ -193,7 +193,7 @@ def test_zarr_written_while_voxelizing_is_the_dense_voxelization(tmp_path, monke
     in-memory voxelization's dense occupancy, and so are the counts and volume bounds it reports."""
     import zarr
 
-    from implc import zarr_store
+    from implc.files import zarr_store
     monkeypatch.setattr(zarr_store, "SHARD", shard)
     monkeypatch.setattr(zarr_store, "CHUNK", chunk)
     surface = implc.compile(HOLLOW)
@@ -213,7 +213,7 @@ def test_zarr_written_while_voxelizing_is_the_dense_voxelization(tmp_path, monke
 
 
 def test_a_cross_section_is_the_dense_solid_layer():
-    from implc.render import cross_section
+    from implc.view.render import cross_section
     v = implc.voxelize(implc.compile(TORUS), 6, solid=True)
     dense = v.to_dense(solid=True)
     for axis, index in ((2, 32), (0, 20), (1, 45)):
@@ -230,7 +230,7 @@ def test_a_cross_section_is_the_dense_solid_layer():
 def test_a_cut_away_shows_the_filled_section_of_a_solid():
     """A ball cut at z = 0 seen from above: the solid's section is one flat disk (one colour at the
     centre), the shell's is the inside of the lower half (shaded)."""
-    from implc.render import View, render_voxels
+    from implc.view.render import View, render_voxels
     s = implc.compile(SPHERE)
     view = View(0.0, 90.0)
     solid = render_voxels(implc.voxelize(s, 6, solid=True), size=128, view=view, cut=(2, 0.0))
@@ -282,7 +282,8 @@ def test_the_octree_records_the_inside_and_its_levels_know_it():
         cells, normals, inside = tree.level(k, solid=True)
         boundary, _ = tree.level(k)
         assert np.array_equal(cells[~inside], boundary) and np.all(normals[inside] == 0)
-        assert np.all(np.diff(implc.morton.morton_codes(cells).astype(np.float64)) > 0)  # Morton order, distinct
+        codes = implc.engines.morton.morton_codes(cells).astype(np.float64)
+        assert np.all(np.diff(codes) > 0)  # Morton order, distinct
         size = 2.0 / (1 << k)
         points = -1 + (cells[inside][:, None, :] + rng.uniform(0, 1, (len(cells[inside]), 16, 3))) * size
         assert np.all(f(*points.reshape(-1, 3).T) < 0)
@@ -297,7 +298,7 @@ def test_the_octree_records_the_inside_and_its_levels_know_it():
 def test_eight_inside_siblings_merge_into_their_parent():
     """Eight inside siblings become their parent, up the levels (64 grandchildren: one octant two levels
     up), in any order; the cells covered stay the same and no node is left counted for them."""
-    from implc.voxelization import Voxels
+    from implc.voxelizer.voxelize import Voxels
     depth = 5
     fine = np.array([[4 + a, 6 + b, 2 + c, 4] for a in (0, 1) for b in (0, 1) for c in (0, 1)], np.int32)
     grand = np.array([[8 + a, 8 + b, 8 + c, 5] for a in range(4) for b in range(4) for c in range(4)], np.int32)
@@ -317,7 +318,7 @@ def test_eight_inside_siblings_merge_into_their_parent():
 def test_a_tree_grows_while_recording_the_inside():
     """Octants needing more nodes than the tree has room for: the native call stops, the tree grows, and
     the call resumes where it stopped."""
-    from implc.voxelization import Voxels
+    from implc.voxelizer.voxelize import Voxels
     rows = np.array([[i, j, k, 6] for i in (1, 9, 17, 40) for j in (3, 30) for k in (0, 63)], np.int32)
     voxels = Voxels(np.array([[0, 0, 0]], np.uint32), np.array([[0, 0, 1]], np.float32), 6, ((-1, 1),) * 3,
                     stats=None, inside=rows)
@@ -329,9 +330,9 @@ def test_a_tree_grows_while_recording_the_inside():
 def test_inside_away_from_the_boundary_creates_its_nodes_and_saves(tmp_path):
     """Inside octants under no boundary node (a hand-built case) get the nodes above them; the tree saves
     and loads with its states."""
-    from implc.storage.octree import Octree
+    from implc.voxelizer.storage.octree import Octree
     inside = np.array([[15, 15, 15, 4], [3, 3, 2, 2], [0, 1, 0, 4]], np.int32)
-    voxels = implc.voxelization.Voxels(np.array([[0, 0, 0], [1, 0, 0]], np.uint32),
+    voxels = implc.voxelizer.voxelize.Voxels(np.array([[0, 0, 0], [1, 0, 0]], np.uint32),
                                        np.array([[0, 0, 1]] * 2, np.float32), 4, ((-1, 1),) * 3, stats=None,
                                        inside=inside)
     tree = voxels.octree

@@ -18,13 +18,14 @@ from hypothesis import strategies as st
 from sympy import Abs, Max, Min, Piecewise, Rational, cos, sin, sqrt
 
 import implc
-from implc import CompileError, tape_program, x, y, z
-from implc import subdivide as subdivide_module
-from implc.codegen.leaf_split import OUTSIDE
-from implc.lower import lower
-from implc.surface import Grouping, choose_engine
-from implc.tape_program import CHOICE_OPS, FIRST_BINARY, FIRST_TERNARY, OPCODES, encode, slot_scratch
-from implc.vm import parse_vm
+from implc import CompileError, x, y, z
+from implc.compiler.lower import lower
+from implc.compiler.vm import parse_vm
+from implc.engines import walk as subdivide_module
+from implc.engines.second_look_native import OUTSIDE
+from implc.engines.surface import Grouping, choose_engine
+from implc.engines.tape import program as tape_program
+from implc.engines.tape.program import CHOICE_OPS, FIRST_BINARY, FIRST_TERNARY, OPCODES, encode, slot_scratch
 
 from .test_vm import CSG, interpret
 from .test_vm import sign_change_cells as vm_sign_change_cells
@@ -708,7 +709,7 @@ def test_programs_hold_only_the_work():
 
 
 def test_a_vm_model_runs_on_the_engine_without_missing_a_cell():
-    from implc.vm import parse_vm
+    from implc.compiler.vm import parse_vm
     model = parse_vm(CSG, name="csg")
     s = implc.compile(model)
     assert s.engine == "tape"
@@ -722,7 +723,7 @@ def test_a_vm_model_runs_on_the_engine_without_missing_a_cell():
 def test_simplification_stamps_start_over_without_changing_anything(monkeypatch):
     """tape_simplify marks what a program needs with a per-call stamp instead of clearing a buffer; when the
     stamps run out they start over (the buffer cleared once): the voxels are the same."""
-    from implc import abi
+    from implc.native import abi
     s = implc.compile(nested_scene(), engine="tape")
     expected = implc.voxelize(s, 7, workers=1)
     original = subdivide_module._Worker.__init__

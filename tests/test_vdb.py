@@ -15,10 +15,10 @@ from sympy import Max, Rational, sqrt
 
 import implc
 from implc import x, y, z
-from implc.cli import main
-from implc.scene import load as load_scene
-from implc.vdb_file import describe_vdb, save_vdb
-from implc.voxelization import Voxels
+from implc.cli.commands import main
+from implc.files.scene import load as load_scene
+from implc.files.vdb import describe_vdb, save_vdb
+from implc.voxelizer.voxelize import Voxels
 
 READ_BACK = textwrap.dedent("""
     import json, sys

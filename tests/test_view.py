@@ -22,14 +22,14 @@ import numpy as np
 import pytest
 
 import implc
-from implc.lod_chunks import CHUNK_LEVELS, HEADER_BYTES, LodChunks, decode_normals, encode_normals
-from implc.mesh_payload import MAGIC as MESH_MAGIC
-from implc.mesh_payload import MeshPayload
-from implc.morton import morton_codes
-from implc.render import View, render_voxels
-from implc.scene import load as load_scene
-from implc.view_server import ViewServer
-from implc.viewer import NotebookView, export, lod_chunks
+from implc.engines.morton import morton_codes
+from implc.files.scene import load as load_scene
+from implc.view.lod_chunks import CHUNK_LEVELS, HEADER_BYTES, LodChunks, decode_normals, encode_normals
+from implc.view.mesh_payload import MAGIC as MESH_MAGIC
+from implc.view.mesh_payload import MeshPayload
+from implc.view.page import NotebookView, export, lod_chunks
+from implc.view.render import View, render_voxels
+from implc.view.server import ViewServer
 
 CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run"]
@@ -95,7 +95,7 @@ def test_octahedral_normals_round_trip():
 def test_sections_are_the_solid_layers_at_each_level():
     """A section at the grid's depth is render.cross_section's layer (the cut-away PNG's); at a coarser
     level, the layer of the octree's nodes and inside entries there."""
-    from implc.render import cross_section
+    from implc.view.render import cross_section
     voxels, _ = _solid_torus()
     chunks = LodChunks(voxels)
     for axis, index in ((2, 64), (0, 40), (1, 100)):
@@ -203,7 +203,7 @@ def test_doubled_hosts_and_absolute_targets_are_refused(server):
 def test_clients_that_hang_up_or_stall_leave_no_traceback(server, capfd):
     """Clients that send half a request and leave, or leave before reading a chunk, cost nothing and print
     nothing; a stalled one holds no connection slot for ever (its socket times out)."""
-    import implc.view_server as view_server
+    import implc.view.server as view_server
     t, port = server.token, server.port
     for _ in range(50):
         _raw(server, f"GET /{t}/chunks/0-0-0-0.bin HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n".encode(),
@@ -220,7 +220,7 @@ def test_clients_that_hang_up_or_stall_leave_no_traceback(server, capfd):
 def test_connections_are_capped(flower):
     """The server's connection slots are the cap (what bounds the handlers running at once; the stalled
     clients' release is the read timeout, checked above)."""
-    import implc.view_server as view_server
+    import implc.view.server as view_server
     with ViewServer(flower[1], port=0).start() as s:
         assert s.httpd._slots._initial_value == view_server.MAX_CONNECTIONS
 
@@ -257,13 +257,13 @@ def test_the_cli_prints_its_url_serves_and_stops_on_ctrl_c(tmp_path):
     (["view"], "name a SCENE"),
 ])
 def test_bad_view_arguments_are_named(argv, words, capsys):
-    from implc.cli import main
+    from implc.cli.commands import main
     assert main(argv) == 2
     assert words in capsys.readouterr().err
 
 
 def test_a_taken_port_is_named(flower, capsys):
-    from implc.cli import main
+    from implc.cli.commands import main
     with ViewServer(flower[1], port=0) as taken:
         assert main(["view", "torus", "--depth", "5", "--quiet", "--no-browser", "--port", str(taken.port)]) == 2
     assert "cannot listen on 127.0.0.1" in capsys.readouterr().err
@@ -518,7 +518,7 @@ def test_a_mesh_shows_the_same_exported_and_inlined_and_a_mesh_file_is_framed_by
                                                                                             tmp_path):
     """export() and Mesh.show() give the served picture; 'implc view part.stl --export DIR' frames the file's
     own extent (a file carries no bounds) and shows every triangle."""
-    from implc.cli import main
+    from implc.cli.commands import main
     _, mesh, sc = torus_mesh
     payload = MeshPayload(mesh, view=sc.view)
     with ViewServer(payload, port=0).start() as s:
@@ -560,9 +560,9 @@ def test_a_mesh_too_large_for_a_notebook_is_refused_in_one_line(torus_mesh):
 
 
 def test_a_voxel_file_with_mesh_is_refused_and_a_surface_with_mesh_exports_a_mesh(tmp_path, capsys):
-    from implc.cli import main
+    from implc.cli.commands import main
     voxels, _ = _scene_voxels("torus", 5)
-    from implc import voxel_files
+    from implc.files import voxel_files
     voxel_files.save(voxels, tmp_path / "t.npz")
     assert main(["view", str(tmp_path / "t.npz"), "--mesh", "--export", str(tmp_path / "a")]) == 2
     assert "--mesh meshes a surface" in capsys.readouterr().err

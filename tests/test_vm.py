@@ -8,9 +8,9 @@ import pytest
 import implc
 from benchmarks import vm_sampling
 from implc import CompileError
-from implc.cli import main
-from implc.regions import plan_regions
-from implc.vm import VmError, parse_vm
+from implc.cli.commands import main
+from implc.compiler.vm import VmError, parse_vm
+from implc.engines.compiled.plan import plan_regions
 
 from .truth import corner_sign_changes
 
@@ -181,7 +181,7 @@ def test_cli_takes_a_vm_file(tmp_path, capsys):
     path.write_text(CSG)
     out = tmp_path / "csg.npz"
     assert main(["voxelize", str(path), "--depth", "5", "--quiet", "-o", str(out)]) == 0
-    from implc import voxel_files
+    from implc.files import voxel_files
     v = voxel_files.load_npz(out)
     assert v.bounds == ((-1.25, 1.25),) * 3 and len(v) > 0
     assert main(["info", str(path)]) == 0
@@ -203,7 +203,7 @@ def test_a_model_runs_without_importing_sympy(tmp_path):
     path.write_text(CSG)
     cli = [["mesh", str(path), "--depth", "4", "--quiet", "-o", str(tmp_path / "m.stl")],
            ["voxelize", str(path), "--depth", "4", "--quiet", "-o", str(tmp_path / "v.npz")]]
-    script = ("import sys, implc\nfrom implc.cli import main\n"
+    script = ("import sys, implc\nfrom implc.cli.commands import main\n"
               f"m = implc.load_vm({str(path)!r}); s = implc.compile(m)\n"
               "assert len(implc.voxelize(s, 5)) > 0 and len(implc.mesh(s, 5).faces) > 0\n"
               f"assert [main(argv) for argv in {cli!r}] == [0, 0]\n"

@@ -5,7 +5,8 @@ import pytest
 from plyfile import PlyData
 
 import implc
-from implc import shapes, voxel_files
+from implc import shapes
+from implc.files import voxel_files
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,8 @@ import sympy
 from sympy import Max, Min, Rational, cos, exp, log, sin, sqrt
 
 import implc
-from implc import phi, r, scene, shapes, theta, x, y, z
+from implc import phi, r, shapes, theta, x, y, z
+from implc.files import scene
 
 from .truth import corner_sign_changes
 
@@ -147,8 +148,8 @@ def test_octant_kernel_decides_as_the_interval_kernel_on_the_children(name, comp
     """implc_octant builds an octant's eight children in registers (and calls the C library once for
     children that differ only in axes a value does not depend on): its keep bits and child masks must be
     those of implc_interval on the same eight boxes."""
-    from implc import abi
-    from implc.subdivide import geometry
+    from implc.engines.walk import geometry
+    from implc.native import abi
     s = compiled[name]
     depth = 7
     geom = geometry(s.bounds, depth)
@@ -182,7 +183,7 @@ def test_octant_kernel_decides_as_the_interval_kernel_on_the_children(name, comp
 def test_tasks_larger_than_a_native_call_resume_and_grow(monkeypatch, compiled, options):
     """With room for only a few voxels per native call, tasks resume from their stack many times and their
     result arrays grow: the voxels must be the same."""
-    from implc import subdivide
+    from implc.engines import walk as subdivide
     s = compiled["paper_sin4_sin8"]
     expected = implc.voxelize(s, 7, workers=2, **options)
     monkeypatch.setattr(subdivide, "OUTPUT_CHUNK", 16)
@@ -355,7 +356,7 @@ def test_memory_is_checked_before_and_during_the_run():
 
 
 def test_worker_errors_reach_the_caller_and_no_thread_is_left(monkeypatch):
-    from implc.subdivide import Subdivider
+    from implc.engines.walk import Subdivider
     s = implc.compile(x**2 + y**2 + z**2 - Rational(1, 2))
     calls = {"n": 0}
     original = Subdivider._leaves  # the pass after each task's walk, in the worker
@@ -403,7 +404,7 @@ def test_the_assembled_octree_is_the_serial_one_for_every_worker_count(compiled,
     """The default octree (tasks' subtrees placed in order, filled in parallel) equals the tree built
     serially from the same voxels, for 1, 2 and 3 workers, with the arrays growing mid-run (a tiny first
     capacity) and on the tape engine; its coordinates come from the tree."""
-    from implc import voxelization
+    from implc.voxelizer import voxelize as voxelization
     if name == "csg_on_tape":
         surface = implc.compile(sympy.Min(x**2 + y**2 + z**2 - sympy.Rational(1, 4),
                                           sympy.Max(abs(x) - sympy.Rational(3, 5), abs(y) + abs(z) - 1)),
@@ -437,7 +438,7 @@ def test_the_default_keeps_at_most_ten_percent_spurious_voxels(name):
     """At 256³ the default keeps at most 1.10 voxels per sign-change cell (corners sampled by numpy through
     lambdify, not by implc), misses none, and keeps no more than the natural mode (measured: 1.00-1.03;
     the natural mode 1.00-4.54)."""
-    from implc.symbols import cartesian_form
+    from implc.compiler.symbols import cartesian_form
     if TIGHTNESS_CASES[name] is None:
         sc = scene.load(name)
         expr, bounds = sc.surface, sc.bounds

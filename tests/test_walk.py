@@ -1,4 +1,4 @@
-"""The subdivision walk is written once over an evaluator (implc.codegen.walk): a third evaluator, written here
+"""The subdivision walk is written once over an evaluator (implc.engines.walk_native): a third evaluator, written here
 in a few lines of IR for one ball (an Evaluator for the walk's code, a WalkEvaluator for the driver, nothing
 else), runs through the same walk and the same Python driver as the compiled kernels and the tape engine,
 and gives the voxels, the inside octants and the normals that the exact arithmetic of the ball and the two
@@ -14,12 +14,14 @@ from llvmlite import ir
 from sympy import Rational
 
 import implc
-from implc import abi, x, y, z
-from implc.codegen.control import I32, I64, Local, const, for_range, load_at, store_at
-from implc.codegen.walk import Evaluator, Walk, emit_walk
-from implc.jit import NativeModule
-from implc.morton import morton_codes
-from implc.subdivide import Subdivider, WalkEvaluator
+from implc import x, y, z
+from implc.compiler.llvm.control import I32, I64, Local, const, for_range, load_at, store_at
+from implc.engines.morton import morton_codes
+from implc.engines.rows_native import ROWS
+from implc.engines.walk import Subdivider, WalkEvaluator
+from implc.engines.walk_native import Evaluator, Walk, emit_walk
+from implc.native import abi
+from implc.native.jit import NativeModule
 
 DOUBLE = ir.DoubleType()
 RADIUS2 = 0.5  # x² + y² + z² - 1/2: at depth 5 on [-1, 1]³ every corner value is a multiple of 2^-8, exact
@@ -173,8 +175,8 @@ def test_drop_marked_keeps_the_unmarked_rows_in_order(solid):
     live-term masks, normals) moved down in their order, the flagged and marked counts added to the stats,
     and for a solid the rows marked INSIDE appended to the inside octants with the depth, after those
     already there; against numpy's selection of the same random rows."""
-    from implc.codegen.leaf_split import INSIDE, OUTSIDE
-    from implc.runtime import Runtime
+    from implc.engines.second_look_native import INSIDE, OUTSIDE
+    from implc.native.runtime import Runtime
     rng = np.random.default_rng(11)
     n = 10_007
     kinds = np.array([0, abi.TIGHTEN_ABOVE, abi.TIGHTEN_BELOW, OUTSIDE, INSIDE], np.int8)
@@ -185,7 +187,7 @@ def test_drop_marked_keeps_the_unmarked_rows_in_order(solid):
     before = coords.copy(), masks.copy(), normals.copy()
     inside = np.full((n + 3, abi.INSIDE_WORDS), -1, np.int32)
     inside_count, stats = np.array([3], np.int64), np.array([5, 7], np.int64)
-    kept = Runtime.shared().drop_marked(9, coords.ctypes.data, masks.ctypes.data, normals.ctypes.data,
+    kept = Runtime.shared().library(ROWS).drop_marked(9, coords.ctypes.data, masks.ctypes.data, normals.ctypes.data,
                                         flags.ctypes.data, n, inside.ctypes.data if solid else None,
                                         inside_count.ctypes.data, stats.ctypes.data)
     keep = (flags != OUTSIDE) & (flags != INSIDE)

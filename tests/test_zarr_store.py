@@ -1,4 +1,4 @@
-"""The Zarr store (implc.zarr_store) against the in-memory voxelization and numpy: its occupancy is the
+"""The Zarr store (implc.files.zarr_store) against the in-memory voxelization and numpy: its occupancy is the
 dense solid, each level of detail that occupancy pooled by numpy, its rows the voxels with their normals
 in Morton order; a region reads back what the voxels hold there; every shard has one writer; a stopped
 run leaves an incomplete store that readers refuse and that resume finishes without redoing its
@@ -12,9 +12,10 @@ import zarr
 from sympy import Max, Rational, sqrt
 
 import implc
-from implc import shapes, zarr_store
-from implc.cli import main
-from implc.symbols import x, y, z
+from implc import shapes
+from implc.cli.commands import main
+from implc.compiler.symbols import x, y, z
+from implc.files import zarr_store
 
 HOLLOW = Max(shapes.box((0.7, 0.7, 0.7)), -(sqrt(x**2 + y**2 + z**2) - Rational(3, 10)))
 TORUS = shapes.torus(Rational(3, 5), Rational(1, 4))
@@ -188,7 +189,7 @@ def test_a_store_with_damaged_or_forged_voxel_rows_is_one_line(tmp_path, capsys)
     decompressed to other rows, which a full read dropped in silence), rows rewritten with coordinates
     outside the grid, or an array's damaged metadata, are one line and exit 2 from implc render, and an
     error from voxel_files.load: no damaged row is read as a voxel. Found by fuzzing stores."""
-    from implc import voxel_files
+    from implc.files import voxel_files
     v = implc.voxelize(implc.compile(TORUS), 5, solid=True)
     for damage, message in (("chunk", "damaged implc Zarr store"), ("coords", "outside the bricks"),
                             ("metadata", "damaged implc Zarr store")):
@@ -227,7 +228,7 @@ def test_the_cli_checks_cluster_options_before_any_work(tmp_path, capsys):
 
 def test_render_and_info_read_a_store(tmp_path, capsys):
     """implc render draws a store as it draws the same voxels from an .npz (the same PNG, byte for byte)."""
-    from implc import voxel_files
+    from implc.files import voxel_files
     v = implc.voxelize(implc.compile(TORUS), 6, solid=True)
     voxel_files.save(v, tmp_path / "t.npz")
     voxel_files.save(v, tmp_path / "t.zarr")
@@ -242,7 +243,7 @@ def test_render_and_info_read_a_store(tmp_path, capsys):
 
 def test_view_exports_a_store_as_it_exports_the_voxels(tmp_path):
     """implc view --export of a store writes the same static viewer as of the same voxels in an .npz."""
-    from implc import voxel_files
+    from implc.files import voxel_files
     v = implc.voxelize(implc.compile(TORUS), 6)
     voxel_files.save(v, tmp_path / "t.npz")
     voxel_files.save(v, tmp_path / "t.zarr")
@@ -280,4 +281,4 @@ def test_a_write_abandoned_by_a_killed_worker_is_not_left_in_the_store(tmp_path,
     out = tmp_path / "torus.zarr"
     zarr_store.write_zarr(implc.compile(shapes.torus(0.5, 0.2)), 6, out, workers=1)
     assert litter and not (out / litter[0]).exists() and (out / litter[1]).exists()
-    assert len(implc.voxel_files.load(out)) > 0
+    assert len(implc.files.voxel_files.load(out)) > 0

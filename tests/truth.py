@@ -10,7 +10,7 @@ import numpy as np
 import sympy
 
 from benchmarks import vm_sampling
-from implc.symbols import cartesian_form, x, y, z
+from implc.compiler.symbols import cartesian_form, x, y, z
 
 DPS = 40
 TRUTH_SECONDS = 2.0

@@ -1,0 +1,7 @@
+"""The implc command."""
+
+from ..common.moved import forward
+
+
+def __getattr__(name: str):  # the 0.2 module implc.cli's names, for one release
+    return forward(__name__, ("commands",), name)

@@ -1,0 +1,2 @@
+"""Helpers every package shares: what implc reads from outside, outputs written under a temporary name, worker
+threads and bounds."""

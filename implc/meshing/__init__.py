@@ -1,0 +1,1 @@
+"""mesh() and Mesh: contouring the voxelized cells, simplification, mesh files."""

@@ -1,0 +1,97 @@
+"""The browser viewer's page: its assets (``implc/viewer_assets``: our HTML, CSS and WebGL2 script, no
+library), the chunks it reads (:mod:`implc.view.lod_chunks`) or the mesh (:mod:`implc.view.mesh_payload`), a static
+export of both, and a self-contained embed for notebooks (``Voxels.show()``, ``Mesh.show()``).
+
+The page reads ``meta.json`` and ``chunks/<level>-<i>-<j>-<k>.bin`` (or ``mesh.bin``) relative to itself, so
+the same files work behind :mod:`implc.view.server`, from any static file server (:func:`export`), or
+inlined in one HTML document (:func:`embed_html`, chunks as base64 up to a size, a mesh whole).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+
+from ..common.atomic_file import replacing, replacing_folder
+from .lod_chunks import LodChunks
+from .mesh_payload import MeshPayload
+
+ASSETS = Path(__file__).resolve().parent / "assets"
+ASSET_TYPES = {"index.html": "text/html; charset=utf-8", "viewer.js": "text/javascript; charset=utf-8",
+               "viewer.css": "text/css; charset=utf-8"}
+EMBED_BYTES = 24 << 20
+"""How many bytes of chunks a notebook embed carries by default (coarse levels first)."""
+
+
+def asset(name: str) -> bytes:
+    """One of the page's files, as shipped in the package."""
+    if name not in ASSET_TYPES:
+        raise KeyError(name)
+    return (ASSETS / name).read_bytes()
+
+
+def lod_chunks(voxels, name: str = "", view=None) -> LodChunks:
+    """The chunks of a voxelization (a :class:`~implc.voxelizer.voxelize.Voxels` or anything with Morton-ordered
+    coords, normals, depth and bounds)."""
+    return LodChunks(voxels, name=name, view=view)
+
+
+def export(chunks: LodChunks | MeshPayload, folder, *, budget: int = 1_000_000) -> Path:
+    """Write a static, self-contained viewer (index.html, its script and style, meta.json and every
+    chunk, or mesh.bin) into ``folder``, replacing it whole once complete."""
+    folder = Path(folder)
+    with replacing_folder(folder) as tmp:
+        for name in ASSET_TYPES:
+            (tmp / name).write_bytes(asset(name))
+        (tmp / "meta.json").write_bytes(chunks.meta_json(budget))
+        if isinstance(chunks, MeshPayload):
+            (tmp / "mesh.bin").write_bytes(chunks.body())
+            return folder
+        (tmp / "chunks").mkdir()
+        for level, i, j, k in chunks.chunk_ids():
+            (tmp / "chunks" / f"{level}-{i}-{j}-{k}.bin").write_bytes(chunks.chunk(level, i, j, k))
+    return folder
+
+
+def embed_html(chunks: LodChunks | MeshPayload, *, max_bytes: int = EMBED_BYTES, budget: int = 1_000_000) -> str:
+    """One HTML document holding the viewer and the coarsest chunks up to ``max_bytes`` (the finest
+    levels that fit are shown; nothing is fetched), or the whole mesh (refused beyond ``max_bytes``)."""
+    data: dict = {"meta": chunks.meta(budget)}
+    if isinstance(chunks, MeshPayload):
+        if chunks.size > max_bytes:
+            raise ValueError(f"this mesh takes {chunks.size / 2**20:.0f} MiB, more than the {max_bytes / 2**20:.0f} "
+                             "MiB a notebook view carries: mesh at a smaller depth, or raise max_bytes")
+        data["mesh"] = base64.b64encode(chunks.body()).decode("ascii")
+    else:
+        data["chunks"] = {f"{c[0]}-{c[1]}-{c[2]}-{c[3]}": base64.b64encode(chunks.chunk(*c) or b"").decode("ascii")
+                          for c in chunks.chunk_ids(max_bytes)}
+    page = asset("index.html").decode()
+    style = f"<style>{asset('viewer.css').decode()}</style>"
+    script = (f"<script>window.IMPLC_EMBED = {json.dumps(data).replace('</', '<' + chr(92) + '/')};</script>"
+              f"<script>{asset('viewer.js').decode()}</script>")
+    page = page.replace('<link rel="stylesheet" href="viewer.css">', style)
+    return page.replace('<script src="viewer.js"></script>', script)
+
+
+class NotebookView:
+    """What ``Voxels.show()`` and ``Mesh.show()`` return: a notebook displays it as the viewer in an iframe
+    (its document inlined, so no server and no second process)."""
+
+    def __init__(self, chunks: LodChunks | MeshPayload, *, height: int = 480, max_bytes: int = EMBED_BYTES,
+                 budget: int = 1_000_000):
+        self.document = embed_html(chunks, max_bytes=max_bytes, budget=budget)
+        self.height = height
+
+    def _repr_html_(self) -> str:
+        return (f'<iframe srcdoc="{html.escape(self.document, quote=True)}" '
+                f'style="width: 100%; height: {self.height}px; border: 0" '
+                f'sandbox="allow-scripts" title="implc viewer"></iframe>')
+
+    def save(self, path) -> Path:
+        """Write the self-contained document to ``path`` (an .html any browser opens)."""
+        path = Path(path)
+        with replacing(path) as tmp:
+            tmp.write_text(self.document, encoding="utf-8")
+        return path

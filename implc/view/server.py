@@ -1,0 +1,189 @@
+"""``implc view``'s local HTTP server: the viewer page and its chunks, to this machine only.
+
+It binds 127.0.0.1, answers only requests with exactly one Host header naming that address (or localhost)
+with its port (against DNS rebinding) and an origin-form target (``/TOKEN/...``, not
+``http://host/...``), and only under a random token that starts every path, as Jupyter's does
+(``http://127.0.0.1:PORT/TOKEN/``). A connection that sends nothing for :data:`READ_TIMEOUT` seconds is
+closed, at most :data:`MAX_CONNECTIONS` are served at once (others wait in the listen queue), and a client
+that hangs up early is forgotten without a traceback. Its routes are the page's files, ``meta.json``,
+``chunks/<level>-<i>-<j>-<k>.bin`` and ``sections/<axis>-<index>-<level>.bin`` (for a mesh, ``mesh.bin``
+instead), all served from memory:
+no file system path is ever read, anything
+else is 404 (a path with ``..`` or ``.`` segments, encoded or not, included), a missing or wrong token
+403, a foreign Host 403.
+"""
+
+from __future__ import annotations
+
+import re
+import secrets
+import sys
+import threading
+from http import HTTPStatus
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from urllib.parse import unquote, urlsplit
+
+from .lod_chunks import LodChunks
+from .mesh_payload import MeshPayload
+from .page import ASSET_TYPES, asset
+
+DEFAULT_PORT = 8765
+PORT_TRIES = 20
+READ_TIMEOUT = 10.0
+"""Seconds a connection may stay silent before it is closed (a slow client holds no thread for ever)."""
+MAX_CONNECTIONS = 32
+"""Connections served at once; more wait until one ends."""
+LISTEN_QUEUE = 128
+"""Connections the kernel queues before they are accepted (socketserver's default is 5): a burst beyond
+that, as a page fetching its chunks or many clients at once make, had each connection past the queue
+wait for TCP's retransmission of its SYN, a second or more."""
+CHUNK_PATH = re.compile(r"chunks/(\d{1,2})-(\d{1,7})-(\d{1,7})-(\d{1,7})\.bin")
+SECTION_PATH = re.compile(r"sections/(\d)-(\d{1,7})-(\d{1,2})\.bin")
+
+
+class ViewServer:
+    """Serves one voxelization's (or one mesh's) viewer; ``url`` carries the token. ``port=None`` takes the first free
+    port from :data:`DEFAULT_PORT` on, ``0`` any free port; a given port that is taken raises OSError."""
+
+    def __init__(self, chunks: LodChunks | MeshPayload, *, port: int | None = None, budget: int = 1_000_000):
+        self.chunks, self.token = chunks, secrets.token_urlsafe(24)
+        self.meta = chunks.meta_json(budget)
+        self.mesh = chunks.body() if isinstance(chunks, MeshPayload) else None
+        self.assets = {name: asset(name) for name in ASSET_TYPES}
+        handler = type("Handler", (_Handler,), {"owner": self})
+        candidates = [port] if port is not None else [DEFAULT_PORT + i for i in range(PORT_TRIES)] + [0]
+        for i, candidate in enumerate(candidates):
+            try:
+                self.httpd = _Server(("127.0.0.1", candidate), handler)
+                break
+            except OSError:
+                if i == len(candidates) - 1:
+                    raise
+        self.httpd.daemon_threads = True
+        self.port = self.httpd.server_address[1]
+        self.hosts = {f"127.0.0.1:{self.port}", f"localhost:{self.port}"}
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}/{self.token}/"
+
+    def serve_forever(self):
+        """Serve until :meth:`close` (from another thread) or Ctrl-C in this one."""
+        self.httpd.serve_forever(poll_interval=0.1)
+
+    def start(self) -> ViewServer:
+        """Serve from a daemon thread (notebooks, tests)."""
+        self._thread = threading.Thread(target=self.serve_forever, name="implc-view-server", daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self):
+        if self._thread is not None:
+            self.httpd.shutdown()
+            self._thread.join()
+            self._thread = None
+        self.httpd.server_close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def resource(self, rest: str) -> tuple[bytes, str] | None:
+        """The body and content type of a route below the token, or None (404)."""
+        if rest in ("", "index.html"):
+            return self.assets["index.html"], ASSET_TYPES["index.html"]
+        if rest in ASSET_TYPES:
+            return self.assets[rest], ASSET_TYPES[rest]
+        if rest == "meta.json":
+            return self.meta, "application/json"
+        if isinstance(self.chunks, MeshPayload):
+            return (self.mesh, "application/octet-stream") if rest == "mesh.bin" and self.mesh is not None else None
+        for pattern, make in ((CHUNK_PATH, self.chunks.chunk), (SECTION_PATH, self.chunks.section)):
+            match = pattern.fullmatch(rest)
+            if match:
+                body = make(*map(int, match.groups()))
+                return (body, "application/octet-stream") if body is not None else None
+        return None
+
+
+class _Server(ThreadingHTTPServer):
+    """One thread per connection, at most :data:`MAX_CONNECTIONS` at once; a client's hang-up is not an
+    error worth a traceback. The listen queue holds :data:`LISTEN_QUEUE` connections not yet accepted."""
+
+    request_queue_size = LISTEN_QUEUE
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._slots = threading.BoundedSemaphore(MAX_CONNECTIONS)
+
+    def process_request(self, request, client_address):
+        self._slots.acquire()
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self._slots.release()
+            raise
+
+    def process_request_thread(self, request, client_address):
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._slots.release()
+
+    def handle_error(self, request, client_address):
+        exc = sys.exc_info()[1]
+        if isinstance(exc, (ConnectionError, TimeoutError, OSError)):
+            return  # the client went away (or was too slow): nothing to report
+        super().handle_error(request, client_address)
+
+
+class _Handler(BaseHTTPRequestHandler):
+    owner: ViewServer
+    server_version = "implc-view"
+    sys_version = ""
+    protocol_version = "HTTP/1.1"
+    timeout = READ_TIMEOUT  # the socket's timeout: a silent client's connection is closed
+
+    def log_message(self, format, *args):  # noqa: A002 - the base class's name
+        pass
+
+    def _send(self, status: HTTPStatus, body: bytes, content_type: str = "text/plain; charset=utf-8"):
+        self.send_response(status)
+        self.send_header("Content-Type", content_type)
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("X-Content-Type-Options", "nosniff")
+        self.send_header("Referrer-Policy", "no-referrer")
+        self.send_header("Cache-Control", "no-store")
+        self.send_header("Content-Security-Policy", "default-src 'self'; img-src 'self' data:; frame-ancestors 'none'")
+        self.end_headers()
+        if self.command != "HEAD":
+            self.wfile.write(body)
+
+    def do_GET(self):
+        owner = self.owner
+        hosts = self.headers.get_all("Host") or []
+        if len(hosts) != 1 or hosts[0] not in owner.hosts:
+            return self._send(HTTPStatus.FORBIDDEN, b"this server answers only to 127.0.0.1\n")
+        if not self.path.startswith("/") or self.path.startswith("//"):  # absolute, authority or scheme-relative
+            return self._send(HTTPStatus.BAD_REQUEST, b"origin-form request targets only\n")
+        path = unquote(urlsplit(self.path).path)
+        segments = path.split("/")
+        if any(s in (".", "..") for s in segments) or "\\" in path or "\x00" in path:
+            return self._send(HTTPStatus.NOT_FOUND, b"not found\n")
+        if len(segments) < 2 or not secrets.compare_digest(segments[1].encode(), owner.token.encode()):
+            return self._send(HTTPStatus.FORBIDDEN, b"open the URL that 'implc view' printed: it carries a token\n")
+        if len(segments) == 2:  # /TOKEN: the page is at /TOKEN/
+            self.send_response(HTTPStatus.MOVED_PERMANENTLY)
+            self.send_header("Location", f"/{owner.token}/")
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+            return None
+        found = owner.resource("/".join(segments[2:]))
+        if found is None:
+            return self._send(HTTPStatus.NOT_FOUND, b"not found\n")
+        return self._send(HTTPStatus.OK, *found)
+
+    do_HEAD = do_GET

@@ -1,0 +1,1 @@
+"""voxelize() and Voxels: the walk's tasks gathered into storage backends (octree, grid, coordinates)."""
