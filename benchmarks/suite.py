@@ -32,6 +32,9 @@ PAPER_TABLE1 = {  # seconds on the SGI Challenge, 1..7 slaves (Stolte & Kaufman,
     "paper_sin4_sin8": [111, 58, 38, 31, 28, 24, 21],
     "paper_sin3_sin4": [71, 35, 23, 17, 16, 14, 11],
 }
+ORACLE = Path(__file__).resolve().parents[1] / "tests" / "support"
+"""Where numpy's run of .vm text lives (``vm_sampling``): the tests' independent truth, shared with the
+benchmarks' missed-cell counts."""
 
 
 # -- measuring -------------------------------------------------------------------------------------
@@ -239,7 +242,7 @@ def tightness(args, out):
     """Voxels per sign-change cell at the tightness depth, and CPU seconds at --depth with one worker
     (modes interleaved in each repeat, kernels compiled before the clock starts), for every scene and the
     peer models of --tightness-models (their cells counted by numpy on the .vm text)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    sys.path.insert(0, str(ORACLE))
     import vm_sampling
 
     cases = [(name, compiled(name), None) for name in args.tightness_scenes]
@@ -370,7 +373,7 @@ def models(args, out):
     chosen depths with all cores, live ops per octant, CPU time against Scene 1, and missed cells at 128³
     against numpy's run of the .vm text (:mod:`vm_sampling`). A model without z (prospero) is extruded:
     max(F(x, y), |z| − 1/10)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    sys.path.insert(0, str(ORACLE))
     import vm_sampling
 
     folder = Path(args.models_dir)
@@ -698,7 +701,7 @@ print(json.dumps({"sample_cpu_s": t1 - t0, "mc_cpu_s": t2 - t1, "triangles": len
 
 def mesh_surface(name, models_dir):
     """A scene's or peer model's compiled surface, its bounds and a numpy F of it (for the quality figures)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    sys.path.insert(0, str(ORACLE))
     import vm_sampling
     path = Path(models_dir) / f"{name}.vm"
     if path.is_file():

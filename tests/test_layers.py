@@ -218,3 +218,19 @@ def test_old_import_paths_warn_and_work():
     from implc.cli.commands import main as new_main
     from implc.cluster.tasks import connect as new_connect
     assert connect is new_connect and main is new_main
+
+
+def test_tests_follow_the_layout():
+    """tests/ mirrors the packages; no test module imports another or the benchmarks: what tests share is in
+    tests/support/."""
+    tests = ROOT / "tests"
+    for folder in (p for p in tests.iterdir() if p.is_dir() and p.name not in ("support", "__pycache__")):
+        assert (PACKAGE / folder.name / "__init__.py").is_file(), f"tests/{folder.name}/ mirrors no package"
+    for path in tests.rglob("test_*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                names = [node.module or ""] + [f"{node.module or ''}.{a.name}" for a in node.names]
+                assert not any(n.split(".")[-1].startswith("test_") or n.startswith("benchmarks") for n in names), \
+                    f"{path.relative_to(ROOT)} imports {node.module}"
+            elif isinstance(node, ast.Import):
+                assert not any(a.name.startswith(("benchmarks", "tests")) for a in node.names), path

@@ -31,7 +31,7 @@ from implc.files.vdb import describe_vdb
 from implc.meshing.triangle_mesh import MeshFileError
 from implc.meshing.triangle_mesh import load as load_mesh
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ from implc import shapes, x, y, z
 from implc.cli.commands import main
 from implc.files.scene import load as load_scene
 
-from .test_mesh import (
+from ..support.meshes import (
     BOX_BALL,
     SURFACES,
     assert_closed_manifold,

@@ -17,7 +17,7 @@ from implc.compiler.rounding import POWI_MAX
 from implc.compiler.symbols import phi, r, theta, x, y, z
 from implc.native.jit import host_has_avx512
 
-from .truth import adversarial_boxes, assert_encloses
+from ..support.truth import adversarial_boxes, assert_encloses
 
 LEAVES = st.sampled_from([x, y, z, r, theta, phi, sympy.Rational(1, 3), sympy.Integer(2), sympy.pi,
                           sympy.Rational(-5, 4), sympy.Float(0.1)])

@@ -8,7 +8,7 @@ import sympy
 import implc
 from implc import phi, r, theta
 
-from .truth import adversarial_boxes
+from ..support.truth import adversarial_boxes
 
 
 def grid_samples(lo, hi, n=17):

@@ -27,9 +27,9 @@ from implc.engines.surface import Grouping, choose_engine
 from implc.engines.tape import program as tape_program
 from implc.engines.tape.program import CHOICE_OPS, FIRST_BINARY, FIRST_TERNARY, OPCODES, encode, slot_scratch
 
-from .test_vm import CSG, interpret
-from .test_vm import sign_change_cells as vm_sign_change_cells
-from .truth import corner_sign_changes
+from ..support.models import CSG, ellipsoid, interpret, smooth_blend
+from ..support.models import sign_change_cells as vm_sign_change_cells
+from ..support.truth import corner_sign_changes
 
 
 def sampled_sign_changes(expr, bounds, depth):
@@ -312,25 +312,8 @@ def test_derivatives_along_directions_prove_a_crease_the_partials_cannot():
         s.gradient_enclosures(lo, hi, directions=np.eye(2))
 
 
-def ellipsoid(centre, axes, turn):
-    """An ellipsoid's implicit function: centre and semi-axes in tenths, turned by ``turn`` about z."""
-    (cx, cy, cz), (ax, ay, az) = ([Rational(v, 10) for v in t] for t in (centre, axes))
-    u = cos(turn) * (x - cx) - sin(turn) * (y - cy)
-    v = sin(turn) * (x - cx) + cos(turn) * (y - cy)
-    return sqrt((u / ax)**2 + (v / ay)**2 + ((z - cz) / az)**2) - 1
 
 
-def smooth_blend():
-    """Three rotated ellipsoids joined by log-sum-exp smooth minima (as fidget's bear is built): natural
-    enclosures of it are loose (each exp magnifies its argument's width) and its leaves' partials need a
-    few levels of splitting before they keep their sign."""
-    def smooth_min(a, b, k=11):
-        return -sympy.log(sympy.exp(-k * a) + sympy.exp(-k * b)) / k
-
-    body = ellipsoid((0, 0, 0), (5, 3, 3), Rational(1, 2))
-    arm = ellipsoid((4, 2, 1), (2, 4, 2), 1)
-    leg = ellipsoid((-4, 3, -1), (2.5, 1.7, 4), -Rational(3, 5))
-    return smooth_min(smooth_min(body, arm), leg)
 
 
 def test_the_engine_looks_below_the_leaves_of_a_smooth_blend():

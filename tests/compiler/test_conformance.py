@@ -55,7 +55,7 @@ from implc.engines.tape.program import OPCODES, unsupported_ops
 from implc.native import abi
 from implc.native.jit import host_has_avx512
 
-from .truth import TrueValues, adversarial_boxes, assert_encloses
+from ..support.truth import TrueValues, adversarial_boxes, assert_encloses
 
 # One or more expressions per op of the IR (the ids name the op they exercise).
 OP_CASES = {

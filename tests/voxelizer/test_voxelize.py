@@ -11,7 +11,7 @@ import implc
 from implc import phi, r, shapes, theta, x, y, z
 from implc.files import scene
 
-from .truth import corner_sign_changes
+from ..support.truth import corner_sign_changes
 
 SURFACES = {
     "paper_blobs": None, "paper_sin4_sin8": None, "paper_sin3_sin4": None,  # from scenes/

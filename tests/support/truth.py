@@ -9,8 +9,9 @@ import mpmath
 import numpy as np
 import sympy
 
-from benchmarks import vm_sampling
 from implc.compiler.symbols import cartesian_form, x, y, z
+
+from . import vm_sampling
 
 DPS = 40
 TRUTH_SECONDS = 2.0

@@ -457,7 +457,7 @@ def test_the_notebook_view_is_self_contained(browser, flower, tmp_path):
 def test_a_wheel_carries_the_page(tmp_path):
     """The page's files are package data: a built wheel holds them (and the viewer reads them there)."""
     import zipfile
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     done = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w",
                            str(tmp_path), root], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr

@@ -1,8 +1,6 @@
 """The implc command: every subcommand works, and every user error is one line on stderr with exit 2."""
 
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,11 +12,7 @@ import implc
 from implc.cli.commands import main
 from implc.files import scene, voxel_files
 
-
-def run(*argv):
-    """(exit status, stdout, stderr) of the command in a fresh process, as a user runs it."""
-    proc = subprocess.run([sys.executable, "-m", "implc", *argv], capture_output=True, text=True, timeout=300)
-    return proc.returncode, proc.stdout, proc.stderr
+from ..support.command import run
 
 
 def test_scenes_lists_every_scene_with_a_line(capsys):
@@ -125,7 +119,7 @@ def test_demo_writes_the_three_renders(tmp_path, capsys):
 
 
 def test_console_script_is_declared():
-    text = (Path(__file__).parent.parent / "pyproject.toml").read_text()
+    text = (Path(__file__).resolve().parents[2] / "pyproject.toml").read_text()
     assert 'implc = "implc.cli.commands:console"' in text  # main() for a process that ends when it returns
 
 

@@ -14,7 +14,7 @@ from implc.cli.commands import main
 from implc.compiler.symbols import cartesian_form
 from implc.engines import walk as subdivide_module
 
-from .test_tape_engine import smooth_blend
+from ..support.models import smooth_blend
 
 SPHERE = sqrt(x**2 + y**2 + z**2) - Rational(7, 10)
 TORUS = shapes.torus(Rational(3, 5), Rational(1, 4))

@@ -15,7 +15,7 @@ import implc
 from implc.cli.commands import main
 from implc.files import voxel_files
 
-from .test_cli import run
+from ..support.command import run
 
 SCENE_TEXT = {
     "string_surface.py": "surface = 'x**2 + y**2 - 1'\n",
