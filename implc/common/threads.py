@@ -16,7 +16,8 @@ MIN_CHUNK = 1 << 13
 """The fewest rows per native call of an entry point that costs a tenth of a microsecond a row or more
 (enclosures, the tape engine's grouped samples), where there are more: below :data:`CHUNK` such rows are
 shared out so that each thread gets several calls (:func:`chunk_rows`). F's samples on the compiled kernels
-(10-20 ns a row) keep :data:`CHUNK`: a call handed to a thread costs about 50 µs on a busy 2-core VM."""
+keep :data:`CHUNK`: handing a call to a thread costs more than such a call's rows
+(``implc bench --sections mesh`` measures the mesher's batches)."""
 CALLS_PER_CORE = 4
 """How many calls each thread gets where :data:`CHUNK` rows per call would give it fewer (several, so that
 a thread that finishes first takes another's share: the rows' costs differ)."""
@@ -44,8 +45,8 @@ def thread_count() -> int:
 
 
 _POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
-"""The thread pools :func:`in_parallel` keeps, by (process, threads): starting a pool's threads cost about
-0.3 ms a call, as much as sampling 40,000 points of Scene 1 (a forked child starts its own)."""
+"""The thread pools :func:`in_parallel` keeps, by (process, threads): starting a pool's threads on every call
+costs as much as a batch of samples (a forked child starts its own)."""
 _POOLS_LOCK = threading.Lock()
 
 

@@ -30,11 +30,10 @@ from ..native.runtime import Runtime
 from .rows_native import ROWS
 
 TASK_SPAN = 8
-"""Levels from a task's cell to its voxels at most, where the plan allows (a surface puts about 4^8 =
-65,536 voxels below a cell eight levels up). Smaller tasks keep fewer voxels waiting for their turn in
-finished tasks' buffers: at 2048³ on the paper's scenes, span 8 instead of 9 took 15-25% fewer page
-faults with two workers, and at 4096³ Scene 1 a 10% lower peak (1176 tasks instead of 272, the same
-wall time)."""
+"""Levels from a task's cell to its voxels at most, where the plan allows (a surface puts about 4^8 voxels
+below a cell eight levels up). Smaller tasks keep fewer voxels waiting for their turn in finished tasks'
+buffers: fewer page faults and a lower peak on fine grids, for the same wall time (``implc bench --sections
+scale`` measures both)."""
 MAX_TASK_LEVEL = 5
 """The deepest level a plan goes to (32³ cells: cheap whatever the grid)."""
 OUTPUT_CHUNK = 1 << 16

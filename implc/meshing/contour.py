@@ -56,9 +56,9 @@ EDGE_MARGIN = 1.0 / 256
 """How far inside its edge (as a fraction of the edge) a surface vertex is kept: no triangle degenerates."""
 ROOT_STEPS = 6
 """The most samples of F (with its gradient) that refine a surface vertex along its edge. Few edges need
-more than three (where F bends within a cell), and those few are the vertices furthest from F = 0: at 256³
-with three, Scene 2 had 2,850 vertices more than 0.05 of a cell from it (first order, |F| / |∇F|), colonnade
-752 and bear 137; with six 8, 1 and 3 (colonnade's furthest 0.24 -> 0.057 of a cell), for 1-5% more CPU."""
+more than three (where F bends within a cell), and those few are the vertices furthest from F = 0; six
+bring them within a few hundredths of a cell for a few percent more CPU (the "max distance" column of
+``implc bench --sections mesh``)."""
 ROOT_TOLERANCE = 1e-2
 """A surface vertex is done where Newton's step along its edge moves less than this fraction of the edge:
 the vertex takes that step (Newton converges quadratically: where F is smooth along the edge, its distance
