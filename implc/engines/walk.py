@@ -17,9 +17,11 @@ joined before the exception reaches the caller.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -103,14 +105,39 @@ def geometry(bounds, depth: int) -> np.ndarray:
     return geom
 
 
+@dataclass(frozen=True)
+class Buffers:
+    """The rows a task's buffers take: ``output_chunk`` free rows before each native call
+    (:data:`OUTPUT_CHUNK`), a task's reserve ``task_reserve`` times its usual voxels (:data:`TASK_RESERVE`).
+    The voxels are the same for every value (tests make them tiny, so that tasks resume and grow)."""
+
+    output_chunk: int = OUTPUT_CHUNK
+    task_reserve: int = TASK_RESERVE
+
+
+BUFFERS: ContextVar[Buffers] = ContextVar("implc_buffers", default=Buffers())
+"""The :class:`Buffers` a :class:`Subdivider` made in this context takes (:func:`buffers` sets them)."""
+
+
+@contextlib.contextmanager
+def buffers(sizes: Buffers) -> Iterator[None]:
+    """Within the block, voxelizations size their tasks' buffers by ``sizes``."""
+    token = BUFFERS.set(sizes)
+    try:
+        yield
+    finally:
+        BUFFERS.reset(token)
+
+
 class _TaskResult:
     """Reusable arrays for one finished task's voxels, written by the native subdivider in place: pooled,
     so that steady state allocates nothing (fresh pages are costly, and page faults from several threads
-    contend in the kernel)."""
+    contend in the kernel). ``chunk``: the free rows each native call gets."""
 
-    def __init__(self, reserve: int = OUTPUT_CHUNK):
+    def __init__(self, chunk: int, reserve: int = 0):
         self.count = 0
-        self._allocate(max(int(reserve), OUTPUT_CHUNK))
+        self.chunk = chunk
+        self._allocate(max(int(reserve), chunk))
         self.inside_count = 0  # a solid's inside octants (abi.INSIDE_WORDS int32 each), allocated on first use
         self.inside = np.empty((0, abi.INSIDE_WORDS), dtype=np.int32)
 
@@ -126,7 +153,7 @@ class _TaskResult:
         """The native subdividers' (inside, inside_capacity) arguments: NULL and 0 unless ``solid``."""
         if not solid:
             return None, 0
-        room = self.make_inside_room(max(OUTPUT_CHUNK // 4, 64))  # the native side needs 8 free rows
+        room = self.make_inside_room(max(self.chunk // 4, 64))  # the native side needs 8 free rows
         return self.inside.ctypes.data + 4 * abi.INSIDE_WORDS * self.inside_count, room
 
     def _allocate(self, size):
@@ -190,6 +217,7 @@ class Subdivider:
         self.surface = surface
         self.depth = depth
         self.workers = workers
+        self.buffers = BUFFERS.get()
         self.runtime = runtime
         self.max_voxels = max_voxels
         self.geom = geometry(surface.bounds, depth)
@@ -231,7 +259,7 @@ class Subdivider:
         w.state[abi.WALK_DEPTH] = depth
         w.state[abi.WALK_TASK_LEVEL] = level
         while True:
-            room = result.make_room(OUTPUT_CHUNK)
+            room = result.make_room(self.buffers.output_chunk)
             # the leaves' flags (and so the second look) only where the task reaches the leaves: never for
             # the plan's cells above them
             flags = result.flags_ptr + result.count if self.tightens and depth == self.depth else None
@@ -313,7 +341,7 @@ class Subdivider:
 
     def _below(self, cell, level: int, to_level: int) -> tuple[_Worker, _TaskResult]:
         """The subdivision of ``cell`` (at ``level``) down to ``to_level``: its worker and its cells."""
-        w, result = self._new_worker(to_level), _TaskResult()
+        w, result = self._new_worker(to_level), _TaskResult(self.buffers.output_chunk)
         self._run_task(w, cell, level, to_level, result)
         return w, result
 
@@ -371,7 +399,7 @@ class Subdivider:
         in_flight = threading.Semaphore(4 * self.workers)  # bounds finished-but-unstored results
         workers = [self._new_worker(self.depth) for _ in range(self.workers)]
         pool: list[_TaskResult] = []
-        reserve = min(TASK_RESERVE * 4 ** (self.depth - level), 1 << 22)
+        reserve = min(self.buffers.task_reserve * 4 ** (self.depth - level), 1 << 22)
 
         filled = [0]
 
@@ -429,7 +457,7 @@ class Subdivider:
                         in_flight.release()
                         return
                     with lock:
-                        result = pool.pop() if pool else _TaskResult(reserve)
+                        result = pool.pop() if pool else _TaskResult(self.buffers.output_chunk, reserve)
                     result.count = result.inside_count = 0
                     t0 = time.perf_counter()
                     self._run_task(w, cells[t], level, self.depth, result)

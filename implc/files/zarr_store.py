@@ -38,6 +38,8 @@ import re
 import shutil
 import tempfile
 import time
+from collections.abc import Iterator
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -81,16 +83,44 @@ if TYPE_CHECKING:
 
 FORMAT = 2
 """The store's layout version (1: implc 0.2's single occupancy array)."""
-CHUNK = 128  # 2 MiB of bool: zarr recommends chunks of 1 MB or more; 64³ made writing twice as slow
+CHUNK = 128
+"""The occupancy's chunk edge (2 MiB of bool: zarr recommends chunks of 1 MB or more, and smaller chunks
+write more slowly: ``implc bench --sections files`` measures the writers)."""
 SHARD = 256
 """A brick: the occupancy's shard edge, the unit the voxel rows are indexed by."""
 ROW_CHUNK = 1 << 16
-"""Rows per chunk of the voxel and octant lists (768 KiB of coordinates)."""
+"""Rows per chunk of the voxel and octant lists."""
 ROW_SHARD = 1 << 20
 """Rows per shard of those lists: each written by one task."""
 CLIENT_LEVELS = 3
 """The levels of detail up to three below the task level are small (8³ cells per task at most) and
 written whole by the caller from each task's block; finer ones by the tasks, shard by shard."""
+
+
+@dataclass(frozen=True)
+class Sizes:
+    """A store's chunk and shard sizes (the defaults above); the store holds the same voxels for every
+    value, and records its own (tests make them small, so that one grid has many bricks and shards)."""
+
+    shard: int = SHARD
+    chunk: int = CHUNK
+    row_chunk: int = ROW_CHUNK
+    row_shard: int = ROW_SHARD
+    client_levels: int = CLIENT_LEVELS
+
+
+SIZES: ContextVar[Sizes] = ContextVar("implc_zarr_sizes", default=Sizes())
+"""The :class:`Sizes` a store written in this context takes (:func:`sizes` sets them)."""
+
+
+@contextlib.contextmanager
+def sizes(chosen: Sizes) -> Iterator[None]:
+    """Within the block, stores are written with the chunk and shard sizes ``chosen``."""
+    token = SIZES.set(chosen)
+    try:
+        yield
+    finally:
+        SIZES.reset(token)
 
 
 @dataclass(frozen=True)
@@ -101,6 +131,9 @@ class Layout:
     solid: bool
     brick: int
     chunk: int
+    row_chunk: int = ROW_CHUNK
+    row_shard: int = ROW_SHARD
+    client_levels: int = CLIENT_LEVELS
 
     @property
     def brick_level(self) -> int:
@@ -115,7 +148,7 @@ class Layout:
     @property
     def client_level(self) -> int:
         """The finest level of detail the caller writes (0: none)."""
-        return min(self.task_level + CLIENT_LEVELS, self.depth - 1)
+        return min(self.task_level + self.client_levels, self.depth - 1)
 
     def lod_shard(self, level: int) -> int:
         """The shard edge of level of detail ``level`` (> :attr:`client_level`): one task's at most."""
@@ -123,8 +156,10 @@ class Layout:
 
     @classmethod
     def of(cls, depth: int, bounds, solid: bool) -> Layout:
-        brick = min(SHARD, 1 << depth)
-        return cls(depth, tuple(tuple(map(float, b)) for b in bounds), bool(solid), brick, min(CHUNK, brick))
+        chosen = SIZES.get()
+        brick = min(chosen.shard, 1 << depth)
+        return cls(depth, tuple(tuple(map(float, b)) for b in bounds), bool(solid), brick, min(chosen.chunk, brick),
+                   chosen.row_chunk, chosen.row_shard, chosen.client_levels)
 
     def describe(self) -> dict:
         """What the store's attributes record of the layout."""
@@ -183,7 +218,7 @@ def _create(folder: Path, layout: Layout, plan: dict) -> Any:
     for level in range(1, layout.depth):
         edge = 1 << level
         if level <= layout.client_level:
-            group.create_array(f"lod/{level}", shape=(edge,) * 3, chunks=(min(CHUNK, edge),) * 3, dtype="bool",
+            group.create_array(f"lod/{level}", shape=(edge,) * 3, chunks=(min(layout.chunk, edge),) * 3, dtype="bool",
                                fill_value=False, compressors=_compressors())
         else:
             shard = layout.lod_shard(level)
@@ -395,7 +430,7 @@ def _write_rows(folder: str, family: str, shard: int, spans: list) -> int:
     names = ("voxels/coords", "voxels/normals") if family == "voxels" else ("inside/octants",)
     members = ("coords", "normals") if family == "voxels" else ("octants",)
     arrays: list[Any] = [group[name] for name in names]
-    rows = arrays[0].shards[0]  # the caller's ROW_SHARD, as the array records it
+    rows = arrays[0].shards[0]  # the layout's row shard, as the array records it
     lo = shard * rows
     hi = min(lo + rows, arrays[0].shape[0])
     blocks = [np.empty((hi - lo,) + a.shape[1:], a.dtype) for a in arrays]
@@ -545,29 +580,30 @@ def _finish(folder: Path, layout: Layout, summaries: list[dict], client: Any, th
         total = int(sum(counts))
         if family == "voxels":
             for name, dtype in (("voxels/coords", "uint32"), ("voxels/normals", "float32")):
-                group.create_array(name, shape=(total, 3), chunks=(ROW_CHUNK, 3), shards=(ROW_SHARD, 3),
+                group.create_array(name, shape=(total, 3), chunks=(layout.row_chunk, 3), shards=(layout.row_shard, 3),
                                    dtype=dtype, fill_value=0, overwrite=True, compressors=_compressors())
         else:
-            group.create_array("inside/octants", shape=(total, 4), chunks=(ROW_CHUNK, 4), shards=(ROW_SHARD, 4),
+            group.create_array("inside/octants", shape=(total, 4), chunks=(layout.row_chunk, 4),
+                               shards=(layout.row_shard, 4),
                                dtype="int32", fill_value=0, overwrite=True,
                                compressors=_compressors())
         starts = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)])
-        for shard in range(math.ceil(total / ROW_SHARD)):
-            lo, hi = shard * ROW_SHARD, min(total, (shard + 1) * ROW_SHARD)
+        for shard in range(math.ceil(total / layout.row_shard)):
+            lo, hi = shard * layout.row_shard, min(total, (shard + 1) * layout.row_shard)
             spans = [(summaries[t]["task"], int(starts[t]), int(counts[t])) for t in range(len(summaries))
                      if counts[t] and starts[t] < hi and starts[t] + counts[t] > lo]
             rows_tasks.append((family, shard, spans))
     run_tasks(client, _write_rows, rows_tasks, shared=(str(folder),), name="implc-rows", threads=threads)
     bricks_all = np.concatenate(bricks) if bricks else np.empty((0, 3), np.int32)
-    _small(group, "bricks", bricks_all.reshape(-1, 3).astype(np.int32))
+    _small(group, layout, "bricks", bricks_all.reshape(-1, 3).astype(np.int32))
     for name, counts in (("voxels/rows", voxel_counts), ("inside/rows", octant_counts)):
         if name.startswith("inside") and not layout.solid:
             continue
         flat = np.concatenate(counts) if counts else np.empty(0, np.int64)
-        _small(group, name, np.concatenate([[0], np.cumsum(flat, dtype=np.int64)]).astype(np.int64))
+        _small(group, layout, name, np.concatenate([[0], np.cumsum(flat, dtype=np.int64)]).astype(np.int64))
     if layout.solid:
         rows = np.concatenate(coarse) if coarse else np.empty((0, 4), np.int32)
-        _small(group, "inside/coarse", rows[np.argsort(_octant_keys(rows, layout.depth), kind="stable")]
+        _small(group, layout, "inside/coarse", rows[np.argsort(_octant_keys(rows, layout.depth), kind="stable")]
                .astype(np.int32).reshape(-1, 4))
     if layout.client_level >= 1:  # the coarse levels of detail, from each task's block
         edge = 1 << (layout.client_level - layout.task_level)
@@ -603,9 +639,9 @@ def _remove_abandoned_writes(folder: Path) -> None:
             path.unlink(missing_ok=True)
 
 
-def _small(group, name: str, array: np.ndarray) -> None:
+def _small(group, layout: Layout, name: str, array: np.ndarray) -> None:
     """A small array written whole by the caller."""
-    group.create_array(name, shape=array.shape, chunks=(max(1, min(len(array), ROW_SHARD)),) + array.shape[1:],
+    group.create_array(name, shape=array.shape, chunks=(max(1, min(len(array), layout.row_shard)),) + array.shape[1:],
                        dtype=array.dtype, fill_value=0, overwrite=True, compressors=_compressors())[...] = array
 
 

@@ -184,7 +184,7 @@ def emit_kuhn_triangles(module: ir.Module):
 
     ``tables``: the cell's 19 edges' lower corners (19) and codes (19), then per sign case of the cell (256)
     its triangles in the order of the six tetrahedra: their count, then each one's three edges as rows of
-    the 19 (see :func:`implc.meshing.contour._kuhn_cases`). Each vertex key ((corner key × 8 + code) × 8) is
+    the 19 (see :func:`implc.meshing.tables._kuhn_cases`). Each vertex key ((corner key × 8 + code) × 8) is
     numbered through the index once per cell; faces get three numbers per triangle, owner the cell's row.
     state[0]: keys in the index, state[1]: triangles written. Stops before a cell when the index holds
     ``limit`` keys or more; returns the cells done."""
@@ -241,7 +241,7 @@ def emit_fan_triangles(module: ir.Module):
     diagonal). Per cell: ``lowest`` its lowest corner key, ``cellkey`` its cell key, ``signs`` a byte (bit c
     set where F < 0 at corner c), ``cell_in`` one (at the cell point), ``face_in`` and ``split`` six (per face: F < 0 at
     its face point, whether it is fanned from it). ``offsets``: the 8 corners' key offsets. ``tables``: see
-    :data:`implc.native.abi.FAN_TABLES` (built by :func:`implc.meshing.contour._fan_face_tables`). A vertex key is
+    :data:`implc.native.abi.FAN_TABLES` (built by :func:`implc.meshing.tables._fan_face_tables`). A vertex key is
     one of
     (kind, local, code): grid edge ((lowest + offsets[local]) × 8 + code) × 8; face corner (face id × 4 +
     local) × 8 + 1, the face id (lowest + offsets[face's corner]) × 3 + axis; cell corner (cellkey × 8 +

@@ -48,13 +48,13 @@ class Mesh:
         return len(self.faces)
 
     # -- measures ---------------------------------------------------------------------------------
-    def _corner_columns(self):
-        """Per chunk of :data:`MEASURE_ROWS` triangles, their corners' coordinates as nine contiguous columns
+    def _corner_columns(self, rows: int = MEASURE_ROWS):
+        """Per chunk of ``rows`` triangles (:data:`MEASURE_ROWS`), their corners' coordinates as nine contiguous columns
         ((ax, ay, az), (bx, by, bz), (cx, cy, cz)): gathered from the vertices' columns, no (F, 3, 3) array
         (np.cross on those took 1.2 s of a 3-million-triangle mesh's volume)."""
         columns = [np.ascontiguousarray(self.vertices[:, axis]) for axis in range(3)]
-        for start in range(0, len(self.faces), MEASURE_ROWS):
-            part = self.faces[start:start + MEASURE_ROWS]
+        for start in range(0, len(self.faces), rows):
+            part = self.faces[start:start + rows]
             yield [[np.take(column, part[:, k]) for column in columns] for k in range(3)]
 
     @property
@@ -67,6 +67,15 @@ class Mesh:
     def volume(self) -> float:
         """The signed volume enclosed (divergence theorem): positive for a closed mesh oriented outward."""
         return math.fsum(_six_volumes(a, b, c) for a, b, c in self._corner_columns()) / 6
+
+    def measures(self, rows: int = MEASURE_ROWS) -> tuple[float, float]:
+        """(:attr:`area`, :attr:`volume`) in one pass, summed ``rows`` triangles at a time (exactly rounded sums
+        of the chunks' sums: the same to rounding for any ``rows``)."""
+        areas, volumes = [], []
+        for a, b, c in self._corner_columns(rows):
+            areas.append(float(np.sqrt(_doubled_area_squared(a, b, c)).sum()))
+            volumes.append(_six_volumes(a, b, c))
+        return math.fsum(areas) / 2, math.fsum(volumes) / 6
 
     def check(self) -> dict:
         """Counted facts about the mesh, each 0 for a closed, oriented, edge-manifold mesh without

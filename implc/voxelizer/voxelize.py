@@ -24,7 +24,7 @@ from ..meshing.simplify import check_tolerance
 from ..meshing.triangle_mesh import Mesh
 from ..native import big_arrays
 from .storage import bytes_per_voxel, make_backend
-from .storage.grid import dense_bytes
+from .storage.dense import dense_bytes
 from .storage.octree import Octree, OctreeAssembly, OctreeBuilder
 from .storage.octree_native import OCTREE_INDEX
 

@@ -26,6 +26,7 @@ from implc.engines.second_look_native import OUTSIDE
 from implc.engines.surface import Grouping, choose_engine
 from implc.engines.tape import program as tape_program
 from implc.engines.tape.program import CHOICE_OPS, FIRST_BINARY, FIRST_TERNARY, OPCODES, encode, slot_scratch
+from implc.engines.walk import Buffers, buffers
 
 from ..support.models import CSG, ellipsoid, interpret, smooth_blend
 from ..support.models import sign_change_cells as vm_sign_change_cells
@@ -119,11 +120,11 @@ def test_pruning_shortens_the_program_below_decided_octants():
     assert unpruned.stats.interval_evaluations == v.stats.interval_evaluations
 
 
-def test_a_task_resumes_when_its_output_is_full(monkeypatch):
+def test_a_task_resumes_when_its_output_is_full():
     s = implc.compile(nested_scene(), engine="tape")
     expected = implc.voxelize(s, 7, workers=2)
-    monkeypatch.setattr(subdivide_module, "OUTPUT_CHUNK", 16)
-    chunked = implc.voxelize(s, 7, workers=2)
+    with buffers(Buffers(output_chunk=16)):
+        chunked = implc.voxelize(s, 7, workers=2)
     np.testing.assert_array_equal(chunked.coords, expected.coords)
     np.testing.assert_array_equal(chunked.normals, expected.normals)
     assert chunked.stats.kept_per_level == expected.stats.kept_per_level
@@ -135,15 +136,14 @@ def test_a_task_whose_buffers_grow_keeps_its_second_look(monkeypatch):
     may), so its voxels are those of a task that never grew, none of them dropped unproven."""
     s = implc.compile(smooth_blend(), engine="tape")
     expected = implc.voxelize(s, 7, storage="coords", workers=1)
-    monkeypatch.setattr(subdivide_module, "OUTPUT_CHUNK", 16)
-    monkeypatch.setattr(subdivide_module, "TASK_RESERVE", 0)  # every task starts with 16 rows and grows
 
     def stale(shape, dtype):
         array = np.empty(shape, dtype)
         array.view(np.uint8)[...] = OUTSIDE
         return array
     monkeypatch.setattr(subdivide_module.big_arrays, "empty", stale)
-    grown = implc.voxelize(s, 7, storage="coords", workers=1)
+    with buffers(Buffers(output_chunk=16, task_reserve=0)):  # every task starts with 16 rows and grows
+        grown = implc.voxelize(s, 7, storage="coords", workers=1)
     np.testing.assert_array_equal(grown.coords, expected.coords)
     assert grown.stats.tightened == expected.stats.tightened
 

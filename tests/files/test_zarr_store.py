@@ -15,7 +15,7 @@ import implc
 from implc import shapes
 from implc.cli.commands import main
 from implc.compiler.symbols import x, y, z
-from implc.files import zarr_store
+from implc.files import voxel_files, zarr_store
 
 HOLLOW = Max(shapes.box((0.7, 0.7, 0.7)), -(sqrt(x**2 + y**2 + z**2) - Rational(3, 10)))
 TORUS = shapes.torus(Rational(3, 5), Rational(1, 4))
@@ -34,15 +34,12 @@ def pooled(dense: np.ndarray, level: int) -> np.ndarray:
 
 
 @pytest.fixture
-def small_bricks(monkeypatch):
+def small_bricks():
     """Bricks of 8³ (chunks 4³), row shards of 4096 rows, the caller writing only the levels of detail
     up to one below the tasks': a 64³ grid has many bricks, tasks holding several, row shards spanning
     several tasks, and levels of detail written by the tasks."""
-    monkeypatch.setattr(zarr_store, "CLIENT_LEVELS", 1)
-    monkeypatch.setattr(zarr_store, "SHARD", 8)
-    monkeypatch.setattr(zarr_store, "CHUNK", 4)
-    monkeypatch.setattr(zarr_store, "ROW_CHUNK", 1024)
-    monkeypatch.setattr(zarr_store, "ROW_SHARD", 4096)
+    with zarr_store.sizes(zarr_store.Sizes(shard=8, chunk=4, row_chunk=1024, row_shard=4096, client_levels=1)):
+        yield
 
 
 @pytest.mark.parametrize("solid", [True, pytest.param(False, marks=pytest.mark.slow)], ids=["solid", "shell"])
@@ -281,4 +278,4 @@ def test_a_write_abandoned_by_a_killed_worker_is_not_left_in_the_store(tmp_path,
     out = tmp_path / "torus.zarr"
     zarr_store.write_zarr(implc.compile(shapes.torus(0.5, 0.2)), 6, out, workers=1)
     assert litter and not (out / litter[0]).exists() and (out / litter[1]).exists()
-    assert len(implc.files.voxel_files.load(out)) > 0
+    assert len(voxel_files.load(out)) > 0

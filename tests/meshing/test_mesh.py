@@ -27,9 +27,11 @@ from implc import x, y, z
 from implc.cli.commands import main
 from implc.compiler.symbols import cartesian_form
 from implc.compiler.vm import parse_vm
+from implc.files import voxel_files
 from implc.files.scene import load as load_scene
-from implc.meshing import contour as contour_module
+from implc.meshing.contour import contour
 from implc.meshing.contour_native import CONTOURING
+from implc.meshing.proofs import DIAGONALS
 from implc.meshing.triangle_mesh import Mesh, is_mesh_file
 
 from ..support import vm_sampling
@@ -88,9 +90,12 @@ def vm_f(text):
 
 
 
-def check_mesh(surface, depth, f, solid_voxels=None):
+def check_mesh(surface, depth, f, solid_voxels=None, effort=None):
+    """The mesh of ``surface`` at ``depth`` (contoured with ``effort`` where given), checked against ``f``
+    (F by numpy): closed, manifold, every vertex on a sign change, the volume within the voxels' bounds."""
     voxels = implc.voxelize(surface, depth, solid=solid_voxels is None or solid_voxels)
-    mesh = voxels.mesh(witnesses=True)
+    mesh = (voxels.mesh(witnesses=True) if effort is None
+            else contour(surface, voxels.coords, voxels.depth, voxels.bounds, witnesses=True, effort=effort))
     assert_closed_manifold(mesh)
     assert_vertices_on_sign_changes(mesh, f, surface.bounds, depth, voxels.coords)
     assert_volume_within(mesh, *voxels.volume_bounds())
@@ -208,7 +213,7 @@ def test_the_qef_point_is_where_the_planes_meet_and_the_mean_where_they_do_not_c
     (a crease) at the point of their line nearest the points' mean; one plane at the mean's projection on
     it; a face's 2D QEF (an axis projected out) keeps the mean's coordinate on that axis. Masked-out rows
     carry garbage that must not count."""
-    from implc.meshing.contour import _qef
+    from implc.meshing.features import _qef
     from implc.native.runtime import Runtime
 
     rng = np.random.default_rng(7)
@@ -259,7 +264,7 @@ def test_vertices_lie_on_a_ball_and_their_normals_are_its_normals_near_them(dept
     the edge (measured: up to 0.49 of that); or, where the root
     lies within EDGE_MARGIN of an edge's end, at that margin. Its normal is the sphere's normal at a point at
     most ROOT_TOLERANCE of the edge away (within that distance over r, in radians)."""
-    from implc.meshing.contour import EDGE_MARGIN, NUDGE, ROOT_TOLERANCE
+    from implc.meshing.vertices import EDGE_MARGIN, NUDGE, ROOT_TOLERANCE
     r = np.sqrt(0.5)
     mesh = implc.voxelize(implc.compile(x**2 + y**2 + z**2 - sympy.Rational(1, 2)), depth).mesh(witnesses=True)
     rows, length, t = edge_parameters(mesh)
@@ -277,7 +282,7 @@ def test_vertices_lie_on_a_ball_and_their_normals_are_its_normals_near_them(dept
 def test_a_face_on_a_grid_plane_keeps_its_vertices_at_the_edges_margin():
     """A box whose face x = 1/2 lies on a plane of the grid (F = 0 at those corners, taken as outside): every
     vertex of that face lies at the margin of its edge next to the plane, however the root search went."""
-    from implc.meshing.contour import EDGE_MARGIN, NUDGE
+    from implc.meshing.vertices import EDGE_MARGIN, NUDGE
     box = sympy.Max(sympy.Abs(x) - sympy.Rational(1, 2), sympy.Abs(y) - sympy.Rational(2, 5),
                     sympy.Abs(z) - sympy.Rational(3, 10))
     mesh = implc.voxelize(implc.compile(box), 6).mesh(witnesses=True)
@@ -290,7 +295,7 @@ def test_a_face_on_a_grid_plane_keeps_its_vertices_at_the_edges_margin():
 
 # -- the native pieces ------------------------------------------------------------------------------------
 def test_the_key_index_numbers_keys_in_first_seen_order_as_it_grows():
-    from implc.meshing.contour import _KeyIndex
+    from implc.meshing.grid import KeyIndex as _KeyIndex
     from implc.native.runtime import Runtime
     rng = np.random.default_rng(3)
     keys = rng.integers(0, 1 << 40, 50_000) * 1_000_003 % (1 << 50)
@@ -392,23 +397,23 @@ def test_a_plane_through_grid_corners_brackets_its_exact_zeros(engine):
 
 
 @pytest.mark.parametrize("name", ["paper_blobs", "vm"])
-def test_the_same_mesh_for_every_worker_count(name, monkeypatch):
+def test_the_same_mesh_for_every_worker_count(name):
     """The mesh does not depend on how many threads make it: with calls of 64 rows (so that the samples,
     the enclosures and the tape engine's groups are shared out over the threads even at 64³), one, two and
     three workers give the same vertices, faces and normals, bit for bit."""
-    from implc.common import threads as threads_module
+    from implc.common.threads import fewest_rows
 
-    monkeypatch.setattr(threads_module, "MIN_CHUNK", 64)
     if name == "vm":
         s = implc.compile(parse_vm(CSG, name="csg"), engine="tape")
     else:
         sc = load_scene(name)
         s = implc.compile(sc.surface, sc.bounds)
-    one = implc.mesh(s, 6, workers=1)
-    for workers in (2, 3):
-        other = implc.mesh(s, 6, workers=workers)
-        assert np.array_equal(one.vertices, other.vertices) and np.array_equal(one.faces, other.faces)
-        assert np.array_equal(one.normals, other.normals)
+    with fewest_rows(64):
+        one = implc.mesh(s, 6, workers=1)
+        for workers in (2, 3):
+            other = implc.mesh(s, 6, workers=workers)
+            assert np.array_equal(one.vertices, other.vertices) and np.array_equal(one.faces, other.faces)
+            assert np.array_equal(one.normals, other.normals)
 
 
 def test_contouring_runs_on_the_threads_it_is_given(monkeypatch):
@@ -458,15 +463,14 @@ def test_vertices_and_corners_done_in_chunks_keep_every_promise(name, monkeypatc
     memory follows the chunk): with chunks of 97 (creases fanned from cell and face points, caps on the
     bounds, the tape engine's grouped samples all cut across chunks) the mesh passes every check, and is
     the mesh made in one chunk."""
-    from implc.meshing import contour
+    from implc.meshing.grid import Effort
 
     s, f = surface_and_f(name)
     whole = implc.voxelize(s, 5, solid=True).mesh(witnesses=True)
     assert whole.stats.feature_cells > 0 or name == "heightfield"
     assert whole.stats.cap_triangles > 0 or name != "heightfield"
     assert len(whole.vertices) > 10 * 97
-    monkeypatch.setattr(contour, "VERTEX_CHUNK", 97)
-    chunked = check_mesh(s, 5, f)
+    chunked = check_mesh(s, 5, f, effort=Effort(vertex_chunk=97))
     for a, b in ((whole.vertices, chunked.vertices), (whole.faces, chunked.faces), (whole.normals, chunked.normals),
                  (whole.witnesses, chunked.witnesses)):
         assert np.array_equal(a, b)
@@ -498,12 +502,12 @@ def test_key_indexes_grown_from_their_smallest_give_the_same_mesh(name, monkeypa
     grows as the native routines fill it (they stop before a cell when it is full, and go on after it is
     rehashed: the corners' numbering, the Kuhn split, the fans): the mesh passes every check and is, bit for
     bit, the mesh made with indexes sized in advance (keys keep the numbers they were first given)."""
-    from implc.meshing import contour
+    from implc.meshing.grid import KeyIndex
 
     s, f = surface_and_f(name)
     sized = implc.voxelize(s, 5, solid=True).mesh(witnesses=True)
     grows = []
-    original_init, original_grow = contour._KeyIndex.__init__, contour._KeyIndex._grow
+    original_init, original_grow = KeyIndex.__init__, KeyIndex._grow
 
     def smallest(self, runtime, expected):
         original_init(self, runtime, 1)
@@ -512,8 +516,8 @@ def test_key_indexes_grown_from_their_smallest_give_the_same_mesh(name, monkeypa
         grows.append(self.count)
         original_grow(self)
 
-    monkeypatch.setattr(contour._KeyIndex, "__init__", smallest)
-    monkeypatch.setattr(contour._KeyIndex, "_grow", grow)
+    monkeypatch.setattr(KeyIndex, "__init__", smallest)
+    monkeypatch.setattr(KeyIndex, "_grow", grow)
     grown = check_mesh(s, 5, f)
     assert len(grows) >= 3, grows
     for a, b in ((sized.vertices, grown.vertices), (sized.faces, grown.faces), (sized.normals, grown.normals),
@@ -578,25 +582,25 @@ def test_faces_of_the_bounds_proven_outside_are_not_sampled_unless_a_contoured_c
     its sign over it); where the cells the samples' signs add reach such a face after all (here: contouring
     from half the kept cells, the surface running on to the face), it is sampled then and capped: the same
     closed mesh as from every kept cell."""
-    from implc.meshing import contour as contour_module
+    from implc.meshing.grid import Grid
     s = implc.compile(sympy.Rational(1, 10) - y + x**2 / 8, ((-1, 1),) * 3)  # the solid y > 0.1 + x²/8
     depth = 4
     voxels = implc.voxelize(s, depth)
     sampled = []
-    original = contour_module._Grid.face_values
+    original = Grid.face_values
 
     def face_values(grid, axis, side, keys):  # a face's values are sampled on its first call, then kept
         if (axis, side) not in grid._faces:
             sampled.append((axis, side))
         return original(grid, axis, side, keys)
 
-    monkeypatch.setattr(contour_module._Grid, "face_values", face_values)
+    monkeypatch.setattr(Grid, "face_values", face_values)
     whole = voxels.mesh()
     assert (1, 0) not in sampled and sorted(sampled) == [(0, 0), (0, 1), (1, 1), (2, 0), (2, 1)]
     assert_closed_manifold(whole)
     sampled.clear()
     half = voxels.coords[voxels.coords[:, 0] < 1 << (depth - 1)]  # none on the face x = 1
-    mesh = contour_module.contour(s, half, depth)
+    mesh = contour(s, half, depth)
     assert (0, 1) in sampled and (1, 0) not in sampled
     assert mesh.stats.added_cells > 0
     assert_closed_manifold(mesh)
@@ -619,8 +623,8 @@ def test_caps_merge_inside_squares_into_fans_and_stay_closed(monkeypatch):
     expr, bounds = SURFACES["heightfield"]
     surface = implc.compile(expr, bounds)
     merged = check_mesh(surface, 6, numpy_f(expr))
-    from implc.meshing import contour as contour_module
-    monkeypatch.setattr(contour_module, "_cap_blocks", lambda whole: ([], np.zeros_like(whole)))
+    from implc.meshing import caps
+    monkeypatch.setattr(caps, "_cap_blocks", lambda whole: ([], np.zeros_like(whole)))
     square_by_square = implc.mesh(surface, 6)
     assert merged.stats.cap_triangles * 3 < square_by_square.stats.cap_triangles
     assert merged.volume == pytest.approx(square_by_square.volume, rel=1e-13)
@@ -645,8 +649,8 @@ def test_nothing_inside_gives_an_empty_mesh():
 def test_voxels_from_a_file_need_their_surface(tmp_path):
     expr, bounds = SURFACES["ball"]
     s = implc.compile(expr, bounds)
-    implc.files.voxel_files.save(implc.voxelize(s, 4), tmp_path / "b.npz")
-    loaded = implc.files.voxel_files.load_npz(tmp_path / "b.npz")
+    voxel_files.save(implc.voxelize(s, 4), tmp_path / "b.npz")
+    loaded = voxel_files.load_npz(tmp_path / "b.npz")
     with pytest.raises(ValueError, match="do not know their surface"):
         loaded.mesh()
     assert np.array_equal(loaded.mesh(s).faces, implc.mesh(s, 4).faces)
@@ -735,18 +739,18 @@ def test_stl_ply_and_obj_as_pymeshlab_reads_them(tmp_path, name):
     assert np.all(np.einsum("ij,ij->i", records["normal"], winding) > 0)
 
 
-def test_area_and_volume_as_trimesh_measures_them(monkeypatch):
+def test_area_and_volume_as_trimesh_measures_them():
     """Mesh.area and Mesh.volume (summed a chunk of triangles at a time, from the vertices' columns) agree
     with trimesh's to rounding, with chunks of 1000 triangles; a degenerate triangle is counted."""
     import trimesh
 
-    from implc.meshing import triangle_mesh
     expr, bounds = SURFACES["box_minus_ball"]
     mesh = implc.mesh(implc.compile(expr, bounds), 5)
-    monkeypatch.setattr(triangle_mesh, "MEASURE_ROWS", 1000)
     assert len(mesh.faces) > 10 * 1000
     other = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
-    assert mesh.volume == pytest.approx(other.volume, rel=1e-12) and mesh.area == pytest.approx(other.area, rel=1e-12)
+    area, volume = mesh.measures(rows=1000)
+    assert volume == pytest.approx(other.volume, rel=1e-12) and area == pytest.approx(other.area, rel=1e-12)
+    assert (mesh.area, mesh.volume) == pytest.approx((other.area, other.volume), rel=1e-12)
     n = len(mesh.vertices)  # a triangle of three distinct points on a line: zero area, no repeated vertex
     flat = Mesh(np.vstack([mesh.vertices, [[0, 0, 0], [0.125, 0, 0], [0.25, 0, 0]]]),
                 np.vstack([mesh.faces, [[n, n + 1, n + 2]]]))
@@ -870,7 +874,7 @@ def test_depths_beyond_the_mesher_are_refused_up_front(tmp_path, capsys):
 
 def test_a_voxel_point_cloud_ply_is_still_described_as_voxels(tmp_path, capsys):
     expr, bounds = SURFACES["ball"]
-    implc.files.voxel_files.save(implc.voxelize(implc.compile(expr, bounds), 4), tmp_path / "v.ply")
+    voxel_files.save(implc.voxelize(implc.compile(expr, bounds), 4), tmp_path / "v.ply")
     assert not is_mesh_file(tmp_path / "v.ply")
     assert main(["info", str(tmp_path / "v.ply")]) == 0
     assert "triangle mesh" not in capsys.readouterr().out
@@ -927,7 +931,7 @@ def test_cells_proven_regular_hold_a_graph_and_a_singular_point_stays_unproven(e
     assert not len(bad), f"cells {bad[:5].tolist()} counted regular but F has two zeros on a line along each axis"
 
 
-_DIRECTIONS = np.concatenate([np.eye(3), contour_module.DIAGONALS])
+_DIRECTIONS = np.concatenate([np.eye(3), DIAGONALS])
 """The directions the proof of regular cells tries: the axes, then the face and body diagonals."""
 
 
@@ -1021,17 +1025,16 @@ def _crossed_cells(mesh, n):
     return {tuple(c) for c in np.floor((centroids[~on_bounds] + 1) / 2 * n).astype(int).tolist()}
 
 
-def test_the_proof_looks_below_the_grid_where_a_cells_enclosures_are_too_wide(monkeypatch):
+def test_the_proof_looks_below_the_grid_where_a_cells_enclosures_are_too_wide():
     """Two levels of sub-boxes below the grid prove cells that their own enclosures leave open (Scene 1 at
     16³: 336 unproven without them, 48 with them), and in each cell they add F has at most one zero on
     each line along some axis, at a dense sample of lines (F through numpy, not implc's compiler)."""
-    from implc.meshing import contour
+    from implc.meshing.grid import Effort
     sc = load_scene("paper_blobs")
     surface = implc.compile(sc.surface, sc.bounds)
     depth, n = 4, 16
-    monkeypatch.setattr(contour, "PROOF_LEVELS", 0)
-    coarse = implc.mesh(surface, depth)
-    monkeypatch.undo()
+    voxels = implc.voxelize(surface, depth, **implc.NATURAL)
+    coarse = contour(surface, voxels.coords, depth, voxels.bounds, effort=Effort(proof_levels=0))
     fine = implc.mesh(surface, depth)
     assert np.array_equal(coarse.faces, fine.faces) and coarse.stats.crossed_cells == fine.stats.crossed_cells
     before = {tuple(c) for c in coarse.unproven_cells.tolist()}
@@ -1063,26 +1066,24 @@ def test_a_partial_needs_its_sign_only_where_the_surface_may_be(engine):
 
 
 
-def test_the_proof_below_the_grid_tries_a_sample_first(monkeypatch):
-    """The first level below the grid, given many cells, is tried on every PROOF_SAMPLE-th first: where the
-    sample gains enough the others follow and the proof is the one without a sample (each box's enclosures
-    are its own); where it does not (here forced), only the sample's cells can be added."""
-    from implc.meshing import contour
+def test_the_proof_below_the_grid_tries_a_sample_first():
+    """The first level below the grid, given many cells, is tried on every ``proof_sample``-th first: where
+    the sample gains enough the others follow and the proof is the one without a sample (each box's
+    enclosures are its own); where it does not (here forced), only the sample's cells can be added."""
+    from implc.meshing.grid import Effort
     sc = load_scene("paper_blobs")
     surface = implc.compile(sc.surface, sc.bounds)
     voxels = implc.voxelize(surface, 4)
     unproven = {}
-    for name, settings in {"whole": {"PROOF_SAMPLE_MIN": 10**9}, "sampled": {"PROOF_SAMPLE_MIN": 1},
-                           "sample only": {"PROOF_SAMPLE_MIN": 1, "PROOF_YIELD": 1.5},
-                           "none": {"PROOF_LEVELS": 0}}.items():
-        with monkeypatch.context() as patch:
-            for key, value in settings.items():
-                patch.setattr(contour, key, value)
-            unproven[name] = {tuple(c) for c in voxels.mesh().unproven_cells.tolist()}
+    for name, effort in {"whole": Effort(proof_sample_min=10**9), "sampled": Effort(proof_sample_min=1),
+                         "sample only": Effort(proof_sample_min=1, proof_yield=1.5),
+                         "none": Effort(proof_levels=0)}.items():
+        mesh = contour(surface, voxels.coords, voxels.depth, voxels.bounds, effort=effort)
+        unproven[name] = {tuple(c) for c in mesh.unproven_cells.tolist()}
     assert unproven["sampled"] == unproven["whole"] < unproven["none"]
     assert unproven["whole"] < unproven["sample only"] < unproven["none"]
     gained = len(unproven["none"]) - len(unproven["sample only"])
-    assert gained <= len(unproven["none"]) / contour.PROOF_SAMPLE + 1
+    assert gained <= len(unproven["none"]) / Effort().proof_sample + 1
 
 
 # -- random surfaces ------------------------------------------------------------------------------------

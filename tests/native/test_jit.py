@@ -140,7 +140,7 @@ def test_editing_any_module_of_the_package_invalidates_the_cache(tmp_path):
     assert module == copy / "implc" / "__init__.py" and not from_cache
     assert _probe(cache, copy)[1]
     for name in ("engines/compiled/plan.py", "compiler/ir.py", "compiler/gradient.py", "__init__.py",
-                 "voxelizer/storage/grid.py"):
+                 "voxelizer/storage/dense.py"):
         with open(copy / "implc" / name, "a") as f:
             f.write("\n# edited\n")
         assert not _probe(cache, copy)[1], name

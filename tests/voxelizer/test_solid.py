@@ -12,7 +12,9 @@ import implc
 from implc import phi, r, shapes, theta, x, y, z
 from implc.cli.commands import main
 from implc.compiler.symbols import cartesian_form
-from implc.engines import walk as subdivide_module
+from implc.engines import morton
+from implc.engines.walk import Buffers, buffers
+from implc.voxelizer import voxelize
 
 from ..support.models import smooth_blend
 
@@ -87,11 +89,11 @@ def test_solid_changes_no_voxel_and_workers_agree():
 
 
 @pytest.mark.parametrize("engine", ["jit", "tape"])
-def test_a_task_resumes_when_its_inside_output_is_full(monkeypatch, engine):
+def test_a_task_resumes_when_its_inside_output_is_full(engine):
     s = implc.compile(Max(SPHERE, -(sqrt(x**2 + y**2) - Rational(1, 5))), engine=engine)
     expected = implc.voxelize(s, 7, solid=True, workers=2)
-    monkeypatch.setattr(subdivide_module, "OUTPUT_CHUNK", 16)
-    chunked = implc.voxelize(s, 7, solid=True, workers=2)
+    with buffers(Buffers(output_chunk=16)):
+        chunked = implc.voxelize(s, 7, solid=True, workers=2)
     np.testing.assert_array_equal(chunked.inside, expected.inside)
     np.testing.assert_array_equal(chunked.coords, expected.coords)
 
@@ -187,21 +189,20 @@ def test_zarr_holds_the_dense_solid_and_the_cli_writes_it(tmp_path, capsys):
                                          pytest.param(16, 8, marks=pytest.mark.slow), (64, 32)],
                          ids=["shards below octants", "shards below tasks", "shards above tasks"])  # small: slow
 @pytest.mark.parametrize("solid", [True, False], ids=["solid", "shell"])
-def test_zarr_written_while_voxelizing_is_the_dense_voxelization(tmp_path, monkeypatch, shard, chunk, solid):
+def test_zarr_written_while_voxelizing_is_the_dense_voxelization(tmp_path, shard, chunk, solid):
     """write_zarr streams each task's voxels and octants into shards as tasks finish: whatever the shard size
     against the tasks' cells (32³ here) and the octants, and for every worker count, the store is the
     in-memory voxelization's dense occupancy, and so are the counts and volume bounds it reports."""
     import zarr
 
     from implc.files import zarr_store
-    monkeypatch.setattr(zarr_store, "SHARD", shard)
-    monkeypatch.setattr(zarr_store, "CHUNK", chunk)
     surface = implc.compile(HOLLOW)
     v = implc.voxelize(surface, 7, solid=solid)
     dense = v.to_dense(solid=solid)
     for workers in (1, 2):
         out = tmp_path / f"w{workers}.zarr"
-        result = zarr_store.write_zarr(surface, 7, out, solid=solid, workers=workers)
+        with zarr_store.sizes(zarr_store.Sizes(shard=shard, chunk=chunk)):
+            result = zarr_store.write_zarr(surface, 7, out, solid=solid, workers=workers)
         array = zarr.open_group(out, mode="r")["occupancy"]
         assert array.shards == (shard,) * 3
         np.testing.assert_array_equal(array[:], dense)
@@ -282,7 +283,7 @@ def test_the_octree_records_the_inside_and_its_levels_know_it():
         cells, normals, inside = tree.level(k, solid=True)
         boundary, _ = tree.level(k)
         assert np.array_equal(cells[~inside], boundary) and np.all(normals[inside] == 0)
-        codes = implc.engines.morton.morton_codes(cells).astype(np.float64)
+        codes = morton.morton_codes(cells).astype(np.float64)
         assert np.all(np.diff(codes) > 0)  # Morton order, distinct
         size = 2.0 / (1 << k)
         points = -1 + (cells[inside][:, None, :] + rng.uniform(0, 1, (len(cells[inside]), 16, 3))) * size
@@ -332,7 +333,7 @@ def test_inside_away_from_the_boundary_creates_its_nodes_and_saves(tmp_path):
     and loads with its states."""
     from implc.voxelizer.storage.octree import Octree
     inside = np.array([[15, 15, 15, 4], [3, 3, 2, 2], [0, 1, 0, 4]], np.int32)
-    voxels = implc.voxelizer.voxelize.Voxels(np.array([[0, 0, 0], [1, 0, 0]], np.uint32),
+    voxels = voxelize.Voxels(np.array([[0, 0, 0], [1, 0, 0]], np.uint32),
                                        np.array([[0, 0, 1]] * 2, np.float32), 4, ((-1, 1),) * 3, stats=None,
                                        inside=inside)
     tree = voxels.octree

@@ -180,14 +180,14 @@ def test_octant_kernel_decides_as_the_interval_kernel_on_the_children(name, comp
 
 
 @pytest.mark.parametrize("options", [{}, {"refine_leaves": True}])
-def test_tasks_larger_than_a_native_call_resume_and_grow(monkeypatch, compiled, options):
+def test_tasks_larger_than_a_native_call_resume_and_grow(compiled, options):
     """With room for only a few voxels per native call, tasks resume from their stack many times and their
     result arrays grow: the voxels must be the same."""
-    from implc.engines import walk as subdivide
+    from implc.engines.walk import Buffers, buffers
     s = compiled["paper_sin4_sin8"]
     expected = implc.voxelize(s, 7, workers=2, **options)
-    monkeypatch.setattr(subdivide, "OUTPUT_CHUNK", 16)
-    chunked = implc.voxelize(s, 7, workers=2, **options)
+    with buffers(Buffers(output_chunk=16)):
+        chunked = implc.voxelize(s, 7, workers=2, **options)
     np.testing.assert_array_equal(chunked.coords, expected.coords)
     np.testing.assert_array_equal(chunked.normals, expected.normals)
     assert chunked.stats.kept_per_level == expected.stats.kept_per_level

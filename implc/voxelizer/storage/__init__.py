@@ -10,7 +10,7 @@ the voxelizer's estimate of the voxel count. Any object with these three methods
 from __future__ import annotations
 
 from .coords import CoordinateList
-from .grid import DenseGrid
+from .dense import DenseGrid
 from .octree import Octree, OctreeBuilder
 
 BACKENDS = {"octree": OctreeBuilder, "grid": DenseGrid, "coords": CoordinateList}
