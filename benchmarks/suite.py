@@ -523,7 +523,7 @@ def solids(args, out):
     medians of interleaved runs, the extra cost, inside octants, the width of the guaranteed volume bounds,
     and the exports: .vdb from the voxels in memory, .zarr voxelized straight into the store (voxelization included)."""
     from implc.files.vdb import save_vdb
-    from implc.files.zarr_store import write_zarr
+    from implc.files.zarr_writer import write_zarr
     rows = []
     for name in args.solid_scenes.split(","):
         sc = scene.load(name)
@@ -881,7 +881,7 @@ def cluster(args, out):
     import distributed
 
     from implc.cluster.tasks import local_cluster, plan_tasks
-    from implc.files import zarr_store
+    from implc.files import zarr_store, zarr_writer
     sc = scene.load(args.cluster_scene)
     s = implc.compile(sc.surface, sc.bounds)
     workers = args.cluster_workers
@@ -893,12 +893,12 @@ def cluster(args, out):
         startup = time.perf_counter() - t0
         try:
             depth = args.cluster_depth
-            zarr_store.write_zarr(s, depth, Path(tmp) / "warm.zarr", solid=True, cluster=client)  # workers compile
+            zarr_writer.write_zarr(s, depth, Path(tmp) / "warm.zarr", solid=True, cluster=client)  # workers compile
             times = {"here": [], "cluster": []}
             for _ in range(args.repeats):
                 for where in ("here", "cluster"):
                     t0 = time.perf_counter()
-                    result = zarr_store.write_zarr(s, depth, Path(tmp) / f"{where}.zarr", solid=True, workers=workers,
+                    result = zarr_writer.write_zarr(s, depth, Path(tmp) / f"{where}.zarr", solid=True, workers=workers,
                                                    cluster=client if where == "cluster" else None)
                     times[where].append(time.perf_counter() - t0)
             rows["overhead"] = {"depth": depth, "workers": workers, "here_s": statistics.median(times["here"]),
@@ -912,7 +912,7 @@ def cluster(args, out):
             if args.cluster_big_depth:
                 big = args.cluster_big_depth
                 t0 = time.perf_counter()
-                result = zarr_store.write_zarr(s, big, Path(tmp) / "big.zarr", solid=True, cluster=client)
+                result = zarr_writer.write_zarr(s, big, Path(tmp) / "big.zarr", solid=True, cluster=client)
                 seconds = time.perf_counter() - t0
                 peaks = client.run(lambda: __import__("resource").getrusage(
                     __import__("resource").RUSAGE_SELF).ru_maxrss * 1024)

@@ -90,7 +90,7 @@ MOVED: dict[str, tuple[str, ...]] = {
     "vm": ("compiler.vm",),
     "voxel_files": ("files.voxel_files",),
     "voxelization": ("voxelizer.voxelize",),
-    "zarr_store": ("files.zarr_store",),
+    "zarr_store": ("files.zarr_store", "files.zarr_writer"),
 }
 """Old module (below ``implc.``) -> the modules its names now live in, searched in order."""
 

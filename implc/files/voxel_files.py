@@ -45,7 +45,7 @@ def save(voxels: Voxels, path: str | os.PathLike[str], *, compress: bool = False
 
     ``compress``: deflate the .npz (about 3x smaller for Morton-ordered voxels, and several times slower).
     """
-    from .zarr_store import save_zarr
+    from .zarr_writer import save_zarr
     path = Path(path)
     writers = {".npz": lambda v, p: save_npz(v, p, compress=compress), ".ply": save_ply, ".npy": save_dense,
                ".vdb": save_vdb, ".zarr": save_zarr}

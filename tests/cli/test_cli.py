@@ -126,8 +126,8 @@ def test_console_script_is_declared():
 def test_tightness_option_spells_the_presets_and_changes_the_leaves(tmp_path):
     """--tightness natural / default / tightest are implc.NATURAL, the default and implc.TIGHTEST: the
     natural mode keeps the most voxels, the tightest the fewest, each file the same as the API's."""
-    from implc.cli import commands as cli
-    assert cli.TIGHTNESS == {"natural": implc.NATURAL, "default": {}, "tightest": implc.TIGHTEST}
+    from implc.cli import arguments
+    assert arguments.TIGHTNESS == {"natural": implc.NATURAL, "default": {}, "tightest": implc.TIGHTEST}
     counts = {}
     for mode in ("natural", "default", "tightest"):
         out = tmp_path / f"{mode}.npz"

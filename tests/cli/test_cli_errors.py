@@ -209,11 +209,12 @@ def test_a_signal_while_main_restores_its_handlers_is_no_traceback(tmp_path, mon
     import os
 
     from implc.cli import commands as cli
+    from implc.cli import signals
     real = signal.signal
     sent = []
 
     def restoring(signum, handler):
-        if handler is not cli._on_sigterm and handler is not cli._on_sigint and not sent:
+        if handler is not signals.on_sigterm and handler is not signals.on_sigint and not sent:
             sent.append(signum)
             os.kill(os.getpid(), sig)  # delivered to the handler still in place
         return real(signum, handler)
@@ -221,9 +222,9 @@ def test_a_signal_while_main_restores_its_handlers_is_no_traceback(tmp_path, mon
     monkeypatch.setattr(cli.signal, "signal", restoring)
     out = tmp_path / "a.npz"
     assert main(["voxelize", "--expr", "x - 0.25", "--depth", "3", "--quiet", "-o", str(out)]) == 0
-    assert sent and cli._signalled == [sig]
+    assert sent and signals.signalled == [sig]
     assert len(voxel_files.load_npz(out)) > 0
-    assert signal.getsignal(signal.SIGINT) is not cli._on_sigint  # put back
+    assert signal.getsignal(signal.SIGINT) is not signals.on_sigint  # put back
     capsys.readouterr()
 
 
@@ -234,14 +235,15 @@ def test_a_signal_after_the_command_of_a_process_is_only_noted(tmp_path, sig):
     import os
 
     from implc.cli import commands as cli
+    from implc.cli import signals
     before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
     try:
         out = tmp_path / "a.npz"
         assert cli.main(["voxelize", "--expr", "x - 0.25", "--depth", "3", "--quiet", "-o", str(out)],
                         restore_handlers=False) == 0
-        assert signal.getsignal(sig) in (cli._on_sigint, cli._on_sigterm)  # still in place
+        assert signal.getsignal(sig) in (signals.on_sigint, signals.on_sigterm)  # still in place
         os.kill(os.getpid(), sig)  # the handler runs right after this call returns
-        assert cli._signalled == [sig]
+        assert signals.signalled == [sig]
     finally:
         signal.signal(signal.SIGINT, before[0])
         signal.signal(signal.SIGTERM, before[1])
@@ -252,28 +254,29 @@ def test_a_signal_in_a_finalizer_is_sent_again_not_lost(sig):
     """A signal that lands in a callback whose exceptions Python prints and drops (a finalizer, an import
     lock's weakref callback: a CI run's SIGTERM did, and 'Exception ignored ... Traceback' was all it left)
     is not raised there: it is sent again a moment later, and raised where it can stop the command."""
-    from implc.cli import commands as cli
+    from implc.cli import signals
     dropped = []
     before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM), sys.unraisablehook
     sys.unraisablehook = dropped.append
 
     class Finalized:
         def __del__(self):
-            cli._on_sigint(sig, sys._getframe()) if sig == signal.SIGINT else cli._on_sigterm(sig, sys._getframe())
+            handler = signals.on_sigint if sig == signal.SIGINT else signals.on_sigterm
+            handler(sig, sys._getframe())
 
     try:
-        signal.signal(signal.SIGINT, cli._on_sigint)
-        signal.signal(signal.SIGTERM, cli._on_sigterm)
-        cli._settled = False
-        cli._signalled.clear()
+        signal.signal(signal.SIGINT, signals.on_sigint)
+        signal.signal(signal.SIGTERM, signals.on_sigterm)
+        signals.settled = False
+        signals.signalled.clear()
         item = Finalized()
         del item  # the handler runs in __del__ (as if the signal had landed there)
-        assert not dropped and cli._signalled == []
-        with pytest.raises(KeyboardInterrupt if sig == signal.SIGINT else cli._Terminated):
+        assert not dropped and signals.signalled == []
+        with pytest.raises(KeyboardInterrupt if sig == signal.SIGINT else signals.Terminated):
             time.sleep(5)  # the signal again, from the timer: raised here
-        assert cli._signalled == [sig]
+        assert signals.signalled == [sig]
     finally:
         signal.signal(signal.SIGINT, before[0])
         signal.signal(signal.SIGTERM, before[1])
         sys.unraisablehook = before[2]
-        cli._settled = True  # as main() leaves it
+        signals.settled = True  # as main() leaves it

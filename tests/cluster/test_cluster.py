@@ -21,7 +21,7 @@ import implc
 from implc.cli.commands import main
 from implc.cluster.recipe import TravelError, build, recipe_of
 from implc.compiler.vm import parse_vm
-from implc.files import scene, zarr_store
+from implc.files import scene, zarr_writer
 
 pytestmark = pytest.mark.slow
 
@@ -112,7 +112,7 @@ def test_separate_processes_write_the_single_process_store(cluster, tmp_path, na
     as a solid, a CSG part through the tape engine, a spherical scene) give the single-process store."""
     sc = scene.load(name)
     surface = implc.compile(sc.surface, sc.bounds)
-    zarr_store.write_zarr(surface, 9, tmp_path / "here.zarr", solid=solid, workers=2)
+    zarr_writer.write_zarr(surface, 9, tmp_path / "here.zarr", solid=solid, workers=2)
     args = ["voxelize", name, "--depth", "9", "-o", str(tmp_path / "there.zarr"), "--quiet",
             "--cluster", cluster.address] + (["--solid"] if solid else [])
     assert main(args) == 0
@@ -136,7 +136,7 @@ def test_a_killed_worker_costs_only_its_tasks(cluster, tmp_path):
 
     def run():
         try:
-            zarr_store.write_zarr(surface, 11, out, solid=True, cluster=cluster.address)
+            zarr_writer.write_zarr(surface, 11, out, solid=True, cluster=cluster.address)
         except BaseException as exc:  # noqa: BLE001 - reported by the test's thread
             failures.append(exc)
 
@@ -152,14 +152,14 @@ def test_a_killed_worker_costs_only_its_tasks(cluster, tmp_path):
     runner.join(300)
     assert not runner.is_alive() and not failures, failures
     assert not parts.exists(), "the parts are removed once the store is complete"
-    zarr_store.write_zarr(surface, 11, tmp_path / "here.zarr", solid=True, workers=2)
+    zarr_writer.write_zarr(surface, 11, tmp_path / "here.zarr", solid=True, workers=2)
     assert_same_store(tmp_path / "here.zarr", out)
 
 
 def test_a_local_cluster_is_started_and_stopped(tmp_path, capsys):
     sc = scene.load("torus")
     surface = implc.compile(sc.surface, sc.bounds)
-    zarr_store.write_zarr(surface, 8, tmp_path / "here.zarr", solid=True, workers=2)
+    zarr_writer.write_zarr(surface, 8, tmp_path / "here.zarr", solid=True, workers=2)
     assert main(["voxelize", "torus", "--depth", "8", "--solid", "-o", str(tmp_path / "there.zarr"),
                  "--cluster", "local:2"]) == 0
     err = capsys.readouterr().err
@@ -219,5 +219,5 @@ def test_ctrl_c_cancels_the_cluster_and_resume_finishes(cluster, tmp_path):
     done = subprocess.run(command + ["--resume"], env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     sc = scene.load("paper_blobs")
-    zarr_store.write_zarr(implc.compile(sc.surface, sc.bounds), 11, tmp_path / "here.zarr", solid=True)
+    zarr_writer.write_zarr(implc.compile(sc.surface, sc.bounds), 11, tmp_path / "here.zarr", solid=True)
     assert_same_store(tmp_path / "here.zarr", out)

@@ -308,7 +308,7 @@ def test_escape_sequences_are_not_printed(tmp_path, capsys):
 def test_zarr_attributes_are_checked(tmp_path, capsys):
     import zarr
     surface = implc.compile(shapes.sphere(0.7, (0, 0, 0)))
-    from implc.files.zarr_store import write_zarr
+    from implc.files.zarr_writer import write_zarr
     write_zarr(surface, 4, tmp_path / "v.zarr")
     group = zarr.open_group(str(tmp_path / "v.zarr"), mode="r+")
     written = dict(group.attrs["implc"])
@@ -512,7 +512,8 @@ def test_outputs_get_the_umask_or_keep_the_old_mode(tmp_path):
 def test_fuzz_zarr_reader(tmp_path_factory, mutation):
     """The store's metadata (zarr.json: shape, chunks, shards, the implc attributes) mutated: implc info
     describes a valid store or says in one line what is wrong."""
-    from implc.files.zarr_store import describe_zarr, write_zarr
+    from implc.files.zarr_store import describe_zarr
+    from implc.files.zarr_writer import write_zarr
     folder = tmp_path_factory.mktemp("z")
     write_zarr(implc.compile(shapes.sphere(0.7, (0, 0, 0))), 3, folder / "v.zarr", solid=False)
     meta = folder / "v.zarr" / "zarr.json"

@@ -15,7 +15,7 @@ import implc
 from implc import shapes
 from implc.cli.commands import main
 from implc.compiler.symbols import x, y, z
-from implc.files import voxel_files, zarr_store
+from implc.files import voxel_files, zarr_store, zarr_writer
 
 HOLLOW = Max(shapes.box((0.7, 0.7, 0.7)), -(sqrt(x**2 + y**2 + z**2) - Rational(3, 10)))
 TORUS = shapes.torus(Rational(3, 5), Rational(1, 4))
@@ -48,7 +48,7 @@ def test_the_store_is_the_voxelization(tmp_path, small_bricks, solid):
     depth = 6
     v = implc.voxelize(surface, depth, solid=solid)
     dense = v.to_dense(solid=solid)
-    written = zarr_store.write_zarr(surface, depth, tmp_path / "w.zarr", solid=solid, workers=2)
+    written = zarr_writer.write_zarr(surface, depth, tmp_path / "w.zarr", solid=solid, workers=2)
     assert written.tasks > 8 and written.voxels == len(v)
     stored = arrays(tmp_path / "w.zarr")
     np.testing.assert_array_equal(stored["occupancy"], dense)
@@ -74,7 +74,7 @@ def test_the_store_is_the_voxelization(tmp_path, small_bricks, solid):
     if solid:
         np.testing.assert_array_equal(back.to_dense(solid=True), dense)
     # the same store from the voxels in memory (another path to the same tasks)
-    zarr_store.save_zarr(v, tmp_path / "s.zarr")
+    zarr_writer.save_zarr(v, tmp_path / "s.zarr")
     saved = arrays(tmp_path / "s.zarr")
     assert saved.keys() == stored.keys()
     for name in stored:
@@ -85,7 +85,7 @@ def test_the_store_is_the_voxelization(tmp_path, small_bricks, solid):
 def test_a_region_reads_what_the_voxels_hold_there(tmp_path, small_bricks):
     surface = implc.compile(TORUS)
     v = implc.voxelize(surface, 6, solid=True)
-    zarr_store.save_zarr(v, tmp_path / "t.zarr")
+    zarr_writer.save_zarr(v, tmp_path / "t.zarr")
     for region in (((5, 35), (0, 23), (17, 64)), ((32, 33), (0, 64), (0, 64)), ((0, 64),) * 3):
         part = zarr_store.load_zarr(tmp_path / "t.zarr", region)
         box = np.array(region)
@@ -104,7 +104,7 @@ def test_every_shard_has_exactly_one_writer(tmp_path, small_bricks):
     """Tasks own whole bricks and their shards at every level of detail they write: no shard key is
     written by two tasks, and every shard file of those arrays is one a task reported."""
     surface = implc.compile(HOLLOW)
-    written = zarr_store.write_zarr(surface, 6, tmp_path / "h.zarr", solid=True, workers=2)
+    written = zarr_writer.write_zarr(surface, 6, tmp_path / "h.zarr", solid=True, workers=2)
     keys = [k for task in written.shard_writers for k in task]
     assert len(keys) == len(set(keys)) > written.tasks
     layout = zarr_store.Layout.of(6, surface.bounds, True)
@@ -120,9 +120,9 @@ def test_every_shard_has_exactly_one_writer(tmp_path, small_bricks):
 def test_a_stopped_run_is_incomplete_and_resume_finishes_it(tmp_path, small_bricks, monkeypatch, capsys):
     surface = implc.compile(HOLLOW)
     calls = []
-    real = zarr_store.task_voxels
-    monkeypatch.setattr(zarr_store, "task_voxels", lambda *a, **k: (calls.append(a[2]), real(*a, **k))[1])
-    zarr_store.write_zarr(surface, 6, tmp_path / "ref.zarr", solid=True, workers=1)
+    real = zarr_writer.task_voxels
+    monkeypatch.setattr(zarr_writer, "task_voxels", lambda *a, **k: (calls.append(a[2]), real(*a, **k))[1])
+    zarr_writer.write_zarr(surface, 6, tmp_path / "ref.zarr", solid=True, workers=1)
     subdividing = len(calls)  # the tasks that subdivide (those inside an octant of the plan do not)
     calls.clear()
 
@@ -132,10 +132,10 @@ def test_a_stopped_run_is_incomplete_and_resume_finishes_it(tmp_path, small_bric
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(zarr_store, "task_voxels", stopping)
+    monkeypatch.setattr(zarr_writer, "task_voxels", stopping)
     out = tmp_path / "h.zarr"
     with pytest.raises(KeyboardInterrupt):
-        zarr_store.write_zarr(surface, 6, out, solid=True, workers=1)
+        zarr_writer.write_zarr(surface, 6, out, solid=True, workers=1)
     partial = tmp_path / "h.zarr.partial"
     assert not out.exists() and partial.is_dir()
     finished = len(list((partial / "_parts").glob("*.npz")))
@@ -147,10 +147,10 @@ def test_a_stopped_run_is_incomplete_and_resume_finishes_it(tmp_path, small_bric
     assert "incomplete" in capsys.readouterr().err
     # another run's options do not resume it
     with pytest.raises(ValueError, match="another run"):
-        zarr_store.write_zarr(surface, 6, out, solid=False, resume=True)
+        zarr_writer.write_zarr(surface, 6, out, solid=False, resume=True)
     calls.clear()
-    monkeypatch.setattr(zarr_store, "task_voxels", lambda *a, **k: (calls.append(a[2]), real(*a, **k))[1])
-    resumed = zarr_store.write_zarr(surface, 6, out, solid=True, workers=1, resume=True)
+    monkeypatch.setattr(zarr_writer, "task_voxels", lambda *a, **k: (calls.append(a[2]), real(*a, **k))[1])
+    resumed = zarr_writer.write_zarr(surface, 6, out, solid=True, workers=1, resume=True)
     assert resumed.resumed == finished and len(calls) == subdividing - ran
     assert not partial.exists()
     a, b = arrays(tmp_path / "ref.zarr"), arrays(out)
@@ -158,12 +158,12 @@ def test_a_stopped_run_is_incomplete_and_resume_finishes_it(tmp_path, small_bric
     for name in a:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
     with pytest.raises(ValueError, match="nothing to resume"):
-        zarr_store.write_zarr(surface, 6, out, solid=True, resume=True)
+        zarr_writer.write_zarr(surface, 6, out, solid=True, resume=True)
 
 
 def test_a_damaged_or_foreign_store_is_one_line(tmp_path, capsys):
     out = tmp_path / "t.zarr"
-    zarr_store.write_zarr(implc.compile(TORUS), 5, out, solid=False)
+    zarr_writer.write_zarr(implc.compile(TORUS), 5, out, solid=False)
     meta = out / "zarr.json"
     about = json.loads(meta.read_text())
     for change, message in ((lambda a: a["attributes"]["implc"].pop("manifest"), "incomplete"),
@@ -260,7 +260,7 @@ def test_a_write_abandoned_by_a_killed_worker_is_not_left_in_the_store(tmp_path,
     the finished store held occupancy/c/2/1/3.<uuid>.partial. Finishing removes such files, and only those."""
     from pathlib import Path
 
-    real = zarr_store.store_task
+    real = zarr_writer.store_task
     litter = []
 
     def killed_mid_write(folder, *args, **kwargs):
@@ -274,8 +274,8 @@ def test_a_write_abandoned_by_a_killed_worker_is_not_left_in_the_store(tmp_path,
             litter.extend([stray.relative_to(folder), keep.relative_to(folder)])
         return summary
 
-    monkeypatch.setattr(zarr_store, "store_task", killed_mid_write)
+    monkeypatch.setattr(zarr_writer, "store_task", killed_mid_write)
     out = tmp_path / "torus.zarr"
-    zarr_store.write_zarr(implc.compile(shapes.torus(0.5, 0.2)), 6, out, workers=1)
+    zarr_writer.write_zarr(implc.compile(shapes.torus(0.5, 0.2)), 6, out, workers=1)
     assert litter and not (out / litter[0]).exists() and (out / litter[1]).exists()
     assert len(voxel_files.load(out)) > 0

@@ -195,14 +195,14 @@ def test_zarr_written_while_voxelizing_is_the_dense_voxelization(tmp_path, shard
     in-memory voxelization's dense occupancy, and so are the counts and volume bounds it reports."""
     import zarr
 
-    from implc.files import zarr_store
+    from implc.files import zarr_store, zarr_writer
     surface = implc.compile(HOLLOW)
     v = implc.voxelize(surface, 7, solid=solid)
     dense = v.to_dense(solid=solid)
     for workers in (1, 2):
         out = tmp_path / f"w{workers}.zarr"
         with zarr_store.sizes(zarr_store.Sizes(shard=shard, chunk=chunk)):
-            result = zarr_store.write_zarr(surface, 7, out, solid=solid, workers=workers)
+            result = zarr_writer.write_zarr(surface, 7, out, solid=solid, workers=workers)
         array = zarr.open_group(out, mode="r")["occupancy"]
         assert array.shards == (shard,) * 3
         np.testing.assert_array_equal(array[:], dense)
