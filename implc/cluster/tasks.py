@@ -31,7 +31,8 @@ from .recipe import SurfaceRecipe, build
 LOCAL = "local:"
 """``local:N``: a cluster of N worker processes (one thread each) started and stopped by implc."""
 TASK_EDGE_LOG2 = 10
-"""A task's octant spans at most 2^10 cells per axis: on the paper's scenes about 0.1-0.5 s of work."""
+"""A task's octant spans at most 2^10 cells per axis: a fraction of a second of work on the paper's scenes
+(``implc bench --sections cluster``), long enough that scheduling a task costs little beside it."""
 MIN_TASK_LEVEL = 2
 """At least the 4³ octants of level 2 (where the bricks allow): enough tasks to balance a few workers."""
 
@@ -149,8 +150,8 @@ def parse_address(cluster: Any) -> Any:
 def local_cluster(workers: int) -> Any:
     """A LocalCluster of ``workers`` processes, one thread each, its dashboard on a free port. The
     workers' environment leaves out Dask's ``MALLOC_TRIM_THRESHOLD_``: with it glibc maps and unmaps
-    every block of 128 KiB or more, and a brick's blocks are 16 MiB (measured: tasks took 25% more CPU
-    at 2048³; see docs/guide/cluster.md for workers started by hand)."""
+    every block of 128 KiB or more, and a brick's blocks are 16 MiB (tasks then take markedly more CPU;
+    see docs/guide/cluster.md for workers started by hand)."""
     import dask
     distributed = _distributed()
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))

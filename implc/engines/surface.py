@@ -365,7 +365,8 @@ class Surface:
         """F at each row of an (N, 3) array of points. ``fast``: on the compiled kernels, sin, cos, exp,
         log and atan2 computed in vector registers, all lanes at once, within the error bounds proven in
         :mod:`implc.compiler.llvm.elementary` (about 1e-15; the voxelizer's and the mesher's samples), rather than
-        by the C library (within an ulp or two, one lane per call): 5-10x faster where F has them. The tape
+        by the C library (within an ulp or two, one lane per call), which is several times slower where F has
+        them. The tape
         engine always computes them so.
 
         >>> import implc

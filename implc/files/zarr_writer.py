@@ -58,8 +58,8 @@ if TYPE_CHECKING:
 
 class _FullShards:
     """The encoded bytes of an all-True shard, made once per shard shape and copied to each full shard's
-    key: every shard of a solid's inside is the same file (compressing 16 MiB of True each time cost
-    14 ms a shard)."""
+    key: every shard of a solid's inside is the same file, and compressing 16 MiB of True for each would
+    cost more than the task's own shards."""
 
     def __init__(self):
         self.encoded: dict[tuple, bytes] = {}
@@ -461,8 +461,8 @@ hex>.partial``): a worker killed in the middle of that write leaves one behind."
 
 def _remove_abandoned_writes(folder: Path) -> None:
     """Delete the files that writers killed mid-write left (:data:`ABANDONED_WRITE`): every task has finished,
-    so nothing writes any more, and the task of a killed worker ran again elsewhere (a killed worker at 2048³
-    left ``occupancy/c/2/1/3.<uuid>.partial`` beside the shard its task's second run wrote)."""
+    so nothing writes any more, and the task of a killed worker ran again elsewhere (a killed worker leaves
+    ``occupancy/c/2/1/3.<uuid>.partial`` beside the shard its task's second run wrote)."""
     for path in folder.rglob("*.partial"):
         if path.is_file() and ABANDONED_WRITE.search(path.name):
             path.unlink(missing_ok=True)

@@ -9,8 +9,8 @@ The index is open addressing with linear probing over ``2^bits`` slots of two wo
 empty slot holds key −1. A key's first slot is the Fibonacci hash of its corner (the key without its low
 six bits, which name the edge or point at that corner) plus those six bits: the keys of one corner sit
 side by side, corners spread over the table. (Folding the key's low bits with the next ones instead kept
-neighbouring cells' keys together, 30% faster on csg_part at 512³, but made probe chains so long on
-colonnade that the index took 6.9 of its 19 s.) Keys are numbered in the order they are first
+neighbouring cells' keys together, faster on flat parts, but made probe chains so long around
+colonnade's creases that the index dominated its mesh.) Keys are numbered in the order they are first
 seen, so a run over the same cells in the same order numbers them alike, and growing the table
 (inserting its keys again, in number order) keeps every number. The loops over many keys or cells prefetch
 the slots of the keys a few rows ahead (:func:`_prefetch`): a big index misses the cache on nearly every

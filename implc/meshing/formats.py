@@ -1,8 +1,7 @@
 """Mesh files written with numpy: binary STL, binary PLY, OBJ, 3MF and glTF binary (:meth:`implc.Mesh.save`).
 
-Why not trimesh: for Scene 1 at 512³ (3.1 million triangles) its writers took 1.8 s (STL), 0.3 s (PLY),
-15 s (OBJ), 11 s (3MF) and 1.0 s (GLB), and importing it 0.5-0.9 s more, against 0.5 s for the mesh
-itself; these take 0.47, 0.15, 1.8, 2.8 and 0.23 s.
+Why not trimesh: its writers took several times as long (OBJ and 3MF most, longer than making the mesh),
+and importing it costs more than some writes (``implc bench --sections mesh`` times both).
 Here the rows are laid out in fixed-width records, a chunk of :data:`ROWS` at a time (memory for a
 chunk, not for the mesh), and written as they are.
 
@@ -200,7 +199,7 @@ def _records(parts: list) -> bytes:
 def _lines(tag: bytes, fields: np.ndarray, padded: bool = False) -> bytes:
     """Lines of ``tag`` followed by each row's fields ((n, k, w) ASCII codes), one space before each;
     ``padded``: the fields' NUL padding taken out. (:func:`_records` for fields of one width: laid out in
-    one copy, 10% faster on OBJ's lines.)"""
+    one copy, faster on OBJ's lines.)"""
     n, k, w = fields.shape
     out = np.empty((n, len(tag) + k * (w + 1) + 1), np.uint8)
     out[:, : len(tag)] = np.frombuffer(tag, np.uint8)

@@ -15,8 +15,9 @@ GROUP_CELLS = 8
 """F is sampled in groups of this many cells per axis: on the tape engine each group runs the program
 simplified over its box."""
 GROUPED_PROGRAM = 128
-"""The shortest tape-engine program sampled by groups: csg_part's 36 instructions ran 13× slower grouped
-(the sorting and gathering of the points), colonnade's 676 twice as fast."""
+"""The shortest tape-engine program sampled by groups: below it, sorting and gathering the points costs
+more than the shorter per-group programs save, above it they gain (``benchmarks/against_revision.py --task
+mesh`` on csg_part and colonnade)."""
 VERTEX_CHUNK = 1 << 18
 """Surface vertices placed, or cells' corners sampled, at a time (:func:`surface_vertices`,
 :func:`_corner_signs`): a big mesh's memory then follows the chunk, since fresh memory is what a big mesh
@@ -63,8 +64,8 @@ class Grid:
         self.geometry = np.concatenate([[self.k, self.n], self.lo, self.step, self.hi]).astype(np.float64)
         """The grid as the native corner routines read it: corners and cells per axis, lo, step, hi. Held
         here: an address taken from a temporary array points at freed memory, which the allocator may hand
-        to someone else before the native routine reads it (Scene 1's meshes at 512³ came out with 0 to 6,387
-        spurious crease cells when its vertices were placed on two threads)."""
+        to someone else before the native routine reads it (meshes came out with spurious crease cells when
+        their vertices were placed on two threads)."""
         # the compiled kernels have no use for groups, and a short program gains less than sorting costs
         self.grouped = surface.engine == "tape" and len(surface.program) >= GROUPED_PROGRAM
 
@@ -157,8 +158,7 @@ class Grid:
 
     def expect_corners(self, count: int):
         """Size the corners' index for ``count`` corners (the cells' and the caps' faces', :meth:`capped_faces`),
-        before any is sampled: growing it rehashes every key (Scene 2 at 256³, whose caps add 396,000 corners:
-        0.13 s)."""
+        before any is sampled: growing it rehashes every key."""
         self._corner_index(count)
 
     def _corner_index(self, expected: int) -> KeyIndex:
@@ -319,7 +319,7 @@ class Cells:
             keys = keys[self.index.number(keys, insert=False) < 0]
         before = self.index.count
         # the values sorted (any sort gives the same array): numpy's default sort takes the voxelizer's cells,
-        # in octree order, 4x faster than its merge sort (Scene 1 at 512³: 4.5 against 17.7 ms)
+        # in octree order, several times faster than its merge sort
         self.index.number(np.sort(keys))
         fresh = self.index.keys()[before:]
         if not len(fresh):

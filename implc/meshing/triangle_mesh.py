@@ -1,8 +1,8 @@
 """Triangle meshes: :class:`Mesh` (vertices, faces, analytic normals), its counted checks, and mesh files.
 
 Files are read through trimesh (one well-kept library for every format, where each format's quirks are
-already handled). They are written by :mod:`implc.meshing.formats` (trimesh's writers took 2-8x as long,
-OBJ's and 3MF's most), under a temporary name renamed into place.
+already handled). They are written by :mod:`implc.meshing.formats` (trimesh's writers took several
+times as long, OBJ's and 3MF's most: ``implc bench --sections mesh``), under a temporary name renamed into place.
 """
 
 from __future__ import annotations
@@ -49,9 +49,9 @@ class Mesh:
 
     # -- measures ---------------------------------------------------------------------------------
     def _corner_columns(self, rows: int = MEASURE_ROWS):
-        """Per chunk of ``rows`` triangles (:data:`MEASURE_ROWS`), their corners' coordinates as nine contiguous columns
-        ((ax, ay, az), (bx, by, bz), (cx, cy, cz)): gathered from the vertices' columns, no (F, 3, 3) array
-        (np.cross on those took 1.2 s of a 3-million-triangle mesh's volume)."""
+        """Per chunk of ``rows`` triangles (:data:`MEASURE_ROWS`), their corners' coordinates as nine contiguous
+        columns ((ax, ay, az), (bx, by, bz), (cx, cy, cz)): gathered from the vertices' columns, no (F, 3, 3)
+        array (np.cross on those dominated a big mesh's volume)."""
         columns = [np.ascontiguousarray(self.vertices[:, axis]) for axis in range(3)]
         for start in range(0, len(self.faces), rows):
             part = self.faces[start:start + rows]

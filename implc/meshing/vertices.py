@@ -19,10 +19,9 @@ ROOT_TOLERANCE = 1e-2
 """A surface vertex is done where Newton's step along its edge moves less than this fraction of the edge:
 the vertex takes that step (Newton converges quadratically: where F is smooth along the edge, its distance
 to F = 0 is of the order of the step squared; on a ball of radius r at most ROOT_TOLERANCE² × edge² / 2r,
-for r = 0.7 in [−1, 1]³ under 10⁻⁵ of a cell at 32³ and 5·10⁻⁷ at 512³), its normal is the gradient where
-F was sampled, at most this fraction of the edge away. 10⁻³ took a second sample on two edges in three at
-512³ (Scene 1: 1.66 samples a vertex, 1.04 now; bear at 256³ 1.74, 1.22 now), for vertices a hundred
-times closer than anyone sees."""
+for r = 0.7 in [−1, 1]³ under 10⁻⁵ of a cell at 32³), its normal is the gradient where F was sampled, at
+most this fraction of the edge away. A tenth of it took a second sample on most edges, for vertices a
+hundred times closer than anyone sees (``implc bench --sections mesh``: the samples and the distance)."""
 NUDGE = 1e-7
 """Each surface vertex moves along its edge by up to this fraction of the edge, by a hash of its key: the
 construction holds for any place inside the edge, and the nudge breaks the exact coplanarity that a
@@ -174,7 +173,7 @@ def _edge_roots(grid: Grid, keys, a, b, fa, fb, vertices: np.ndarray, normals: n
 def _unit(normals: np.ndarray) -> np.ndarray:
     """Gradients normalised in place (NaN where they are not usable)."""
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        normals /= np.sqrt(np.einsum("ij,ij->i", normals, normals))[:, None]  # np.linalg.norm: 3x slower
+        normals /= np.sqrt(np.einsum("ij,ij->i", normals, normals))[:, None]  # np.linalg.norm: several times slower
     normals[np.flatnonzero(~np.isfinite(normals).all(1))] = np.nan
     return normals
 
@@ -195,7 +194,7 @@ def fill_normals(grid: Grid, normals, vertices, faces) -> np.ndarray:
     if len(bad):
         mask = np.zeros(len(vertices), bool)
         mask[bad] = True
-        # only the triangles around those vertices (column by column: a boolean mask of (F, 3) is 4x slower)
+        # only the triangles around those vertices (column by column: a boolean mask of (F, 3) is several times slower)
         faces = np.take(faces, np.flatnonzero(mask[faces[:, 0]] | mask[faces[:, 1]] | mask[faces[:, 2]]), axis=0)
         p = np.take(vertices, faces, axis=0)
         area = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])

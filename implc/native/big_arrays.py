@@ -4,9 +4,8 @@ over anonymous memory mappings, so that the page size is this module's choice ra
 numpy advises the kernel to back every array over 4 MiB with transparent huge pages. Where the kernel
 answers that advice by compacting memory on the first touch (``/sys/kernel/mm/transparent_hugepage/defrag``
 set to ``madvise``, the kernel's default), the first touch of each 2 MiB page can stall far longer than
-512 small page faults: on the development VM, Scene 1 at 4096³ in a fresh process took 3.8 s with
-numpy's advice and 2.6 s without it (system time 4.9 s against 1.9-2.8 s; ``benchmarks/suite.py``
-section 'scale' measures it). So these arrays carry no advice (small pages unless huge pages are
+512 small page faults, and fine grids spent more system time than they saved (``implc bench --sections
+scale`` measures it). So these arrays carry no advice (small pages unless huge pages are
 'always'); ``IMPLC_HUGE_PAGES=1`` in the environment advises huge pages instead, to compare.
 Untouched pages of a mapping cost nothing, so a generous capacity is free until written.
 """

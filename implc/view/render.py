@@ -64,9 +64,10 @@ def _shade(normals, forward, right, up, style: Style):
 
 
 MAX_SIZE = 8192
-"""The largest image (pixels per side): 6.4 GB of working memory and about 15 s of splatting."""
+"""The largest image (pixels per side): :data:`BYTES_PER_PIXEL` times its pixels of working memory."""
 BYTES_PER_PIXEL = 100
-"""A render's working memory per pixel (z-buffer, winners, shading, the image), measured: 1.6 GB at 4096²."""
+"""A render's working memory per pixel (z-buffer, winners, shading, the image), rounded up from the peak
+measured at the largest sizes."""
 
 
 def render_points(centers: np.ndarray, normals: np.ndarray, cell_size: np.ndarray, bounds: Any, *, size: int = 1024,

@@ -117,7 +117,7 @@ PIO2_1, PIO2_2, PIO2_3 = 1.5707963267341256, 6.077100506303966e-11, 2.0222662487
 OUTLINE_ABOVE = 8
 """A tape with more sin, cos and atan2 nodes than this calls them as functions of its module (one copy
 each, never inlined) instead of expanding ~40-80 instructions at every use: its IR, and LLVM's time, stay
-proportional to the tape (a sum of 50 sines compiled in 4.8 s expanded)."""
+proportional to the tape (expanded, a sum of many sines compiles for seconds)."""
 
 
 def outlined(name: str, arity: int, body):

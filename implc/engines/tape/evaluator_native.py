@@ -177,15 +177,14 @@ class TapeEvaluator(Evaluator):
         """The program of child ``c`` (i32) of the octant at ``level``: simplified by its choices where one
         was decided (``decided``: i1) and pruning is on, else the octant's own. Two levels above the grid's
         leaves it also reads a constant for each negligible exponential term (``tape_simplify_substituting``:
-        bear's programs just above the leaves 321 -> 144 instructions at 512³), whose partials are not F's:
+        on smooth blends most of the program just above the leaves), whose partials are not F's:
         the normals below it run its parent's (:meth:`exact_level`), the second look both (:meth:`second_look`).
         A child just
         above the leaves (of the grid, :data:`implc.native.abi.TAPE_GRID_DEPTH`, wherever this walk stops) takes the
         octant's own too: its program would enclose the eight leaves once and serve nothing else, and
         simplifying costs two passes over the octant's program, about a third of what enclosing eight boxes
-        costs per instruction, for little (bear's programs shrink 7% there, 321 to 299 instructions on average
-        at 512³; colonnade's 5.9 to 4.5). Without it, at 512³ in the natural mode, CPU: bear 1.50 -> 1.35 s,
-        Prospero (extruded) 0.244 -> 0.198 s (medians of 5 interleaved runs)."""
+        costs per instruction, for little: programs shrink by a few per cent there (``implc bench --sections
+        models`` counts the live ops per octant, and measures the time)."""
         b = walk.b
         child = b.add(level, const(I64, 1))
         above_the_leaves = b.icmp_signed(">=", child, b.sub(self.grid_depth, const(I64, 1)))
@@ -258,8 +257,7 @@ class TapeEvaluator(Evaluator):
         """The look with the octant's own program (where a negligible term reads a constant, its proofs
         still hold: docs/soundness.md), then, where that program has a term replaced, with the exact one
         (:meth:`exact_level`) at the leaves it left flagged: never a voxel more than the exact program's
-        look alone keeps (bear's default at 512³, one worker: 3.64 -> 3.20 s of CPU, 567,149 -> 566,814
-        voxels)."""
+        look alone keeps, for less work than that look alone (``implc bench --sections models``)."""
         b = walk.b
 
         def look(at_level):

@@ -67,7 +67,7 @@ NEGLIGIBLE = 2.0 ** -7
 """How small a sum's exponential term must be, relative to the width of the sum's enclosure over an
 octant, for the octant's descendants to read a constant instead: scale-free, and the sum's enclosure over
 a descendant widens by at most that share of its width over the octant (a few per cent of a leaf's two
-levels down; in the median, bear's at 512³, far less: docs/soundness.md)."""
+levels down; in the median far less: docs/soundness.md)."""
 
 _POWERS = {2: "square", 3: "cube", 4: "fourth"}
 _DIRECT = {"neg", "abs", "sqrt", "exp", "log", "sin", "cos", "sub", "mul", "div", "min", "max", "select_lt",

@@ -18,8 +18,8 @@ pieces (:func:`emit_tape_tighten`'s ``prove_face``); one still open is split
 (:mod:`implc.engines.second_look_native`), each box below it tested first over the face its parent's partials'
 signs give (they hold over the box, which lies in the parent's), with its own partials only where that
 fails; unless F at one of its corners (``tape_point``, in floating point) already lies across 0, as in
-:mod:`implc.engines.compiled.tighten_native`: the surface crosses it, and splitting it would only spend time (Prospero,
-extruded, at 512³: 52,614 of the 62,238 flagged leaves that stay). Boxes are the subdivider's at the
+:mod:`implc.engines.compiled.tighten_native`: the surface crosses it, and splitting it would only spend time (most of
+the flagged leaves that stay, on the peer models). Boxes are the subdivider's at the
 finer levels (origin + i·h, padded outward)."""
 
 from __future__ import annotations

@@ -51,8 +51,7 @@ def make_backend(storage):
 def bytes_per_voxel(storage) -> float:
     """A planning figure for the memory estimate (voxel arrays kept by Voxels included). The default
     octree: 12 bytes of float32 normal and about 10 of nodes per voxel kept, and the tasks' buffers
-    while they run (measured 26.5-28.1 bytes per voxel of peak RSS on Scene 1 at 4096³, the process
-    included)."""
+    while they run, rounded up from the peak that ``implc bench --sections scale`` measures."""
     return {"octree": 32, "coords": 24}.get(storage, 24) if isinstance(storage, str) else 24
 
 
