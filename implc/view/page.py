@@ -1,4 +1,4 @@
-"""The browser viewer's page: its assets (``implc/viewer_assets``: our HTML, CSS and WebGL2 script, no
+"""The browser viewer's page: its assets (``implc/view/assets``: our HTML, CSS and WebGL2 script, no
 library), the chunks it reads (:mod:`implc.view.lod_chunks`) or the mesh (:mod:`implc.view.mesh_payload`), a static
 export of both, and a self-contained embed for notebooks (``Voxels.show()``, ``Mesh.show()``).
 

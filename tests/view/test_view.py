@@ -463,7 +463,7 @@ def test_a_wheel_carries_the_page(tmp_path):
     assert done.returncode == 0, done.stderr
     (wheel,) = tmp_path.glob("implc-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
-    assert {f"implc/viewer_assets/{n}" for n in ("index.html", "viewer.js", "viewer.css")} <= names
+    assert {f"implc/view/assets/{n}" for n in ("index.html", "viewer.js", "viewer.css")} <= names
 
 
 # -- a mesh in the page ----------------------------------------------------------------------------
