@@ -108,13 +108,17 @@ PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort":
 """Bytes per value of each PLY property type."""
 
 
+PLY_HEADER_BYTES = 1 << 20
+"""The longest PLY header read (comments and properties included)."""
+
+
 def ply_header(path, error=ValueError) -> tuple[list[str], int]:
-    """A PLY file's header lines (at most 64, each read with a bound) and the offset where its body
-    starts; ``error`` if there is no ``end_header`` within them."""
+    """A PLY file's header lines (within its first :data:`PLY_HEADER_BYTES`, each read with a bound) and the
+    offset where its body starts; ``error`` if there is no ``end_header`` within them."""
     lines: list[str] = []
     offset = 0
     with open(path, "rb") as f:
-        while len(lines) <= 64:
+        while offset < PLY_HEADER_BYTES:
             raw = f.readline(1 << 12)  # bounded: a body without line breaks is not read whole
             if not raw:
                 break

@@ -1,7 +1,7 @@
 """Triangle meshes: :class:`Mesh` (vertices, faces, analytic normals), its counted checks, and mesh files.
 
-Files are read through trimesh (one well-kept library for every format, where each format's quirks are
-already handled). They are written by :mod:`implc.meshing.formats` (trimesh's writers took several
+Files are read by :mod:`implc.meshing.readers` (untrusted input: nothing followed out of the file, every
+count bounded) and written by :mod:`implc.meshing.formats` (trimesh's writers took several
 times as long, OBJ's and 3MF's most: ``implc bench --sections mesh``), under a temporary name renamed into place.
 """
 
@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from ..common.atomic_file import replacing
-from ..common.untrusted import ply_elements, ply_header, printable, regular_file
 from ..errors import MeshFileError
+from .readers import read_mesh
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb", ".3mf")
 MEASURE_ROWS = 1 << 18
@@ -226,35 +226,19 @@ def is_mesh_file(path: str | os.PathLike[str]) -> bool:
 
 
 def load(path: str | os.PathLike[str]) -> Mesh:
-    """Read a mesh file (any format trimesh reads) as a :class:`Mesh`; one clear error if it is not one."""
-    path = Path(path)
-    regular_file(path, MeshFileError, "mesh file")
-    if path.suffix.lower() == ".ply":  # counts checked against the file's length before trimesh allocates
-        ply_elements(path, *ply_header(path, MeshFileError), MeshFileError)
-    import trimesh
-    try:
-        loaded = trimesh.load(str(path), force="mesh", process=False)
-    except Exception as error:  # trimesh raises many kinds for a bad file
-        raise MeshFileError(f"cannot read {path} as a mesh: {printable(str(error), 160)}") from None
-    vertices, faces = np.asarray(getattr(loaded, "vertices", ())), np.asarray(getattr(loaded, "faces", ()))
-    if vertices.ndim != 2 or len(faces) == 0:
-        raise MeshFileError(f"{path} holds no triangles")
-    if vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:  # what a damaged file can give
-        raise MeshFileError(f"{path} holds no triangle mesh in three dimensions (vertices {vertices.shape}, "
-                            f"faces {faces.shape})")
-    if not np.issubdtype(faces.dtype, np.integer) or faces.min() < 0 or faces.max() >= len(vertices):
-        raise MeshFileError(f"{path}: its faces name vertices it does not hold")
-    return Mesh(vertices, faces)
+    """Read a mesh file (STL, PLY, OBJ, GLB or 3MF: :mod:`implc.meshing.readers`, which follow nothing out of
+    the file) as a :class:`Mesh`; one clear error if it is not one."""
+    return Mesh(*read_mesh(path))
 
 
 def describe(path: str | os.PathLike[str]) -> list[str]:
     """``implc info`` for a mesh file: size, extent, and the counted checks (after merging the vertices
-    that formats such as STL repeat per triangle)."""
+    that formats such as STL repeat per triangle: equal coordinates are one vertex)."""
     path = Path(path)
     mesh = load(path)
-    merged = mesh.to_trimesh()
-    merged.merge_vertices()
-    report = Mesh(merged.vertices, merged.faces).check()
+    distinct, inverse = np.unique(mesh.vertices, axis=0, return_inverse=True)  # STL repeats them per triangle
+    merged = Mesh(distinct, inverse.reshape(-1)[mesh.faces])
+    report = merged.check()
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
     closed = report["open_edges"] == 0 and report["overused_edges"] == 0
     return [
@@ -266,5 +250,5 @@ def describe(path: str | os.PathLike[str]) -> list[str]:
         f"{'consistent' if report['repeated_directed_edges'] == 0 else 'inconsistent'}"
         f"; degenerate triangles: {report['degenerate']}; pinched vertices: "
         f"{'not counted' if report['split_vertices'] is None else report['split_vertices']}",
-        f"volume: {report['volume']:.9g}, area: {merged.area:.9g}",
+        f"volume: {report['volume']:.9g}, area: {mesh.area:.9g}",
     ]
