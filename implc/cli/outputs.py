@@ -54,13 +54,14 @@ def cmd_voxelize(args) -> int:
         from ..files.zarr_writer import write_zarr
         t0 = time.perf_counter()
         result: typing.Any
+        partial = out.with_name(out.name + ".partial")
+        refusable = partial.exists()  # a refusal to start over it is not a run that stopped
         try:
             result = write_zarr(surface, depth, out, solid=args.solid, workers=args.workers, cluster=args.cluster,
                                 resume=args.resume, progress=not args.quiet and sys.stderr.isatty(), say=say,
                                 **TIGHTNESS[args.tightness])
-        except BaseException:
-            partial = out.with_name(out.name + ".partial")
-            if partial.is_dir():
+        except BaseException as exc:
+            if partial.is_dir() and not (refusable and isinstance(exc, ValueError)):
                 print(f"implc: the finished tasks are kept in {partial}: the same command with --resume "
                       "finishes the store", file=sys.stderr)
             raise

@@ -5,7 +5,10 @@ rename.
 flushed to disk and renamed over the target in one step (``os.replace``), so a reader, a crash, Ctrl-C
 or SIGTERM sees either the old file or the whole new one. On any exception the temporary file is removed
 and the target is untouched. :func:`replacing_folder` does the same for a folder (a Zarr store, a slice
-stack): the old folder is moved aside, the new one renamed into place, then the old one removed.
+stack): the old folder is moved aside, the new one renamed into place, then the old one removed. A folder
+is replaced only where it is empty or one of implc's own outputs of the same kind (it holds the
+:data:`MARKER` file naming that kind, or the caller recognises its layout): a user's folder that happens to
+have the name is refused, and nothing in it is touched.
 :func:`resumable_folder` builds a folder under the fixed name ``NAME.partial`` instead, kept when the
 block fails after saving finished work in it, so that a later run can finish it.
 
@@ -24,7 +27,11 @@ import signal
 import stat
 import tempfile
 import threading
+from collections.abc import Callable
 from pathlib import Path
+
+MARKER = ".implc-output"
+"""The file every folder output of implc holds, naming its kind ("zarr store", "viewer", "slices")."""
 
 COMPLETED: list[Path] = []
 """Every target this process has put in place, in order (see the module's docstring)."""
@@ -132,37 +139,88 @@ def _filled_into_place(folder: Path, path: Path, keep=None):
         raise
 
 
+def mark(folder: Path, kind: str) -> None:
+    """Mark ``folder`` as an implc output of ``kind`` (:data:`MARKER`)."""
+    (Path(folder) / MARKER).write_text(kind + "\n")
+
+
+def output_kind(folder: Path) -> str | None:
+    """The kind of implc output ``folder`` is, by its :data:`MARKER` (None: not marked as one)."""
+    try:
+        with open(folder / MARKER, "rb") as f:
+            return f.read(64).decode("ascii", errors="replace").strip() or None
+    except OSError:
+        return None
+
+
+def _ours(folder: Path, kind: str, recognise: Callable[[Path], bool] | None) -> bool:
+    """Whether ``folder`` is an implc output of ``kind``: marked so, or recognised by its layout."""
+    return folder.is_dir() and not folder.is_symlink() and (
+        output_kind(folder) == kind or (recognise is not None and recognise(folder)))
+
+
+def check_replaceable(path: Path, kind: str, recognise: Callable[[Path], bool] | None = None) -> None:
+    """Refuse (ValueError, one line) to replace ``path`` unless it is missing, an empty folder, or an implc
+    output of ``kind`` (its marker, or ``recognise(path)`` for outputs written before markers)."""
+    if not path.exists() and not path.is_symlink():
+        return
+    if not path.is_dir() or path.is_symlink():
+        raise ValueError(f"{path} exists and is not a folder: implc writes a {kind} there only in place of "
+                         f"its own (choose another name, or remove it first)")
+    with os.scandir(path) as entries:
+        if next(entries, None) is None:
+            return
+    if _ours(path, kind, recognise):
+        return
+    raise ValueError(f"{path} exists and is not an implc {kind}: implc replaces only its own outputs "
+                     "(choose another name, or remove it first)")
+
+
 @contextlib.contextmanager
-def replacing_folder(path):
-    """``with replacing_folder(path) as tmp: fill(tmp)``: a new, empty folder beside ``path`` that
-    becomes ``path`` (replacing an existing folder) only if the block completes."""
+def replacing_folder(path, kind: str, recognise: Callable[[Path], bool] | None = None, *, marked: bool = True):
+    """``with replacing_folder(path, kind) as tmp: fill(tmp)``: a new folder beside ``path`` (marked as an
+    implc output of ``kind`` unless not ``marked``: then ``recognise`` alone tells it later) that becomes
+    ``path`` only if the block completes, replacing an existing folder only where :func:`check_replaceable`
+    allows."""
     path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise ValueError(f"{path} exists and is not a folder")
+    check_replaceable(path, kind, recognise)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent))
+    if marked:
+        mark(tmp, kind)
     with _filled_into_place(tmp, path) as folder:
         yield folder
 
 
 @contextlib.contextmanager
-def resumable_folder(path, *, resume: bool = False, matches=None, keep=None):
-    """``with resumable_folder(path) as folder: fill(folder)``: the folder ``NAME.partial`` beside
-    ``path``, renamed into place (replacing an existing folder) when the block completes. If the block
-    fails where ``keep(folder)`` says finished work was saved in it, it stays for a later
-    ``resume=True``, which takes it up again where ``matches(folder)`` says it holds the same job."""
+def resumable_folder(path, kind: str, *, resume: bool = False, matches=None, keep=None, recognise=None,
+                     marked: bool = True):
+    """``with resumable_folder(path, kind) as folder: fill(folder)``: the folder ``NAME.partial`` beside
+    ``path``, marked as an implc output of ``kind``, renamed into place (replacing an existing folder where
+    :func:`check_replaceable` allows) when the block completes. If the block fails where ``keep(folder)``
+    says finished work was saved in it, it stays for a later ``resume=True``, which takes it up again where
+    ``matches(folder)`` says it holds the same job; a run without ``resume`` refuses to start over it (its
+    finished work is the user's to keep or remove). ``recognise`` and ``marked``: as for
+    :func:`replacing_folder`."""
     path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise ValueError(f"{path} exists and is not a folder")
+    check_replaceable(path, kind, recognise)
     partial = path.with_name(path.name + ".partial")
     if resume:
         if not partial.is_dir():
             raise ValueError(f"nothing to resume: {partial} does not exist (a run that stops early keeps it)")
+        if not _ours(partial, kind, recognise):
+            raise ValueError(f"{partial} is not an unfinished implc {kind}: nothing to resume there")
         if matches is not None and not matches(partial):
-            raise ValueError(f"{partial} holds another run (another surface, depth or options): run without "
-                             "resume to start over")
-    elif partial.exists():
-        shutil.rmtree(partial)
+            raise ValueError(f"{partial} holds another run (another surface, depth or options): remove it to "
+                             "start over")
+    elif partial.exists() or partial.is_symlink():
+        if _ours(partial, kind, recognise):
+            raise ValueError(f"{partial} holds an unfinished run: finish it with --resume (resume=True), or remove "
+                             "it to start over")
+        raise ValueError(f"{partial} exists and is not implc's: implc keeps its unfinished runs there (choose "
+                         "another name, or remove it first)")
     partial.mkdir(parents=True, exist_ok=True)
+    if marked and output_kind(partial) is None:
+        mark(partial, kind)
     with _filled_into_place(partial, path, keep) as folder:
         yield folder

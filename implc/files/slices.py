@@ -10,6 +10,7 @@ column) is cell (i = column, j = n − 1 − row) of the layer: x to the right, 
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -52,6 +53,11 @@ def layers(voxels: Voxels) -> Iterator[tuple[int, np.ndarray]]:
         yield z, np.flipud(image.T)
 
 
+def _is_slice_stack(folder: Path) -> bool:
+    """Whether ``folder`` holds nothing but a slice stack (one written before outputs were marked)."""
+    return all(re.fullmatch(r"layer_\d+\.(png|tif)", p.name) and p.is_file() for p in folder.iterdir())
+
+
 def save_slices(voxels: Voxels, folder: str | os.PathLike[str], fmt: str = "png") -> Path:
     """Write ``folder/layer_00000.png`` ... (or ``.tif``), one 1-bit image per z layer, bottom first. The
     folder is written under a temporary name beside it and renamed into place: an interrupted save leaves
@@ -62,7 +68,7 @@ def save_slices(voxels: Voxels, folder: str | os.PathLike[str], fmt: str = "png"
     if fmt not in FORMATS:
         raise ValueError(f"unknown slice format {fmt!r}: use {' or '.join(FORMATS)}")
     folder = Path(folder)
-    with replacing_folder(folder) as tmp:
+    with replacing_folder(folder, "slices", _is_slice_stack, marked=False) as tmp:
         digits = max(5, len(str((1 << voxels.depth) - 1)))
         options = {"compression": "group4"} if fmt == "tiff" else {"optimize": False}
         for z, image in layers(voxels):

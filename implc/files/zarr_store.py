@@ -31,6 +31,7 @@ parts it spans, and the small arrays and the manifest by the caller. The store i
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
 from collections.abc import Iterator
@@ -45,7 +46,7 @@ from ..cluster.tasks import (
     task_level,
 )
 from ..common.bounds import usable_bounds
-from ..common.untrusted import printable
+from ..common.untrusted import printable, regular_file
 from ..engines.morton import morton_codes
 from ..errors import StoreError
 from ..native import abi
@@ -69,6 +70,27 @@ ROW_SHARD = 1 << 20
 CLIENT_LEVELS = 3
 """The levels of detail up to three below the task level are small (8³ cells per task at most) and
 written whole by the caller from each task's block; finer ones by the tasks, shard by shard."""
+
+
+STORE_KIND = "zarr store"
+"""The kind of output a store is (:data:`implc.common.atomic_file.MARKER`)."""
+STORE_ENTRIES = {"zarr.json", "occupancy", "lod", "voxels", "inside", "bricks", "_parts"}
+"""What a store's folder holds."""
+
+
+def is_store_folder(folder: Path) -> bool:
+    """Whether ``folder`` is a store implc wrote (whole or a run's partial one): its entries are a store's
+    and its ``zarr.json`` carries implc's attributes. (A store holds no marker file: zarr would take it for
+    a member.)"""
+    try:
+        if not {p.name for p in folder.iterdir()} <= STORE_ENTRIES:
+            return False
+        regular_file(folder / "zarr.json", StoreError, "store metadata")
+        with open(folder / "zarr.json", "rb") as f:
+            meta = json.loads(f.read(1 << 20))
+        return isinstance(meta, dict) and "implc" in meta.get("attributes", {})
+    except (OSError, ValueError):
+        return False
 
 
 @dataclass(frozen=True)

@@ -50,7 +50,18 @@ from ..voxelizer.voxelize import (
     inside_voxel_count,
     volume_bounds,
 )
-from .zarr_store import Layout, compressors, create_store, first_cells, octant_keys, paint, pooled, small_array
+from .zarr_store import (
+    STORE_KIND,
+    Layout,
+    compressors,
+    create_store,
+    first_cells,
+    is_store_folder,
+    octant_keys,
+    paint,
+    pooled,
+    small_array,
+)
 
 if TYPE_CHECKING:
     from ..engines.surface import Surface
@@ -325,8 +336,8 @@ def write_zarr(surface: Surface, depth: int, path: str | os.PathLike[str], *, so
                                         "layout": layout.describe()}))
     t0 = time.perf_counter()
     path = Path(path)
-    with resumable_folder(path, resume=resume, matches=lambda folder: _plan_of(folder) == plan_about,
-                          keep=_has_parts) as folder:
+    with resumable_folder(path, STORE_KIND, resume=resume, matches=lambda folder: _plan_of(folder) == plan_about,
+                          keep=_has_parts, recognise=is_store_folder, marked=False) as folder:
         if not (folder / "zarr.json").exists():
             create_store(folder, layout, plan_about)
         cells, plan_inside = plan_tasks(surface, depth, layout.task_level, solid=solid, options=options)
@@ -476,7 +487,7 @@ def save_zarr(voxels: Voxels, path: str | os.PathLike[str]) -> Path:
     depth, level = layout.depth, layout.task_level
     coords, normals = voxels.coords, voxels.normals
     inside = voxels.inside if voxels.inside is not None else np.empty((0, 4), np.int32)
-    with replacing_folder(path) as folder:
+    with replacing_folder(path, STORE_KIND, is_store_folder, marked=False) as folder:
         create_store(folder, layout, {"surface": None, "options": None})
         plan_rows = inside[inside[:, 3] <= level]
         fine = inside[inside[:, 3] > level]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import html
 import json
+import re
 from pathlib import Path
 
 from ..common.atomic_file import replacing, replacing_folder
@@ -38,11 +39,20 @@ def lod_chunks(voxels, name: str = "", view=None) -> LodChunks:
     return LodChunks(voxels, name=name, view=view)
 
 
+def _is_export(folder: Path) -> bool:
+    """Whether ``folder`` holds nothing but an exported viewer (one written before outputs were marked)."""
+    names = {p.name for p in folder.iterdir()}
+    if not names <= {*ASSET_TYPES, "meta.json", "mesh.bin", "chunks"}:
+        return False
+    chunks = folder / "chunks"
+    return not chunks.exists() or all(re.fullmatch(r"\d+-\d+-\d+-\d+\.bin", p.name) for p in chunks.iterdir())
+
+
 def export(chunks: LodChunks | MeshPayload, folder, *, budget: int = 1_000_000) -> Path:
     """Write a static, self-contained viewer (index.html, its script and style, meta.json and every
     chunk, or mesh.bin) into ``folder``, replacing it whole once complete."""
     folder = Path(folder)
-    with replacing_folder(folder) as tmp:
+    with replacing_folder(folder, "viewer", _is_export, marked=False) as tmp:
         for name in ASSET_TYPES:
             (tmp / name).write_bytes(asset(name))
         (tmp / "meta.json").write_bytes(chunks.meta_json(budget))
