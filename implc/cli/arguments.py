@@ -139,8 +139,11 @@ def refuse_surface_options(args, kind: str, shown: str, *more):
 
 def check_surface_options(args):
     check_range(args.depth, "--depth", 1, 21)
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    if args.workers is not None:
+        from ..common.threads import max_workers
+        if not 1 <= args.workers <= max_workers():
+            raise UsageError(f"--workers must be from 1 to {max_workers()} (four per usable core here), "
+                             f"got {args.workers}")
 
 
 def check_folder_writable(path: Path, what: str):

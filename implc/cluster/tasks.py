@@ -14,6 +14,7 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import logging
+import re
 import resource
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -22,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from ..common.threads import default_workers
 from ..common.untrusted import printable
 from ..engines.walk import Subdivider, SubdivisionStats
 from ..errors import ClusterError
@@ -131,20 +133,32 @@ def parse_address(cluster: Any) -> Any:
             return cluster
         raise ClusterError(f"cluster must be 'local:N', a scheduler address or a distributed.Client, "
                            f"not a {type(cluster).__name__}")
+    shown = shown_address(cluster)
     if cluster.startswith(LOCAL):
-        count = cluster[len(LOCAL):]
-        if not count.isdigit() or not 1 <= int(count) <= 1024:
-            raise ClusterError(f"--cluster {cluster!r}: local:N needs a worker count N from 1 to 1024")
+        count, most = cluster[len(LOCAL):], max_local_workers()
+        if not (count.isascii() and count.isdigit() and len(count) <= 6) or not 1 <= int(count) <= most:
+            raise ClusterError(f"--cluster {shown}: local:N needs a worker count N from 1 to {most} (four per usable "
+                               "core: local workers are processes on this machine)")
         return cluster
     if "://" in cluster:
         scheme, _, rest = cluster.partition("://")
         if scheme not in ("tcp", "tls", "inproc", "ucx", "ws", "wss") or not rest:
-            raise ClusterError(f"--cluster {cluster!r}: not a scheduler address (tcp://host:port) or local:N")
+            raise ClusterError(f"--cluster {shown}: not a scheduler address (tcp://host:port) or local:N")
         return cluster
     host, _, port = cluster.rpartition(":")
-    if not host or not port.isdigit():
-        raise ClusterError(f"--cluster {cluster!r}: not a scheduler address (tcp://host:port) or local:N")
+    if not host or not (port.isascii() and port.isdigit()):
+        raise ClusterError(f"--cluster {shown}: not a scheduler address (tcp://host:port) or local:N")
     return f"tcp://{cluster}"
+
+
+def shown_address(address: str) -> str:
+    """``address`` as messages show it: credentials (``user:password@``) replaced by ``***@``."""
+    return printable(re.sub(r"(?<=://)[^/@\s]*@|^[^/@\s:]*:[^/@\s]*@", "***@", str(address)), 120)
+
+
+def max_local_workers() -> int:
+    """The most worker processes ``local:N`` starts: four per usable core."""
+    return 4 * default_workers()
 
 
 def local_cluster(workers: int) -> Any:
@@ -179,11 +193,15 @@ def connect(cluster: Any, *, say: Callable[[str], None] | None = None) -> Iterat
         else:
             try:
                 client = distributed.Client(cluster, timeout="10s")
-            except (OSError, TimeoutError) as exc:
-                raise ClusterError(f"cannot reach the Dask scheduler at {cluster}: {exc}") from None
+            except Exception as exc:  # unreachable, or a transport without its configuration (tls://, ucx://)
+                why = " ".join(str(exc).split())
+                for secret in re.findall(r"([^/@\s]+)@", cluster):  # whatever the library echoed of the address
+                    why = why.replace(secret, "***")
+                raise ClusterError(f"cannot connect to the Dask scheduler at {shown_address(cluster)}: "
+                                   f"{printable(why, 160) or type(exc).__name__}") from None
         stack.callback(client.close)
         if say is not None:
-            say(f"cluster  {cluster}: {len(client.scheduler_info().get('workers', {}))} workers, "
+            say(f"cluster  {shown_address(cluster)}: {len(client.scheduler_info().get('workers', {}))} workers, "
                 f"dashboard {client.dashboard_link}")
         yield client
 
@@ -193,12 +211,20 @@ def worker_threads(client: Any) -> int:
     return max(1, sum(client.nthreads().values()))
 
 
+NO_WORKERS_SECONDS = 60.0
+"""How long a run waits for a worker when the cluster has none (they died, or none ever joined)."""
+POLL_SECONDS = 0.05
+"""How often a run looks for finished tasks while none is ready (Ctrl-C is seen then too)."""
+
+
 def run_tasks(client: Any, function: Callable[..., Any], tasks: Sequence[tuple], *, shared: tuple = (),
-              name: str = "implc", on_result: Callable[[Any], None] | None = None, threads: int = 1) -> list[Any]:
+              name: str = "implc", on_result: Callable[[Any], None] | None = None, threads: int = 1,
+              no_workers_seconds: float = NO_WORKERS_SECONDS) -> list[Any]:
     """``function(*shared, *task)`` for every task: on ``client``'s workers (None: here, ``threads`` at a time),
     results in the tasks' order; ``on_result`` sees each as it arrives. ``shared`` travels with every
     task (a recipe is text: small, and a worker that joins late needs nothing else). Ctrl-C or a
-    failure cancels the tasks still queued or running before it propagates."""
+    failure cancels the tasks still queued or running before it propagates; a cluster without workers for
+    ``no_workers_seconds`` and a scheduler that goes away are each a ClusterError."""
     if client is None:
         return _run_here(function, tasks, shared, on_result, threads)
     results: list[Any] = [None] * len(tasks)
@@ -207,22 +233,71 @@ def run_tasks(client: Any, function: Callable[..., Any], tasks: Sequence[tuple],
     futures = [client.submit(function, *shared, *task, key=f"{token}-{i}", pure=False)
                for i, task in enumerate(tasks)]
     index = {future.key: i for i, future in enumerate(futures)}
+    pending = distributed.as_completed(futures)
+    watch = _Watch(client, no_workers_seconds)
     try:
-        for future in distributed.as_completed(futures):
-            try:
-                result = future.result()
-            except Exception as exc:
-                if type(exc).__name__ == "KilledWorker":  # Dask gave up on it: its workers kept dying
-                    raise ClusterError(f"a task's workers died repeatedly (Dask's KilledWorker: "
-                                       f"{printable(str(exc), 200)}); see the workers' logs") from None
-                raise
-            results[index[future.key]] = result
-            if on_result is not None:
-                on_result(result)
+        while not pending.is_empty():
+            for done in _finished(pending, watch):
+                try:
+                    result = done.result()
+                except Exception as exc:
+                    if type(exc).__name__ == "KilledWorker":  # Dask gave up on it: its workers kept dying
+                        raise ClusterError(f"a task's workers died repeatedly (Dask's KilledWorker: "
+                                           f"{printable(str(exc), 200)}); see the workers' logs") from None
+                    if _lost_scheduler(exc):
+                        raise ClusterError("the Dask scheduler went away during the run") from None
+                    raise
+                results[index[done.key]] = result
+                if on_result is not None:
+                    on_result(result)
     except BaseException:
-        client.cancel(futures, force=True)
+        with contextlib.suppress(Exception):
+            client.cancel(futures, force=True)
         raise
     return results
+
+
+class _Watch:
+    """Whether the cluster still has workers, asked at most once a second; ClusterError once it has had
+    none for ``seconds``."""
+
+    def __init__(self, client: Any, seconds: float):
+        self.client, self.seconds = client, seconds
+        self.none_since: float | None = None
+        self.asked = 0.0
+
+    def check(self) -> None:
+        if time.monotonic() - self.asked < 1.0:
+            return
+        self.asked = time.monotonic()
+        try:
+            workers = self.client.scheduler_info().get("workers", {})
+        except Exception:
+            raise ClusterError("the Dask scheduler went away during the run") from None
+        if workers:
+            self.none_since = None
+            return
+        now = time.monotonic()
+        self.none_since = now if self.none_since is None else self.none_since
+        if now - self.none_since >= self.seconds:
+            raise ClusterError(f"the cluster has had no workers for {self.seconds:.0f} s (they died, or none "
+                               "joined); see the workers' logs")
+
+
+def _finished(pending: Any, watch: _Watch) -> list[Any]:
+    """The futures of ``pending`` (a distributed.as_completed) finished by now, at least one, checking the
+    cluster while waiting for them."""
+    while True:
+        batch = pending.next_batch(block=False)
+        if batch:
+            return batch
+        watch.check()
+        time.sleep(POLL_SECONDS)
+
+
+def _lost_scheduler(exc: BaseException) -> bool:
+    """Whether ``exc`` says the scheduler (or the connection to it) is gone."""
+    return type(exc).__name__ in ("FutureCancelledError", "CancelledError", "CommClosedError", "StreamClosedError")
 
 
 def _run_here(function, tasks, shared, on_result, threads: int) -> list[Any]:

@@ -9,6 +9,9 @@ import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from contextvars import ContextVar
+from typing import Any
+
+import numpy as np
 
 CHUNK = 1 << 16
 """The most rows per native call of the batched entry points (a multiple of every vector width)."""
@@ -113,3 +116,19 @@ def default_workers() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # pragma: no cover - non-Linux
         return os.cpu_count() or 1
+
+
+def max_workers() -> int:
+    """The most worker threads a call may ask for: four per usable core, at least eight (more only queue
+    for the cores, each with its buffers)."""
+    return max(8, 4 * default_workers())
+
+
+def check_workers(value: Any) -> int:
+    """``value`` as a count of worker threads: a whole number from 1 to :func:`max_workers`; ValueError
+    (one line) otherwise."""
+    most = max_workers()
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= value <= most:
+        raise ValueError(f"workers must be a whole number from 1 to {most} (four per usable core here), "
+                         f"got {value!r}")
+    return int(value)

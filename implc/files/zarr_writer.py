@@ -38,13 +38,12 @@ from ..cluster.tasks import (
     worker_threads,
 )
 from ..common.atomic_file import replacing_folder, resumable_folder
-from ..common.threads import default_workers
+from ..common.threads import check_workers, default_workers
 from ..engines.morton import morton_codes
 from ..engines.walk import SubdivisionStats
 from ..native import abi
 from ..voxelizer.voxelize import (
     Voxels,
-    _check_count,
     _check_depth,
     _check_leaf_options,
     inside_voxel_count,
@@ -326,7 +325,7 @@ def write_zarr(surface: Surface, depth: int, path: str | os.PathLike[str], *, so
     tasks. ``mean_value_levels``, ``refine_leaves``: as :func:`implc.voxelize`'s. ``say``: receives
     one-line reports (the dashboard's address)."""
     depth = _check_depth(depth)
-    workers = default_workers() if workers is None else _check_count("workers", workers)
+    workers = default_workers() if workers is None else check_workers(workers)
     mean_value_levels, refine_leaves = _check_leaf_options(mean_value_levels, refine_leaves)
     options = {"mean_value_levels": mean_value_levels, "refine_leaves": refine_leaves}
     recipe = recipe_of(surface) if cluster is not None else None

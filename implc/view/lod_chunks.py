@@ -20,12 +20,12 @@ axis, layer index, level, cell count, 0, 0), then the two other coordinates of e
 
 from __future__ import annotations
 
-import json
 from types import SimpleNamespace
 
 import numpy as np
 
 from ..engines.morton import morton_codes
+from .json_text import json_bytes
 from .render import cross_section
 
 CHUNK_LEVELS = 6
@@ -169,4 +169,4 @@ class LodChunks:
                 "budget": int(budget), "solid": self.solid, "first_level": min(self.levels)}
 
     def meta_json(self, budget: int = 1_000_000) -> bytes:
-        return json.dumps(self.meta(budget)).encode()
+        return json_bytes(self.meta(budget))

@@ -10,9 +10,9 @@ each vertex (a file that carries none).
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
+
+from .json_text import json_bytes
 
 MAGIC = 0x484D4D49  # "IMMH" read as a little-endian uint32
 VERSION = 1
@@ -68,7 +68,7 @@ class MeshPayload:
                 "vertices": len(self.vertices), "triangles": len(self.faces), "budget": int(budget)}
 
     def meta_json(self, budget: int = 1_000_000) -> bytes:
-        return json.dumps(self.meta(budget)).encode()
+        return json_bytes(self.meta(budget))
 
     def body(self) -> bytes:
         """``mesh.bin`` (see the module docstring)."""

@@ -16,6 +16,7 @@ import re
 from pathlib import Path
 
 from ..common.atomic_file import replacing, replacing_folder
+from .json_text import finite
 from .lod_chunks import LodChunks
 from .mesh_payload import MeshPayload
 
@@ -79,7 +80,8 @@ def embed_html(chunks: LodChunks | MeshPayload, *, max_bytes: int = EMBED_BYTES,
                           for c in chunks.chunk_ids(max_bytes)}
     page = asset("index.html").decode()
     style = f"<style>{asset('viewer.css').decode()}</style>"
-    script = (f"<script>window.IMPLC_EMBED = {json.dumps(data).replace('</', '<' + chr(92) + '/')};</script>"
+    embedded = json.dumps(finite(data), allow_nan=False).replace("</", "<" + chr(92) + "/")
+    script = (f"<script>window.IMPLC_EMBED = {embedded};</script>"
               f"<script>{asset('viewer.js').decode()}</script>")
     page = page.replace('<link rel="stylesheet" href="viewer.css">', style)
     return page.replace('<script src="viewer.js"></script>', script)

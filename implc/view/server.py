@@ -4,19 +4,21 @@ It binds 127.0.0.1, answers only requests with exactly one Host header naming th
 with its port (against DNS rebinding) and an origin-form target (``/TOKEN/...``, not
 ``http://host/...``), and only under a random token that starts every path, as Jupyter's does
 (``http://127.0.0.1:PORT/TOKEN/``). A connection that sends nothing for :data:`READ_TIMEOUT` seconds is
-closed, at most :data:`MAX_CONNECTIONS` are served at once (others wait in the listen queue), and a client
-that hangs up early is forgotten without a traceback. Its routes are the page's files, ``meta.json``,
-``chunks/<level>-<i>-<j>-<k>.bin`` and ``sections/<axis>-<index>-<level>.bin`` (for a mesh, ``mesh.bin``
-instead), all served from memory:
-no file system path is ever read, anything
-else is 404 (a path with ``..`` or ``.`` segments, encoded or not, included), a missing or wrong token
-403, a foreign Host 403.
+closed, and so is one whose request (read and answered) takes more than :data:`REQUEST_SECONDS` in all (a
+client sending a byte every few seconds holds no thread for ever), at most :data:`MAX_CONNECTIONS` are served
+at once (others wait in the listen queue), and a client that hangs up early is forgotten without a traceback.
+Its routes are the page's files, ``meta.json``, ``chunks/<level>-<i>-<j>-<k>.bin`` and
+``sections/<axis>-<index>-<level>.bin`` (for a mesh, ``mesh.bin`` instead), all served from memory: no file
+system path is ever read, anything else is 404 (a path with ``..`` or ``.`` segments, encoded or not,
+included), a missing or wrong token 403, a foreign Host 403.
 """
 
 from __future__ import annotations
 
+import contextlib
 import re
 import secrets
+import socket
 import sys
 import threading
 from http import HTTPStatus
@@ -31,6 +33,8 @@ DEFAULT_PORT = 8765
 PORT_TRIES = 20
 READ_TIMEOUT = 10.0
 """Seconds a connection may stay silent before it is closed (a slow client holds no thread for ever)."""
+REQUEST_SECONDS = 60.0
+"""Seconds one request may take in all, from its first byte to the last of the answer."""
 MAX_CONNECTIONS = 32
 """Connections served at once; more wait until one ends."""
 LISTEN_QUEUE = 128
@@ -45,8 +49,10 @@ class ViewServer:
     """Serves one voxelization's (or one mesh's) viewer; ``url`` carries the token. ``port=None`` takes the first free
     port from :data:`DEFAULT_PORT` on, ``0`` any free port; a given port that is taken raises OSError."""
 
-    def __init__(self, chunks: LodChunks | MeshPayload, *, port: int | None = None, budget: int = 1_000_000):
+    def __init__(self, chunks: LodChunks | MeshPayload, *, port: int | None = None, budget: int = 1_000_000,
+                 request_seconds: float = REQUEST_SECONDS):
         self.chunks, self.token = chunks, secrets.token_urlsafe(24)
+        self.request_seconds = request_seconds
         self.meta = chunks.meta_json(budget)
         self.mesh = chunks.body() if isinstance(chunks, MeshPayload) else None
         self.assets = {name: asset(name) for name in ASSET_TYPES}
@@ -149,6 +155,21 @@ class _Handler(BaseHTTPRequestHandler):
 
     def log_message(self, format, *args):  # noqa: A002 - the base class's name
         pass
+
+    def handle_one_request(self):
+        """One request, cut off (its connection shut) once it has taken :attr:`ViewServer.request_seconds`."""
+        deadline = threading.Timer(self.owner.request_seconds, self._cut_off)
+        deadline.daemon = True
+        deadline.start()
+        try:
+            super().handle_one_request()
+        finally:
+            deadline.cancel()
+
+    def _cut_off(self):
+        self.close_connection = True
+        with contextlib.suppress(OSError):
+            self.connection.shutdown(socket.SHUT_RDWR)
 
     def _send(self, status: HTTPStatus, body: bytes, content_type: str = "text/plain; charset=utf-8"):
         self.send_response(status)

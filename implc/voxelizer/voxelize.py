@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..common.threads import default_workers, threads
+from ..common.threads import check_workers, default_workers, threads
 from ..engines.surface import Surface
 from ..engines.walk import Subdivider, SubdivisionStats
 from ..meshing.contour import MAX_DEPTH as MESH_MAX_DEPTH
@@ -166,7 +166,7 @@ class Voxels:
         """
         if simplify is not None:
             check_tolerance(simplify)  # refused before the contouring, not after it
-        workers = None if workers is None else _check_count("workers", workers)
+        workers = None if workers is None else check_workers(workers)
         surface = self.surface if surface is None else surface
         if not isinstance(surface, Surface):
             raise ValueError("these voxels do not know their surface (read from a file?): pass it, "
@@ -361,7 +361,7 @@ def voxelize(surface: Surface, depth: int = 9, *, workers: int | None = None, st
     if not isinstance(surface, Surface):
         raise TypeError(f"voxelize expects an implc.Surface (from implc.compile), got {type(surface).__name__}")
     depth = _check_depth(depth)
-    workers = default_workers() if workers is None else _check_count("workers", workers)
+    workers = default_workers() if workers is None else check_workers(workers)
     if max_voxels is not None:
         max_voxels = _check_count("max_voxels", max_voxels)
     mean_value_levels, refine_leaves = _check_leaf_options(mean_value_levels, refine_leaves)

@@ -104,7 +104,7 @@ BAD_INPUTS = [  # (argv, words the message must contain); {d} is the folder of t
     (["voxelize", "--expr", "x", "--bounds=-1e308,1e308,-1,1,-1,1", "-o", "{d}/new.npz"], "too far apart"),
     (["voxelize", "--expr", "x", "--bounds", "0,1e-320,-1,1,-1,1", "-o", "{d}/new.npz"], "too close"),
     (["voxelize", "--expr", "x", "--bounds", "0,inf,-1,1,-1,1", "-o", "{d}/new.npz"], "--bounds must be finite"),
-    (["voxelize", "--expr", "x", "--workers", "0", "-o", "{d}/new.npz"], "--workers must be at least 1"),
+    (["voxelize", "--expr", "x", "--workers", "0", "-o", "{d}/new.npz"], "--workers must be from 1 to"),
     (["voxelize", "torus", "--depth", "22", "-o", "{d}/new.npz"], "--depth must be an integer from 1 to 21"),
     (["voxelize", "torus", "-o", "{d}"], "is a folder"),
     (["voxelize", "torus", "--frobnicate", "-o", "{d}/new.npz"], "unrecognized arguments"),

@@ -21,6 +21,7 @@ import implc
 from implc.cli.commands import main
 from implc.cluster.recipe import TravelError, build, recipe_of
 from implc.compiler.vm import parse_vm
+from implc.errors import ClusterError
 from implc.files import scene, zarr_writer
 
 pytestmark = pytest.mark.slow
@@ -221,3 +222,67 @@ def test_ctrl_c_cancels_the_cluster_and_resume_finishes(cluster, tmp_path):
     sc = scene.load("paper_blobs")
     zarr_writer.write_zarr(implc.compile(sc.surface, sc.bounds), 11, tmp_path / "here.zarr", solid=True)
     assert_same_store(tmp_path / "here.zarr", out)
+
+
+def _cluster_with_one_worker(tmp_path) -> Cluster:
+    c = Cluster(tmp_path)
+    c.add_worker()
+    c.wait_for(1)
+    return c
+
+
+def test_a_run_whose_only_worker_dies_ends(tmp_path):
+    """The only worker killed mid-run: the run does not wait for ever; with no worker for the bound (2 s
+    here, run_tasks' parameter) it ends in one ClusterError."""
+    from implc.cluster.tasks import connect, run_tasks
+    c = _cluster_with_one_worker(tmp_path)
+    try:
+        with connect(c.address) as client:
+            killer = threading.Timer(1.0, c.workers[0].kill)
+            killer.start()
+            t0 = time.monotonic()
+            with pytest.raises(ClusterError, match="no workers"):
+                run_tasks(client, time.sleep, [(0.5,)] * 40, no_workers_seconds=2.0)
+            assert time.monotonic() - t0 < 30
+            killer.join()
+    finally:
+        c.close()
+
+
+def test_a_scheduler_that_dies_ends_the_run_in_one_line(tmp_path, capsys):
+    c = _cluster_with_one_worker(tmp_path)
+    try:
+        killer = threading.Timer(2.0, c.scheduler.kill)
+        killer.start()
+        t0 = time.monotonic()
+        code = main(["voxelize", "paper_blobs", "--depth", "11", "-o", str(tmp_path / "s.zarr"), "--quiet",
+                     "--cluster", c.address])
+        err = capsys.readouterr().err
+        assert code == 2 and "Traceback" not in err and time.monotonic() - t0 < 90
+        lines = [line for line in err.splitlines() if line.startswith("implc: error")]
+        assert len(lines) == 1 and "scheduler" in lines[0], err
+        killer.join()
+    finally:
+        c.close()
+
+
+@pytest.mark.parametrize("address,words", [("local:\u0662", "worker count"), ("local:100000", "worker count"),
+                                           ("tls://127.0.0.1:1", "cannot connect"),
+                                           ("ucx://127.0.0.1:1", "cannot connect"),
+                                           ("tcp://admin:s3cr3t@127.0.0.1:1", "cannot connect"),
+                                           ("admin:s3cr3t@host", "not a scheduler address")])
+def test_cluster_addresses_are_one_line_and_keep_credentials_out(tmp_path, address, words):
+    run = subprocess.run([sys.executable, "-m", "implc", "voxelize", "torus", "--depth", "5", "-o",
+                          str(tmp_path / "t.zarr"), "--quiet", "--cluster", address],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and run.stderr.count("\n") == 1 and words in run.stderr, run.stderr
+    assert "s3cr3t" not in run.stderr and "admin" not in run.stderr
+
+
+def test_worker_counts_are_bounded(capsys):
+    from implc.common.threads import max_workers
+    with pytest.raises(ValueError, match="workers must be"):
+        implc.voxelize(implc.compile(implc.x - 0.1), 3, workers=max_workers() + 1)
+    assert main(["voxelize", "torus", "--depth", "3", "-o", "never.npz", "--workers", "100000"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--workers" in err

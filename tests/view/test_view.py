@@ -570,3 +570,39 @@ def test_a_voxel_file_with_mesh_is_refused_and_a_surface_with_mesh_exports_a_mes
     assert main(["view", "torus", "--depth", "5", "--mesh", "--export", str(tmp_path / "b"), "--quiet"]) == 0
     meta = json.loads((tmp_path / "b" / "meta.json").read_text())
     assert meta["kind"] == "mesh" and meta["triangles"] == len(voxels.mesh().faces)
+
+
+def test_a_client_trickling_its_request_is_cut_off(flower):
+    """A client that sends a byte of its request every half second never lets a receive time out; the
+    request's deadline (2 s here, the server's parameter) still closes its connection."""
+    with ViewServer(flower[1], port=0, request_seconds=2.0).start() as slow:
+        request = f"GET /{slow.token}/meta.json HTTP/1.1\r\nHost: 127.0.0.1:{slow.port}\r\n".encode()
+        t0 = time.monotonic()
+        closed = False
+        with socket.create_connection(("127.0.0.1", slow.port), timeout=10) as sock:
+            for byte in request * 4:
+                try:
+                    sock.sendall(bytes([byte]))
+                except OSError:
+                    closed = True
+                    break
+                sock.settimeout(0.5)
+                try:
+                    if sock.recv(1024) == b"":
+                        closed = True
+                        break
+                except TimeoutError:
+                    pass
+                if time.monotonic() - t0 > 8:
+                    break
+        assert closed and time.monotonic() - t0 < 5
+        assert _get(slow, f"/{slow.token}/meta.json")[0] == 200  # the server goes on
+
+
+def test_meta_json_is_strict_json_with_non_finite_values(tmp_path):
+    """JSON has no NaN: a value that is not finite goes out as null, and the page's JSON.parse (here,
+    Python's json in strict mode) reads every exported meta.json."""
+    from implc.view.json_text import json_bytes
+    text = json_bytes({"a": float("nan"), "b": [1.0, float("inf"), {"c": -float("inf")}], "d": np.float64(np.nan)})
+    assert json.loads(text, parse_constant=lambda name: pytest.fail(f"{name} in JSON")) == \
+        {"a": None, "b": [1.0, None, {"c": None}], "d": None}
