@@ -88,9 +88,12 @@ def _put_in_place(tmp: Path, path: Path):
 @contextlib.contextmanager
 def replacing(path):
     """``with replacing(path) as tmp: write(tmp)``: ``path`` gets the new content only if the block
-    completes. The temporary name ends with the target's suffix in lower case (numpy and Pillow choose
+    completes (where ``path`` is a symbolic link, its target does). The temporary name ends with the
+    target's suffix in lower case (numpy and Pillow choose
     the format by it, and numpy appends ".npz" to a name that does not end so)."""
     path = Path(path)
+    if path.is_symlink():  # the link's target gets the new content; the link stays a link
+        path = Path(os.path.realpath(path))
     fd, name = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.",
                                 suffix=f".part{path.suffix.lower()}")
     os.close(fd)

@@ -276,3 +276,47 @@ _TENS_ZERO = 200
 _TENS = 10.0 ** np.arange(-_TENS_ZERO, _TENS_ZERO + 1, dtype=np.float64)
 """10^k for k in [-200, 200] as doubles (the nearest), indexed by k + _TENS_ZERO: a half of any power the
 numbers need (doubles reach 10^±308, the mantissa's scaling at most 10^332)."""
+
+
+def written_coordinates(suffix: str, vertices: np.ndarray) -> np.ndarray:
+    """The coordinates a reader gets back from a file of ``suffix``: float32 in STL and GLB, the nine
+    written digits in OBJ and 3MF, the doubles themselves in PLY."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    if suffix in (".stl", ".glb"):
+        with np.errstate(over="ignore"):
+            return vertices.astype(np.float32).astype(np.float64)
+    if suffix in (".obj", ".3mf") and np.isfinite(vertices).all():
+        text = np.ascontiguousarray(_decimals(vertices)).view(f"S{16}").reshape(vertices.shape)
+        return text.astype(np.float64)
+    return vertices
+
+
+def precision_problem(suffix: str, vertices: np.ndarray, faces: np.ndarray) -> str | None:
+    """Why the mesh, rounded to the format's precision (:func:`written_coordinates`), would not keep its
+    promises, or None: a coordinate beyond the format's range, distinct vertices that become one (a reader
+    that merges them gets a pinched or non-manifold mesh), a triangle that degenerates or turns over
+    (folds, which may intersect their neighbours). Each is checked exactly on the rounded coordinates; a
+    mesh that passes has the same topology in the file, its triangles each facing as before."""
+    written = written_coordinates(suffix, vertices)
+    if written is vertices or np.array_equal(written, vertices):
+        return None
+    where = {".stl": "float32", ".glb": "float32"}.get(suffix, "nine significant digits")
+    if not np.isfinite(written).all():
+        return f"a coordinate is beyond the range of {where}, the format's precision: write .ply (doubles)"
+    used = np.zeros(len(vertices), bool)
+    used[faces.ravel()] = True
+    w, v = written[used], np.asarray(vertices, np.float64)[used]
+    order = np.lexsort(w.T[::-1])  # equal written rows side by side: one of them differs before rounding
+    w, v = w[order], v[order]
+    if ((w[1:] == w[:-1]).all(1) & (v[1:] != v[:-1]).any(1)).any():
+        return (f"in {where}, the format's precision, distinct vertices would become one (the bounds are far "
+                "from the origin for their cells, or tiny): write .ply (doubles)")
+    a, b, c = (written[faces[:, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    oa, ob, oc = (np.asarray(vertices, np.float64)[faces[:, k]] for k in range(3))
+    before = np.cross(ob - oa, oc - oa)
+    turned = np.einsum("ij,ij->i", normal, before) <= 0
+    if turned.any():
+        return (f"in {where}, the format's precision, {int(turned.sum())} triangles would degenerate or turn "
+                "over: write .ply (doubles)")
+    return None

@@ -142,13 +142,20 @@ class Mesh:
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write ``path`` (.stl, .obj, .ply, .glb or .3mf, by its suffix) under a temporary name renamed into
-        place, by :mod:`implc.meshing.formats` (binary STL and PLY; the vertex normals in PLY, OBJ and GLB)."""
+        place, by :mod:`implc.meshing.formats` (binary STL and PLY; the vertex normals in PLY, OBJ and GLB).
+        Refused where the format's precision would break the mesh (:func:`~implc.meshing.formats.precision_problem`)
+        or it holds no triangles."""
         path = Path(path)
         suffix = path.suffix.lower()
         if suffix not in MESH_SUFFIXES:
             raise MeshFileError(f"unknown mesh format {path.suffix or '(none)'!r} for {path}: use "
                                 f"{', '.join(MESH_SUFFIXES)}")
         from . import formats as mesh_formats
+        if len(self.faces) == 0:
+            raise MeshFileError(f"the mesh holds no triangles: nothing to write to {path}")
+        problem = mesh_formats.precision_problem(suffix, self.vertices, self.faces)
+        if problem is not None:
+            raise MeshFileError(f"cannot write {path}: {problem}")
         with replacing(path) as tmp, open(tmp, "wb") as f:
             if suffix == ".stl":
                 mesh_formats.write_stl(f, self.vertices, self.faces)
