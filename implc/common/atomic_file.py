@@ -208,22 +208,44 @@ def resumable_folder(path, kind: str, *, resume: bool = False, matches=None, kee
     path = Path(path)
     check_replaceable(path, kind, recognise)
     partial = path.with_name(path.name + ".partial")
-    if resume:
-        if not partial.is_dir():
-            raise ValueError(f"nothing to resume: {partial} does not exist (a run that stops early keeps it)")
-        if not _ours(partial, kind, recognise):
-            raise ValueError(f"{partial} is not an unfinished implc {kind}: nothing to resume there")
-        if matches is not None and not matches(partial):
-            raise ValueError(f"{partial} holds another run (another surface, depth or options): remove it to "
-                             "start over")
-    elif partial.exists() or partial.is_symlink():
-        if _ours(partial, kind, recognise):
-            raise ValueError(f"{partial} holds an unfinished run: finish it with --resume (resume=True), or remove "
-                             "it to start over")
-        raise ValueError(f"{partial} exists and is not implc's: implc keeps its unfinished runs there (choose "
-                         "another name, or remove it first)")
-    partial.mkdir(parents=True, exist_ok=True)
-    if marked and output_kind(partial) is None:
-        mark(partial, kind)
-    with _filled_into_place(partial, path, keep) as folder:
-        yield folder
+    with contextlib.ExitStack() as held:
+        if partial.is_dir() and not partial.is_symlink():
+            held.enter_context(_locked(partial))  # a run writing it now has it locked: refused here
+        if resume:
+            if not partial.is_dir():
+                raise ValueError(f"nothing to resume: {partial} does not exist (a run that stops early keeps it)")
+            if not _ours(partial, kind, recognise):
+                raise ValueError(f"{partial} is not an unfinished implc {kind}: nothing to resume there")
+            if matches is not None and not matches(partial):
+                raise ValueError(f"{partial} holds another run (another surface, depth or options): remove it to "
+                                 "start over")
+        elif partial.exists() or partial.is_symlink():
+            if _ours(partial, kind, recognise):
+                raise ValueError(f"{partial} holds an unfinished run: finish it with --resume (resume=True), or "
+                                 "remove it to start over")
+            raise ValueError(f"{partial} exists and is not implc's: implc keeps its unfinished runs there (choose "
+                             "another name, or remove it first)")
+        else:
+            partial.mkdir(parents=True, exist_ok=True)
+            held.enter_context(_locked(partial))
+        if marked and output_kind(partial) is None:
+            mark(partial, kind)
+        with _filled_into_place(partial, path, keep) as folder:
+            yield folder
+
+
+@contextlib.contextmanager
+def _locked(folder: Path):
+    """``folder`` locked for this process (an advisory lock on the folder itself, which follows it when it
+    is renamed into place): one writer at a time; ValueError at once where another holds it."""
+    import fcntl
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ValueError(f"another implc run is writing {folder} now: wait for it to finish, or stop it") \
+                from None
+        yield
+    finally:
+        os.close(fd)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import hashlib
 import json
 import math
 import os
@@ -39,8 +40,10 @@ from ..cluster.tasks import (
 )
 from ..common.atomic_file import replacing_folder, resumable_folder
 from ..common.threads import check_workers, default_workers
+from ..common.untrusted import regular_file
 from ..engines.morton import morton_codes
 from ..engines.walk import SubdivisionStats
+from ..errors import StoreError
 from ..native import abi
 from ..voxelizer.voxelize import (
     Voxels,
@@ -172,10 +175,43 @@ def _part_path(folder: Path, task: int) -> Path:
     return folder / "_parts" / f"{task:08d}.npz"
 
 
+def _sum_path(part: Path) -> Path:
+    """Where a part's SHA-256 is recorded: written after the part is in place, so a part without it (the run
+    stopped between the two) or with another is not trusted."""
+    return part.with_suffix(".sha256")
+
+
+def _digest(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _trusted_part(folder: Path, task: int) -> Path | None:
+    """Task ``task``'s part where it finished in full and is unaltered (a regular file whose SHA-256 is the
+    one recorded when it was written); None otherwise, the untrusted files removed (the task runs again)."""
+    part, digest = _part_path(folder, task), _sum_path(_part_path(folder, task))
+    if not part.exists() and not part.is_symlink():
+        return None
+    try:
+        regular_file(part, StoreError, "part file")
+        regular_file(digest, StoreError, "part checksum")
+        if digest.stat().st_size == 64 and digest.read_text("ascii") == _digest(part):
+            return part
+    except (StoreError, OSError, UnicodeDecodeError):
+        pass
+    for stale in (part, digest):
+        with contextlib.suppress(OSError):
+            stale.unlink()
+    return None
+
+
 def _has_parts(folder: Path) -> bool:
     """Whether a stopped run left finished tasks in ``folder`` (worth keeping for ``resume``)."""
     parts = folder / "_parts"
-    return parts.is_dir() and any(p.suffix == ".npz" and not p.name.startswith(".") for p in parts.iterdir())
+    return parts.is_dir() and any(p.suffix == ".sha256" and not p.name.startswith(".") for p in parts.iterdir())
 
 
 def store_task(folder: Path, layout: Layout, task: int, cell: Any, voxels: TaskVoxels, plan_octants: np.ndarray,
@@ -237,6 +273,9 @@ def store_task(folder: Path, layout: Layout, task: int, cell: Any, voxels: TaskV
              bricks=bricks[listed_rows[:, 0]].astype(np.int32), voxel_counts=listed_rows[:, 1],
              octant_counts=listed_rows[:, 2], lod=client_block, summary=np.array(json.dumps(summary)))
     os.replace(tmp, part)
+    record = _sum_path(part).with_name(f".{part.stem}.{os.getpid()}.tmp.sha256")
+    record.write_text(_digest(part), "ascii")
+    os.replace(record, _sum_path(part))
     return summary
 
 
@@ -247,8 +286,8 @@ def _write_task(recipe: SurfaceRecipe, folder: str, layout: Layout, options: dic
                 plan_octants: np.ndarray, workers: int = 1, surface=None) -> dict:
     """A task of :func:`write_zarr`: its part if it finished before (a retry, a resumed run), else its
     voxels found and stored."""
-    done = _part_path(Path(folder), task)
-    if done.exists():
+    done = _trusted_part(Path(folder), task)
+    if done is not None:
         with np.load(done) as part:
             return json.loads(str(part["summary"]))
     if full:
@@ -341,7 +380,7 @@ def write_zarr(surface: Surface, depth: int, path: str | os.PathLike[str], *, so
             create_store(folder, layout, plan_about)
         cells, plan_inside = plan_tasks(surface, depth, layout.task_level, solid=solid, options=options)
         tasks = _task_list(layout, cells, plan_inside)
-        done = sum(_part_path(folder, t).exists() for t in range(len(tasks)))
+        done = sum(_trusted_part(folder, t) is not None for t in range(len(tasks)))
         with contextlib.nullcontext() if cluster is None else connect(cluster, say=say) as client:
             threads = workers if client is None else worker_threads(client)
             # here: the surface itself, the tasks on this process's threads; there: the recipe travels

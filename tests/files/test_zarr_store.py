@@ -5,6 +5,7 @@ run leaves an incomplete store that readers refuse and that resume finishes with
 finished tasks. The store is the same written from voxels in memory and while voxelizing."""
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -279,3 +280,73 @@ def test_a_write_abandoned_by_a_killed_worker_is_not_left_in_the_store(tmp_path,
     zarr_writer.write_zarr(implc.compile(shapes.torus(0.5, 0.2)), 6, out, workers=1)
     assert litter and not (out / litter[0]).exists() and (out / litter[1]).exists()
     assert len(voxel_files.load(out)) > 0
+
+
+def _stopped_run(tmp_path, monkeypatch, stop_after=6):
+    """A run of HOLLOW at 64³ stopped after some tasks: (its partial folder, the reference store)."""
+    surface = implc.compile(HOLLOW)
+    zarr_writer.write_zarr(surface, 6, tmp_path / "ref.zarr", solid=True, workers=1)
+    real, calls = zarr_writer.task_voxels, []
+
+    def stopping(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == stop_after:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(zarr_writer, "task_voxels", stopping)
+    with pytest.raises(KeyboardInterrupt):
+        zarr_writer.write_zarr(surface, 6, tmp_path / "h.zarr", solid=True, workers=1)
+    monkeypatch.setattr(zarr_writer, "task_voxels", real)
+    return surface, tmp_path / "h.zarr.partial"
+
+
+@pytest.mark.parametrize("damage", ["altered coords", "altered normals", "truncated", "fifo", "no checksum"])
+def test_resume_trusts_a_part_only_with_its_checksum(tmp_path, small_bricks, monkeypatch, damage):
+    """A finished part that was altered (its coordinates or normals rewritten, a valid file), truncated,
+    replaced by a FIFO or left without its recorded SHA-256 is not trusted: its task runs again, and the
+    resumed store is, array by array, the clean run's."""
+    surface, partial = _stopped_run(tmp_path, monkeypatch)
+    parts = sorted((partial / "_parts").glob("*.npz"))
+    victim = next(p for p in parts if len(np.load(p)["coords"]))
+    if damage.startswith("altered"):
+        with np.load(victim) as part:
+            content = {name: part[name] for name in part.files}
+        member = damage.split()[1]
+        content[member] = content[member] + 1
+        np.savez(victim, **content)  # a valid part, with other voxels
+    elif damage == "truncated":
+        victim.write_bytes(victim.read_bytes()[: victim.stat().st_size // 2])
+    elif damage == "fifo":
+        victim.unlink()
+        os.mkfifo(victim)
+    else:
+        victim.with_suffix(".sha256").unlink()
+    resumed = zarr_writer.write_zarr(surface, 6, tmp_path / "h.zarr", solid=True, workers=1, resume=True)
+    assert resumed.resumed == len(parts) - 1
+    a, b = arrays(tmp_path / "ref.zarr"), arrays(tmp_path / "h.zarr")
+    assert a.keys() == b.keys()
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+def test_one_writer_per_store(tmp_path, small_bricks, monkeypatch, capsys):
+    """While a run writes a store (its partial folder locked), a second run is refused in one line, its
+    resume too, and nothing of the first run's is touched."""
+    import fcntl
+    surface, partial = _stopped_run(tmp_path, monkeypatch)
+    before = sorted(p.name for p in (partial / "_parts").iterdir())
+    fd = os.open(partial, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # as the running writer holds it
+    try:
+        for resume in (True, False):
+            with pytest.raises(ValueError, match="another implc run is writing"):
+                zarr_writer.write_zarr(surface, 6, tmp_path / "h.zarr", solid=True, workers=1, resume=resume)
+        code = main(["voxelize", "--expr", "x - 0.1", "--depth", "6", "-o", str(tmp_path / "h.zarr"), "--resume",
+                     "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1 and "another implc run" in err
+    finally:
+        os.close(fd)
+    assert sorted(p.name for p in (partial / "_parts").iterdir()) == before
+    zarr_writer.write_zarr(surface, 6, tmp_path / "h.zarr", solid=True, workers=1, resume=True)  # now it may
