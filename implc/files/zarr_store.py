@@ -34,6 +34,7 @@ import contextlib
 import json
 import math
 import os
+import stat
 from collections.abc import Iterator
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -241,9 +242,36 @@ def pooled(grid: np.ndarray) -> np.ndarray:
     return i[:, 0] | i[:, 1]
 
 
+MAX_STORE_FILE = 1 << 31
+"""The largest file a store may hold (a shard of a brick is at most a few tens of MiB)."""
+
+
+def _scan(path) -> None:
+    """Every entry of the store a regular file or a folder, none a link, a FIFO or a device, and none
+    larger than :data:`MAX_STORE_FILE`: zarr then reads nothing that blocks or never ends."""
+    root = Path(path)
+    if root.is_symlink() or not root.is_dir():
+        regular_file(root, StoreError, "Zarr store")  # says what it is instead
+        raise StoreError(f"cannot read {root} as a Zarr store: it is a file, not a store's folder")
+    for folder, dirs, files in os.walk(root, followlinks=False):
+        for name in dirs + files:
+            entry = Path(folder) / name
+            info = os.lstat(entry)
+            if stat.S_ISDIR(info.st_mode):
+                continue
+            if not stat.S_ISREG(info.st_mode):
+                kind = "a link" if stat.S_ISLNK(info.st_mode) else "a FIFO" if stat.S_ISFIFO(info.st_mode) \
+                    else "not a regular file"
+                raise StoreError(f"cannot read {root}: {entry.relative_to(root)} is {kind} (a store holds regular "
+                                 "files only)")
+            if info.st_size > MAX_STORE_FILE:
+                raise StoreError(f"cannot read {root}: {entry.relative_to(root)} is larger than any file of a store")
+
+
 def _open(path: str | os.PathLike[str]) -> tuple[Any, dict]:
     """The store's group and its checked ``implc`` attributes; :class:`StoreError` otherwise."""
     import zarr
+    _scan(path)
     try:
         group = zarr.open_group(str(path), mode="r")
     except Exception as exc:  # zarr raises several kinds for a folder that is not a group
@@ -258,9 +286,13 @@ def _open(path: str | os.PathLike[str]) -> tuple[Any, dict]:
     depth, bounds, solid = about.get("depth"), about.get("bounds"), about.get("solid")
     if type(depth) is not int or not 1 <= depth <= 21:
         raise StoreError(f"{path}: damaged implc Zarr store (depth {printable(repr(depth), 40)})")
-    if not (isinstance(bounds, list) and len(bounds) == 3 and all(
+    try:
+        sound = isinstance(bounds, list) and len(bounds) == 3 and all(
             isinstance(b, list) and len(b) == 2 and all(type(v) in (int, float) and math.isfinite(v) for v in b)
-            and b[0] < b[1] for b in bounds)) or not usable_bounds(bounds, abi.MAX_DEPTH):
+            and b[0] < b[1] for b in bounds) and usable_bounds(bounds, abi.MAX_DEPTH)
+    except OverflowError:  # an integer beyond the doubles
+        sound = False
+    if not sound:
         raise StoreError(f"{path}: damaged implc Zarr store (bounds {printable(repr(bounds), 60)})")
     if type(solid) is not bool:
         raise StoreError(f"{path}: damaged implc Zarr store (solid {printable(repr(solid), 40)})")
@@ -269,9 +301,9 @@ def _open(path: str | os.PathLike[str]) -> tuple[Any, dict]:
         raise StoreError(f"{path}: an incomplete implc Zarr store (no manifest: the run that wrote it stopped; "
                          "'implc voxelize ... --resume' finishes it from NAME.partial)")
     counts = ("tasks", "voxels", "inside_octants", "inside_voxels", "bricks", "shards")
-    if not all(type(manifest.get(name)) is int and manifest[name] >= 0 for name in counts):
-        raise StoreError(f"{path}: damaged implc Zarr store (manifest {printable(repr(manifest), 80)})")
     n = 1 << depth
+    if not all(type(manifest.get(name)) is int and 0 <= manifest[name] <= n**3 for name in counts):
+        raise StoreError(f"{path}: damaged implc Zarr store (manifest {printable(repr(manifest), 80)})")
     try:
         occupancy: Any = group["occupancy"]
         rows: list[Any] = [group[name] for name in ("bricks", "voxels/rows", "voxels/coords", "voxels/normals")]
@@ -313,6 +345,11 @@ def load_zarr(path: str | os.PathLike[str], region: Any = None) -> Voxels:
     whole), reading only the bricks the region meets."""
     group, about = _open(path)
     box = None if region is None else _region(region, about["depth"])
+    need = about["manifest"]["voxels"] * ROW_BYTES + about["manifest"]["inside_octants"] * 16
+    available = _available_memory()
+    if box is None and need > 0.8 * available:
+        raise MemoryError(f"{path}: its {about['manifest']['voxels']} voxels need about {need / 2**30:.1f} GiB, more "
+                          f"than this machine has free ({available / 2**30:.1f} GiB): read a region of it")
     try:
         return _read(group, about, box)
     except (StoreError, MemoryError):  # a store too large for this machine is not a damaged one
@@ -350,7 +387,10 @@ def _read(group: Any, about: dict, box: np.ndarray | None) -> Voxels:
         lo, hi = box[:, 0], box[:, 1]
         first, last = bricks << shift, (bricks + 1) << shift
         chosen = np.flatnonzero(np.all((first < hi) & (last > lo), axis=1))
-    starts = group["voxels/rows"][...].astype(np.int64)
+    if len(bricks) and (bricks.min() < 0 or bricks.max() >= (1 << depth) >> shift
+                        or len(np.unique(bricks, axis=0)) != len(bricks)):
+        raise ValueError("bricks outside the grid, or listed twice")
+    starts = _starts(group["voxels/rows"][...], len(bricks), group["voxels/coords"].shape[0])
     coords, normals = _rows(group, starts, chosen, ("voxels/coords", "voxels/normals"))
     # each row lies in the brick that lists it: a damaged chunk that still decompresses (a store written
     # before its chunks had zstd's checksum) gives rows elsewhere, which the region's filter below would
@@ -361,14 +401,39 @@ def _read(group: Any, about: dict, box: np.ndarray | None) -> Voxels:
     keep = np.all((coords >= lo) & (coords < hi), axis=1)
     inside = None
     if solid:
-        (fine,) = _rows(group, group["inside/rows"][...].astype(np.int64), chosen, ("inside/octants",))
+        starts = _starts(group["inside/rows"][...], len(bricks), group["inside/octants"].shape[0])
+        (fine,) = _rows(group, starts, chosen, ("inside/octants",))
         coarse = group["inside/coarse"][...]
         rows = np.concatenate([coarse, fine]) if len(coarse) or len(fine) else np.empty((0, 4), np.int32)
+        levels = rows[:, 3].astype(np.int64)
+        if len(rows) and (levels.min() < 0 or levels.max() > depth or (rows[:, :3] < 0).any()
+                          or (rows[:, :3].astype(np.int64) >= np.left_shift(1, levels)[:, None]).any()):
+            raise ValueError("inside octants at a level or place outside the grid")
+        if len(np.unique(rows, axis=0)) != len(rows):
+            raise ValueError("an inside octant listed twice")
         size = np.left_shift(np.int64(1), depth - rows[:, 3].astype(np.int64))[:, None]
         first = rows[:, :3].astype(np.int64) * size
         rows = rows[np.all((first < hi) & (first + size > lo), axis=1)]
         inside = rows[np.argsort(octant_keys(rows, depth), kind="stable")].astype(np.int32)
     return Voxels(coords[keep], normals[keep], depth, bounds, None, inside=inside)
+
+
+ROW_BYTES = 40
+"""Memory per voxel read: its coordinates and normal, and the copies a region's filter makes."""
+
+
+def _available_memory() -> int:
+    from ..voxelizer.voxelize import available_memory
+    return available_memory()
+
+
+def _starts(rows: np.ndarray, bricks: int, total: int) -> np.ndarray:
+    """Where each brick's rows start (and the end): from 0, never decreasing, ending at the rows there are."""
+    starts = np.asarray(rows).astype(np.int64)
+    if starts.shape != (bricks + 1,) or (len(starts) and (starts[0] != 0 or starts[-1] != total)) \
+            or (np.diff(starts) < 0).any():
+        raise ValueError("the row index does not match the rows")
+    return starts
 
 
 def _rows(group, starts: np.ndarray, chosen: np.ndarray, names: tuple) -> list[np.ndarray]:

@@ -78,10 +78,12 @@ def tetra_obj(extra: str = "") -> str:
         "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in TETRA_F)
 
 
-def info(path) -> tuple[int, str, str]:
-    run = subprocess.run([sys.executable, "-m", "implc", "info", str(path)], capture_output=True, text=True,
-                         timeout=60)
-    return run.returncode, run.stdout, run.stderr
+def info(path, capsys) -> tuple[int, str, str]:
+    """``implc info`` on ``path``, in this process: (status, stdout, stderr)."""
+    from implc.cli.commands import main
+    code = main(["info", str(path)])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
 
 
 # -- what the readers read -------------------------------------------------------------------------------
@@ -121,7 +123,7 @@ def test_a_ply_with_a_long_header_is_read(tmp_path):
 
 
 # -- nothing read out of the file ------------------------------------------------------------------------
-def test_a_glb_buffer_naming_a_sibling_file_is_refused_and_the_file_not_read(tmp_path):
+def test_a_glb_buffer_naming_a_sibling_file_is_refused_and_the_file_not_read(tmp_path, capsys):
     secret = tmp_path / "secret.txt"
     secret.write_bytes(np.array(TETRA_V, np.float32).tobytes() + np.array(TETRA_F, np.uint32).tobytes())
     doc = json.loads(tetra_glb()[20:20 + struct.unpack_from("<I", tetra_glb(), 12)[0]])
@@ -132,7 +134,7 @@ def test_a_glb_buffer_naming_a_sibling_file_is_refused_and_the_file_not_read(tmp
     with pytest.raises(MeshFileError, match="outside the GLB"):
         load(path)
     assert os.stat(secret).st_atime_ns == before
-    code, out, err = info(path)
+    code, out, err = info(path, capsys)
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1 and "outside the GLB" in err
     export = tmp_path / "site"
     run = subprocess.run([sys.executable, "-m", "implc", "view", str(path), "--export", str(export), "--quiet"],
@@ -246,7 +248,7 @@ def test_ply_list_sizes_and_obj_index_zero_are_refused(tmp_path):
 # -- non-finite coordinates ------------------------------------------------------------------------------
 @pytest.mark.parametrize("suffix", [".stl", ".obj", ".ply", ".glb", ".3mf", "3mf transform"])
 @pytest.mark.parametrize("value", ["nan", "inf"])
-def test_non_finite_coordinates_are_refused(tmp_path, suffix, value):
+def test_non_finite_coordinates_are_refused(tmp_path, capsys, suffix, value):
     v = [(float(value), 0.0, 0.0), *TETRA_V[1:]]
     if suffix == ".stl":
         data = b"\0" * 80 + struct.pack("<I", 4) + b"".join(
@@ -269,7 +271,7 @@ def test_non_finite_coordinates_are_refused(tmp_path, suffix, value):
     path.write_bytes(data)
     with pytest.raises(MeshFileError, match="finite"):
         load(path)
-    code, out, err = info(path)
+    code, out, err = info(path, capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "finite" in err
 
 
