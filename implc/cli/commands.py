@@ -92,6 +92,10 @@ def _outcome(argv, done_before: int) -> int:
             message = "the input is nested too deeply"
         elif isinstance(exc, OSError) and exc.filename and exc.strerror:
             message = f"{exc.filename}: {exc.strerror}"
+        elif isinstance(exc, OSError) and exc.strerror:  # no file named: the terminal or a pipe
+            written = _output_complete(done_before)
+            message = (f"{written} was written in full, but standard output failed: {exc.strerror}" if written
+                       else f"standard output or error failed: {exc.strerror}")
         if len(message) > MESSAGE_LIMIT:
             message = message[: MESSAGE_LIMIT - 3] + "..."
         print(f"implc: error: {message}", file=sys.stderr)

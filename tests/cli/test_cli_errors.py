@@ -3,6 +3,7 @@ or damaged; inputs that merely look odd (negative numbers after --bounds, a form
 an upper-case suffix) work. Interrupts at any moment of a save leave the old file or the whole new one."""
 
 import hashlib
+import os
 import signal
 import subprocess
 import sys
@@ -280,3 +281,14 @@ def test_a_signal_in_a_finalizer_is_sent_again_not_lost(sig):
         signal.signal(signal.SIGTERM, before[1])
         sys.unraisablehook = before[2]
         signals.settled = True  # as main() leaves it
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+def test_a_full_standard_output_is_one_line_naming_what_was_written(tmp_path):
+    """The mesh is written, then the summary cannot be: one line says both, exit status 2."""
+    with open("/dev/full", "w") as full:
+        run = subprocess.run([sys.executable, "-m", "implc", "mesh", "torus", "--depth", "4", "-o",
+                              str(tmp_path / "t.stl")], stdout=full, stderr=subprocess.PIPE, text=True, timeout=120)
+    assert run.returncode == 2 and run.stderr.count("\n") == 1
+    assert "t.stl was written in full, but standard output failed" in run.stderr
+    assert (tmp_path / "t.stl").stat().st_size > 84
