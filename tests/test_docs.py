@@ -17,6 +17,11 @@ DOCTESTED = [
     "implc.compiler.vm",
     "implc.meshing.triangle_mesh",
     "implc.shapes",
+    "implc.shapes.sketch",
+    "implc.shapes.solids",
+    "implc.shapes.csg",
+    "implc.shapes.offsets",
+    "implc.shapes.transforms",
 ]
 """Modules whose docstring examples run: compile, Surface.eval/gradient/interval, voxelize, Voxels and its
 methods, mesh, load_vm (the issue names these)."""
@@ -36,6 +41,14 @@ PUBLIC_MODULES = [
     "implc.common.untrusted",
     "implc.cluster.tasks",
     "implc.cluster.recipe",
+    "implc.shapes.sketch",
+    "implc.shapes.solids",
+    "implc.shapes.csg",
+    "implc.shapes.offsets",
+    "implc.shapes.transforms",
+    "implc.shapes.deform",
+    "implc.shapes.repeat",
+    "implc.shapes.lattices",
 ]
 
 
@@ -126,6 +139,14 @@ ANNOTATED = [
     "implc.files.scene",
     "implc.cluster.tasks",
     "implc.cluster.recipe",
+    "implc.shapes.sketch",
+    "implc.shapes.solids",
+    "implc.shapes.csg",
+    "implc.shapes.offsets",
+    "implc.shapes.transforms",
+    "implc.shapes.deform",
+    "implc.shapes.repeat",
+    "implc.shapes.lattices",
 ]
 
 

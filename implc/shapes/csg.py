@@ -1,0 +1,85 @@
+"""Constructive solid geometry: union, intersection and difference, sharp (Min/Max), smooth (a blend radius)
+and chamfered, and a morph between two shapes.
+
+The smooth operations are the polynomial smooth minimum min(a, b) − max(k − abs(a − b), 0)² / 4k, written with
+Min and Max: where the operands are more than k apart the correction's Max picks 0, so the tape engine
+decides it there and prunes the blend far from the seam. They keep the union's (intersection's) exact
+distance away from the blend region; inside it they are a bound.
+"""
+
+from __future__ import annotations
+
+import sympy
+
+from .vectors import Number, positive
+
+
+def union(*shapes: sympy.Expr) -> sympy.Expr:
+    """The union of solids (F < 0 inside each): their Min."""
+    return sympy.Min(*shapes)
+
+
+def intersection(*shapes: sympy.Expr) -> sympy.Expr:
+    """The intersection of solids: their Max."""
+    return sympy.Max(*shapes)
+
+
+def difference(a: sympy.Expr, *cut: sympy.Expr) -> sympy.Expr:
+    """a with every shape in ``cut`` removed."""
+    return sympy.Max(a, *[-c for c in cut])
+
+
+def _smooth_min(a: sympy.Expr, b: sympy.Expr, k: sympy.Expr) -> sympy.Expr:
+    return sympy.Min(a, b) - sympy.Max(k - sympy.Abs(a - b), 0) ** 2 / (4 * k)
+
+
+def smooth_union(radius: Number, *shapes: sympy.Expr) -> sympy.Expr:
+    """The union of ``shapes`` with their seams filled by a fillet about ``radius`` wide.
+
+    >>> from implc.compiler.symbols import x
+    >>> float(smooth_union(1, x - 1, -x - 1).subs(x, 0))  # two half spaces 2 apart: the fillet dips below
+    -1.25
+    """
+    k = positive(radius, "radius")
+    if not shapes:
+        raise ValueError("smooth_union needs at least one shape")
+    result = shapes[0]
+    for shape in shapes[1:]:
+        result = _smooth_min(result, shape, k)
+    return result
+
+
+def smooth_intersection(radius: Number, *shapes: sympy.Expr) -> sympy.Expr:
+    """The intersection of ``shapes`` with its edges rounded about ``radius``."""
+    k = positive(radius, "radius")
+    return -smooth_union(k, *[-s for s in shapes])
+
+
+def smooth_difference(radius: Number, a: sympy.Expr, *cut: sympy.Expr) -> sympy.Expr:
+    """``a`` with ``cut`` removed, the cut's edges rounded about ``radius``."""
+    return smooth_intersection(radius, a, *[-c for c in cut])
+
+
+def chamfer_union(size: Number, *shapes: sympy.Expr) -> sympy.Expr:
+    """The union with a 45° chamfer of width about ``size`` along each seam."""
+    c = positive(size, "size")
+    result = shapes[0]
+    for shape in shapes[1:]:
+        result = sympy.Min(result, shape, (result + shape - c) / sympy.sqrt(2))
+    return result
+
+
+def chamfer_intersection(size: Number, *shapes: sympy.Expr) -> sympy.Expr:
+    """The intersection with its edges cut at 45°, about ``size`` wide."""
+    return -chamfer_union(size, *[-s for s in shapes])
+
+
+def chamfer_difference(size: Number, a: sympy.Expr, *cut: sympy.Expr) -> sympy.Expr:
+    """``a`` with ``cut`` removed, the cut's edges chamfered about ``size``."""
+    return chamfer_intersection(size, a, *[-c for c in cut])
+
+
+def morph(a: sympy.Expr, b: sympy.Expr, t: Number) -> sympy.Expr:
+    """The shape between ``a`` (t = 0) and ``b`` (t = 1): (1 − t)·a + t·b (not a distance)."""
+    t = sympy.sympify(t)
+    return (1 - t) * a + t * b

@@ -1,0 +1,80 @@
+"""Transforms: a shape moved, scaled, rotated about any axis, mapped by a 4×4 matrix, mirrored or made
+symmetric, by substituting the coordinates (the shape at p is the original at the inverse image of p).
+
+Rigid motions (translate, rotate, mirror) keep an exact distance exact; scaling by a factor s multiplies it
+by s only where the factor is the same on every axis (``scale`` does not renormalise: F/s would).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import sympy
+
+from ..compiler.symbols import cartesian_form, x, y, z
+from .vectors import Number, Vec, unit, vec3
+
+
+def translate(expr: sympy.Expr, offset: Vec) -> sympy.Expr:
+    """``expr`` moved by ``offset`` (dx, dy, dz)."""
+    dx, dy, dz = vec3(offset, "offset")
+    return cartesian_form(expr).xreplace({x: x - dx, y: y - dy, z: z - dz})
+
+
+def scale(expr: sympy.Expr, factor: Number) -> sympy.Expr:
+    """Scale about the origin by a number or per-axis (sx, sy, sz); F is not renormalised."""
+    sx, sy, sz = vec3(factor, "factor") if isinstance(factor, (tuple, list)) else (sympy.sympify(factor),) * 3
+    return cartesian_form(expr).xreplace({x: x / sx, y: y / sy, z: z / sz})
+
+
+def rotate(expr: sympy.Expr, angle: Number, axis: str | Vec = "z") -> sympy.Expr:
+    """Rotate by ``angle`` (radians, counter-clockwise looking down the axis) about the x, y or z axis, or
+    any axis through the origin given as a vector.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> import sympy
+    >>> rotate(x, sympy.pi / 2, "z")  # the half space x < 0, turned a quarter: y < 0
+    y
+    """
+    if isinstance(axis, str):
+        if axis not in ("x", "y", "z"):
+            raise ValueError(f"axis must be 'x', 'y', 'z' or a vector, got {axis!r}")
+        axis = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1)}[axis]
+    kx, ky, kz = unit(axis, "axis")
+    c, s = sympy.cos(angle), sympy.sin(angle)
+    # the shape at p rotated by +angle is the original at p rotated by -angle (Rodrigues' formula)
+    k_dot = kx * x + ky * y + kz * z
+    cross = (ky * z - kz * y, kz * x - kx * z, kx * y - ky * x)  # k × p
+    back = [p * c - cr * s + kk * k_dot * (1 - c) for p, cr, kk in zip((x, y, z), cross, (kx, ky, kz))]
+    return cartesian_form(expr).xreplace({x: back[0], y: back[1], z: back[2]})
+
+
+def transform(expr: sympy.Expr, matrix: Sequence[Sequence[Number]]) -> sympy.Expr:
+    """``expr`` mapped by the affine 4×4 ``matrix`` (column vectors: p' = M·p; its last row 0 0 0 1): the
+    original at M⁻¹·p. Exact distances stay exact only where M is rigid."""
+    m = sympy.Matrix(matrix)
+    if m.shape != (4, 4) or list(m[3, :]) != [0, 0, 0, 1]:
+        raise ValueError("matrix must be 4×4 with its last row 0 0 0 1")
+    if m[:3, :3].det() == 0:
+        raise ValueError("matrix must be invertible")
+    inverse = m.inv()
+    p = inverse * sympy.Matrix([x, y, z, 1])
+    return cartesian_form(expr).xreplace({x: p[0], y: p[1], z: p[2]})
+
+
+def mirror(expr: sympy.Expr, axis: str = "x") -> sympy.Expr:
+    """The mirror image of ``expr`` across the plane through the origin normal to ``axis``."""
+    a = _axis(axis)
+    return cartesian_form(expr).xreplace({a: -a})
+
+
+def symmetric(expr: sympy.Expr, axis: str = "x") -> sympy.Expr:
+    """The half of ``expr`` on the positive side of ``axis``, reflected onto the negative side too (abs(a) for a)."""
+    a = _axis(axis)
+    return cartesian_form(expr).xreplace({a: sympy.Abs(a)})
+
+
+def _axis(axis: str):
+    if axis not in ("x", "y", "z"):
+        raise ValueError(f"axis must be 'x', 'y' or 'z', got {axis!r}")
+    return {"x": x, "y": y, "z": z}[axis]
