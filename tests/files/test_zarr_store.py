@@ -301,7 +301,9 @@ def _stopped_run(tmp_path, monkeypatch, stop_after=6):
     return surface, tmp_path / "h.zarr.partial"
 
 
-@pytest.mark.parametrize("damage", ["altered coords", "altered normals", "truncated", "fifo", "no checksum"])
+@pytest.mark.parametrize("damage", ["altered coords", "fifo",
+                                    *[pytest.param(d, marks=pytest.mark.slow)  # the same path, other damage
+                                      for d in ("altered normals", "truncated", "no checksum")]])
 def test_resume_trusts_a_part_only_with_its_checksum(tmp_path, small_bricks, monkeypatch, damage):
     """A finished part that was altered (its coordinates or normals rewritten, a valid file), truncated,
     replaced by a FIFO or left without its recorded SHA-256 is not trusted: its task runs again, and the

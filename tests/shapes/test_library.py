@@ -64,7 +64,12 @@ EXACT = {  # name: (expression, the true signed distance at points p by nearest 
 }
 
 
-@pytest.mark.parametrize("name", sorted(EXACT))
+EXACT_DEFAULT = {"box_exact", "rounded_box", "capsule", "revolved circle", "elongated sphere", "rotated box"}
+"""Exact shapes checked in the default run (a primitive, a derived shape, a transform); the rest in the slow set."""
+
+
+@pytest.mark.parametrize("name", [n if n in EXACT_DEFAULT else pytest.param(n, marks=pytest.mark.slow)
+                                  for n in sorted(EXACT)])
 def test_exact_shapes_are_the_distance_and_their_gradient_is_a_unit(name):
     expr, truth = EXACT[name]
     surface = implc.compile(expr, ((-1.5, 1.5),) * 3)
