@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from .context import scoped
+
 CHUNK = 1 << 16
 """The most rows per native call of the batched entry points (a multiple of every vector width)."""
 MIN_CHUNK = 1 << 13
@@ -34,11 +36,8 @@ _THREADS: ContextVar[int | None] = ContextVar("implc_threads", default=None)
 def threads(count: int | None) -> Iterator[None]:
     """Within the block, the batched entry points run on at most ``count`` threads (None: one per usable
     core), e.g. a mesh contoured with ``workers=1`` (the calling thread alone)."""
-    token = _THREADS.set(count)
-    try:
+    with scoped(_THREADS, count):
         yield
-    finally:
-        _THREADS.reset(token)
 
 
 def thread_count() -> int:
@@ -93,11 +92,8 @@ _FEWEST: ContextVar[int] = ContextVar("implc_fewest_rows", default=MIN_CHUNK)
 def fewest_rows(count: int) -> Iterator[None]:
     """Within the block, a costly entry point's calls take at least ``count`` rows (:data:`MIN_CHUNK` outside
     one): smaller batches then still spread over the threads, as a test of the sharing needs."""
-    token = _FEWEST.set(count)
-    try:
+    with scoped(_FEWEST, count):
         yield
-    finally:
-        _FEWEST.reset(token)
 
 
 def chunk_rows(rows: int, width: int = 8, fewest: int | None = None) -> int:

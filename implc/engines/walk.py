@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..common.context import scoped
 from ..native import abi, big_arrays
 from ..native.abi import GEOMETRY_DOUBLES, MAX_DEPTH
 from ..native.runtime import Runtime
@@ -122,11 +123,8 @@ BUFFERS: ContextVar[Buffers] = ContextVar("implc_buffers", default=Buffers())
 @contextlib.contextmanager
 def buffers(sizes: Buffers) -> Iterator[None]:
     """Within the block, voxelizations size their tasks' buffers by ``sizes``."""
-    token = BUFFERS.set(sizes)
-    try:
+    with scoped(BUFFERS, sizes):
         yield
-    finally:
-        BUFFERS.reset(token)
 
 
 class _TaskResult:

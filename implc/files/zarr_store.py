@@ -47,6 +47,7 @@ from ..cluster.tasks import (
     task_level,
 )
 from ..common.bounds import usable_bounds
+from ..common.context import scoped
 from ..common.untrusted import printable, regular_file
 from ..engines.morton import morton_codes
 from ..errors import StoreError
@@ -113,11 +114,8 @@ SIZES: ContextVar[Sizes] = ContextVar("implc_zarr_sizes", default=Sizes())
 @contextlib.contextmanager
 def sizes(chosen: Sizes) -> Iterator[None]:
     """Within the block, stores are written with the chunk and shard sizes ``chosen``."""
-    token = SIZES.set(chosen)
-    try:
+    with scoped(SIZES, chosen):
         yield
-    finally:
-        SIZES.reset(token)
 
 
 @dataclass(frozen=True)
