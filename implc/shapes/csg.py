@@ -15,17 +15,32 @@ from .vectors import Number, positive
 
 
 def union(*shapes: sympy.Expr) -> sympy.Expr:
-    """The union of solids (F < 0 inside each): their Min."""
+    """The union of solids (F < 0 inside each): their Min.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(union(x - 1, y - 1).subs({x: 2, y: 0, z: 0})), 6)
+    -1.0
+    """
     return sympy.Min(*shapes)
 
 
 def intersection(*shapes: sympy.Expr) -> sympy.Expr:
-    """The intersection of solids: their Max."""
+    """The intersection of solids: their Max.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(intersection(x - 1, y - 1).subs({x: 2, y: 0, z: 0})), 6)
+    1.0
+    """
     return sympy.Max(*shapes)
 
 
 def difference(a: sympy.Expr, *cut: sympy.Expr) -> sympy.Expr:
-    """a with every shape in ``cut`` removed."""
+    """a with every shape in ``cut`` removed.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(difference(x - 1, x).subs({x: 0.5, y: 0, z: 0})), 6)
+    -0.5
+    """
     return sympy.Max(a, *[-c for c in cut])
 
 
@@ -50,18 +65,33 @@ def smooth_union(radius: Number, *shapes: sympy.Expr) -> sympy.Expr:
 
 
 def smooth_intersection(radius: Number, *shapes: sympy.Expr) -> sympy.Expr:
-    """The intersection of ``shapes`` with its edges rounded about ``radius``."""
+    """The intersection of ``shapes`` with its edges rounded about ``radius``.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(smooth_intersection(1, x - 1, -x - 1).subs({x: 0, y: 0, z: 0})), 6)
+    -0.75
+    """
     k = positive(radius, "radius")
     return -smooth_union(k, *[-s for s in shapes])
 
 
 def smooth_difference(radius: Number, a: sympy.Expr, *cut: sympy.Expr) -> sympy.Expr:
-    """``a`` with ``cut`` removed, the cut's edges rounded about ``radius``."""
+    """``a`` with ``cut`` removed, the cut's edges rounded about ``radius``.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(smooth_difference(0.5, x - 1, x).subs({x: 0.5, y: 0, z: 0})), 6)
+    -0.375
+    """
     return smooth_intersection(radius, a, *[-c for c in cut])
 
 
 def chamfer_union(size: Number, *shapes: sympy.Expr) -> sympy.Expr:
-    """The union with a 45° chamfer of width about ``size`` along each seam."""
+    """The union with a 45° chamfer of width about ``size`` along each seam.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(chamfer_union(0.5, x - 1, y - 1).subs({x: 1, y: 1, z: 0})), 6)
+    -0.353553
+    """
     c = positive(size, "size")
     result = shapes[0]
     for shape in shapes[1:]:
@@ -70,16 +100,31 @@ def chamfer_union(size: Number, *shapes: sympy.Expr) -> sympy.Expr:
 
 
 def chamfer_intersection(size: Number, *shapes: sympy.Expr) -> sympy.Expr:
-    """The intersection with its edges cut at 45°, about ``size`` wide."""
+    """The intersection with its edges cut at 45°, about ``size`` wide.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(chamfer_intersection(0.5, x - 1, y - 1).subs({x: 1, y: 1, z: 0})), 6)
+    0.353553
+    """
     return -chamfer_union(size, *[-s for s in shapes])
 
 
 def chamfer_difference(size: Number, a: sympy.Expr, *cut: sympy.Expr) -> sympy.Expr:
-    """``a`` with ``cut`` removed, the cut's edges chamfered about ``size``."""
+    """``a`` with ``cut`` removed, the cut's edges chamfered about ``size``.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(chamfer_difference(0.1, x - 1, x).subs({x: 0.5, y: 0, z: 0})), 6)
+    -0.5
+    """
     return chamfer_intersection(size, a, *[-c for c in cut])
 
 
 def morph(a: sympy.Expr, b: sympy.Expr, t: Number) -> sympy.Expr:
-    """The shape between ``a`` (t = 0) and ``b`` (t = 1): (1 − t)·a + t·b (not a distance)."""
+    """The shape between ``a`` (t = 0) and ``b`` (t = 1): (1 − t)·a + t·b (not a distance).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(morph(x, y, 0.5).subs({x: 1, y: 1, z: 0})), 6)
+    1.0
+    """
     t = sympy.sympify(t)
     return (1 - t) * a + t * b

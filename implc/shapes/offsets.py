@@ -12,17 +12,35 @@ from .vectors import Number, positive
 
 
 def offset(expr: sympy.Expr, distance: Number) -> sympy.Expr:
-    """The solid grown by ``distance`` (shrunk where it is negative): F − d."""
+    """The solid grown by ``distance`` (shrunk where it is negative): F − d.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> from implc.shapes import sphere
+    >>> round(float(offset(sphere(1), 1).subs({x: 3, y: 0, z: 0})), 6)
+    1.0
+    """
     return expr - sympy.sympify(distance)
 
 
 def dilate(expr: sympy.Expr, distance: Number) -> sympy.Expr:
-    """The solid grown by ``distance`` (> 0)."""
+    """The solid grown by ``distance`` (> 0).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> from implc.shapes import sphere
+    >>> round(float(dilate(sphere(1), 0.5).subs({x: 1.5, y: 0, z: 0})), 6)
+    0.0
+    """
     return offset(expr, positive(distance, "distance"))
 
 
 def erode(expr: sympy.Expr, distance: Number) -> sympy.Expr:
-    """The solid shrunk by ``distance`` (> 0)."""
+    """The solid shrunk by ``distance`` (> 0).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> from implc.shapes import sphere
+    >>> round(float(erode(sphere(1), 0.5).subs({x: 0, y: 0, z: 0})), 6)
+    -0.5
+    """
     return offset(expr, -positive(distance, "distance"))
 
 
@@ -38,11 +56,22 @@ def shell(expr: sympy.Expr, thickness: Number) -> sympy.Expr:
 
 
 def inner_shell(expr: sympy.Expr, thickness: Number) -> sympy.Expr:
-    """The part of the solid within ``thickness`` of its surface (a hollowed part, its outside kept)."""
+    """The part of the solid within ``thickness`` of its surface (a hollowed part, its outside kept).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> from implc.shapes import sphere
+    >>> round(float(inner_shell(sphere(1), 0.25).subs({x: 0, y: 0, z: 0})), 6)
+    0.75
+    """
     t = positive(thickness, "thickness")
     return sympy.Max(expr, -expr - t)
 
 
 def clearance(a: sympy.Expr, b: sympy.Expr, gap: Number) -> sympy.Expr:
-    """``a`` with everything within ``gap`` of ``b`` removed (a hole for ``b`` with room around it)."""
+    """``a`` with everything within ``gap`` of ``b`` removed (a hole for ``b`` with room around it).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(clearance(x - 1, x, 0.25).subs({x: 0.1, y: 0, z: 0})), 6)
+    0.15
+    """
     return sympy.Max(a, -(b - positive(gap, "gap")))

@@ -28,7 +28,12 @@ def circle(radius: Number = 1, center: Sequence = (0, 0)) -> sympy.Expr:
 
 
 def rectangle(half_sizes: Sequence = (1, 1), center: Sequence = (0, 0)) -> sympy.Expr:
-    """Axis-aligned rectangle of ``half_sizes``, exact: the 2D box distance."""
+    """Axis-aligned rectangle of ``half_sizes``, exact: the 2D box distance.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(rectangle((1, 2)).subs({x: 3, y: 0, z: 0})), 6)
+    2.0
+    """
     (hx, hy), (cx, cy) = (sympy.sympify(v) for v in half_sizes), (sympy.sympify(c) for c in center)
     q = (sympy.Abs(x - cx) - hx, sympy.Abs(y - cy) - hy)
     return length(*map(positive_part, q)) + sympy.Min(sympy.Max(*q), 0)
@@ -36,7 +41,12 @@ def rectangle(half_sizes: Sequence = (1, 1), center: Sequence = (0, 0)) -> sympy
 
 def rounded_rectangle(half_sizes: Sequence = (1, 1), radius: Number = sympy.Rational(1, 10),
                       center: Sequence = (0, 0)) -> sympy.Expr:
-    """Rectangle with its corners rounded by ``radius``, exact."""
+    """Rectangle with its corners rounded by ``radius``, exact.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(rounded_rectangle((1, 1), 0.25).subs({x: 2, y: 0, z: 0})), 6)
+    1.0
+    """
     r = positive(radius, "radius")
     hx, hy = (sympy.sympify(v) for v in half_sizes)
     if not (hx > r and hy > r):
@@ -45,12 +55,22 @@ def rounded_rectangle(half_sizes: Sequence = (1, 1), radius: Number = sympy.Rati
 
 
 def ring(radius: Number = 1, width: Number = sympy.Rational(1, 5), center: Sequence = (0, 0)) -> sympy.Expr:
-    """Annulus of mean ``radius`` and ``width``, exact."""
+    """Annulus of mean ``radius`` and ``width``, exact.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(ring(1, 0.2).subs({x: 1.5, y: 0, z: 0})), 6)
+    0.4
+    """
     return sympy.Abs(circle(radius, center)) - positive(width, "width") / 2
 
 
 def convex_polygon(points: Sequence[Sequence]) -> sympy.Expr:
-    """Convex polygon through ``points`` counter-clockwise: the largest of its edges' signed distances."""
+    """Convex polygon through ``points`` counter-clockwise: the largest of its edges' signed distances.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(convex_polygon([(0, 0), (1, 0), (0, 1)]).subs({x: 2, y: 0, z: 0})), 6)
+    0.707107
+    """
     pts = [tuple(sympy.sympify(c) for c in p) for p in points]
     if len(pts) < 3:
         raise ValueError("a polygon needs three points or more")
@@ -65,7 +85,12 @@ def convex_polygon(points: Sequence[Sequence]) -> sympy.Expr:
 
 
 def regular_polygon(sides: int, radius: Number = 1) -> sympy.Expr:
-    """Regular polygon of ``sides`` sides, its corners ``radius`` from the origin, one on the +x axis."""
+    """Regular polygon of ``sides`` sides, its corners ``radius`` from the origin, one on the +x axis.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(regular_polygon(4, 1).subs({x: 0, y: 0, z: 0})), 6)
+    -0.707107
+    """
     if not isinstance(sides, int) or sides < 3:
         raise ValueError(f"sides must be a whole number of at least 3, got {sides!r}")
     r = positive(radius, "radius")
@@ -74,7 +99,12 @@ def regular_polygon(sides: int, radius: Number = 1) -> sympy.Expr:
 
 
 def triangle(a: Sequence, b: Sequence, c: Sequence) -> sympy.Expr:
-    """Triangle with corners ``a``, ``b``, ``c`` (either orientation)."""
+    """Triangle with corners ``a``, ``b``, ``c`` (either orientation).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(triangle((0, 0), (0, 1), (1, 0)).subs({x: 0.25, y: 0.25, z: 0})), 6)
+    -0.25
+    """
     (ax, ay), (bx, by), (cx, cy) = a, b, c
     area = sympy.sympify((bx - ax) * (cy - ay) - (by - ay) * (cx - ax))
     return convex_polygon([a, b, c] if area > 0 else [a, c, b])
@@ -93,13 +123,25 @@ def extrude(shape2d: sympy.Expr, height: Number, center: Number = 0) -> sympy.Ex
 
 def revolve(shape2d: sympy.Expr, offset: Number = 0) -> sympy.Expr:
     """``shape2d`` (x its radial, y its height coordinate) revolved about the z axis, ``offset`` from it:
-    exact where the 2D shape is (a torus is a circle revolved)."""
+    exact where the 2D shape is (a torus is a circle revolved).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> from implc.shapes import circle
+    >>> round(float(revolve(circle(0.25), 1).subs({x: 1, y: 0, z: 0})), 6)
+    -0.25
+    """
     return shape2d.xreplace({x: length(x, y) - sympy.sympify(offset), y: z})
 
 
 def loft(bottom: sympy.Expr, top: sympy.Expr, z0: Number, z1: Number) -> sympy.Expr:
     """A solid between z0 and z1 whose section goes from ``bottom`` at z0 to ``top`` at z1 (linear
-    interpolation of the two fields: not a distance)."""
+    interpolation of the two fields: not a distance).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> from implc.shapes import circle
+    >>> round(float(loft(circle(1), circle(0.5), 0, 1).subs({x: 0.75, y: 0, z: 0.5})), 6)
+    0.0
+    """
     z0, z1 = sympy.sympify(z0), sympy.sympify(z1)
     if not z1 > z0:
         raise ValueError("loft needs z1 > z0")

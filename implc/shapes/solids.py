@@ -22,39 +22,69 @@ def _squared_distance(center):
 
 
 def sphere(radius: Number = 1, center: Vec = (0, 0, 0)) -> sympy.Expr:
-    """Signed-distance sphere: ‖p − c‖ − radius."""
+    """Signed-distance sphere: ‖p − c‖ − radius.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(sphere(1, (1, 0, 0)).subs({x: 3, y: 0, z: 0})), 6)
+    1.0
+    """
     return sympy.sqrt(_squared_distance(center)) - radius
 
 
 def box(half_sizes: Vec = (1, 1, 1), center: Vec = (0, 0, 0)) -> sympy.Expr:
-    """Axis-aligned box as max(abs(pᵢ − cᵢ) − hᵢ) over the axes (exact inside, a lower bound outside)."""
+    """Axis-aligned box as max(abs(pᵢ − cᵢ) − hᵢ) over the axes (exact inside, a lower bound outside).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(box((1, 1, 1)).subs({x: 0, y: 0, z: 3})), 6)
+    2.0
+    """
     hx, hy, hz = _vec(half_sizes, "half_sizes")
     cx, cy, cz = _vec(center, "center")
     return sympy.Max(sympy.Abs(x - cx) - hx, sympy.Abs(y - cy) - hy, sympy.Abs(z - cz) - hz)
 
 
 def torus(major: Number = 1, minor: Number = sympy.Rational(1, 4), center: Vec = (0, 0, 0)) -> sympy.Expr:
-    """Torus around the z axis: (sqrt(x² + y²) − major)² + z² − minor²."""
+    """Torus around the z axis: (sqrt(x² + y²) − major)² + z² − minor².
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(torus(1, 0.25).subs({x: 1, y: 0, z: 0})), 6)
+    -0.0625
+    """
     cx, cy, cz = _vec(center, "center")
     ring = sympy.sqrt((x - cx) ** 2 + (y - cy) ** 2) - major
     return ring**2 + (z - cz) ** 2 - minor**2
 
 
 def cylinder(radius: Number = 1, height: Number = 2, center: Vec = (0, 0, 0)) -> sympy.Expr:
-    """Capped cylinder along z: max(radial distance − radius, abs(z − cz) − height / 2)."""
+    """Capped cylinder along z: max(radial distance − radius, abs(z − cz) − height / 2).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(cylinder(1, 2).subs({x: 3, y: 0, z: 0})), 6)
+    2.0
+    """
     cx, cy, cz = _vec(center, "center")
     return sympy.Max(sympy.sqrt((x - cx) ** 2 + (y - cy) ** 2) - radius, sympy.Abs(z - cz) - height / sympy.S(2))
 
 
 def blend(squared_distance: sympy.Expr, radius: Number) -> sympy.Expr:
-    """The paper's blend g(d) = (d² − R²)⁴ / R⁸ for d ≤ R, else 0, written in d² (no square root)."""
+    """The paper's blend g(d) = (d² − R²)⁴ / R⁸ for d ≤ R, else 0, written in d² (no square root).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(blend(x**2 + y**2 + z**2, 1).subs({x: 0, y: 0, z: 0})), 6)
+    1.0
+    """
     r2 = sympy.sympify(radius) ** 2
     return sympy.Piecewise(((squared_distance - r2) ** 4 / r2**4, squared_distance <= r2), (0, True))
 
 
 def blobs(centers: Sequence[Vec], radius: Number, threshold: Number,
           weights: Sequence[Number] | None = None) -> sympy.Expr:
-    """Blended blobs: threshold − Σ wᵢ g(‖p − cᵢ‖), negative inside (where the field exceeds threshold)."""
+    """Blended blobs: threshold − Σ wᵢ g(‖p − cᵢ‖), negative inside (where the field exceeds threshold).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(blobs([(0, 0, 0)], 1, 0.5).subs({x: 0, y: 0, z: 0})), 6)
+    -0.5
+    """
     centers = list(centers)
     if not centers:
         raise ValueError("blobs needs at least one center")
@@ -127,7 +157,12 @@ def capsule(a: Vec, b: Vec, radius: Number) -> sympy.Expr:
 
 def capped_cylinder(radius: Number = 1, height: Number = 2, center: Vec = (0, 0, 0)) -> sympy.Expr:
     """Cylinder along z with flat caps, exact (:func:`cylinder` is the same solid with a bound outside its
-    rims)."""
+    rims).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(capped_cylinder(1, 2).subs({x: 0, y: 0, z: 3})), 6)
+    2.0
+    """
     cx, cy, cz = _vec(center, "center")
     w = (length(x - cx, y - cy) - positive(radius, "radius"), sympy.Abs(z - cz) - positive(height, "height") / 2)
     return sympy.Min(sympy.Max(*w), 0) + length(*map(positive_part, w))
@@ -136,7 +171,12 @@ def capped_cylinder(radius: Number = 1, height: Number = 2, center: Vec = (0, 0,
 def cone(radius: Number = 1, height: Number = 2, center: Vec = (0, 0, 0)) -> sympy.Expr:
     """Cone along z, its base of ``radius`` at z = cz − height/2 and its apex at z = cz + height/2: the
     largest of the base plane's and the slanted side's signed distances (exact inside; a bound outside, near
-    the rim and beyond the apex)."""
+    the rim and beyond the apex).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(cone(1, 2).subs({x: 0, y: 0, z: -1.5})), 6)
+    0.5
+    """
     cx, cy, cz = _vec(center, "center")
     r, h = positive(radius, "radius"), positive(height, "height")
     slant = sympy.sqrt(r**2 + h**2)
@@ -146,7 +186,12 @@ def cone(radius: Number = 1, height: Number = 2, center: Vec = (0, 0, 0)) -> sym
 
 def ellipsoid(radii: Vec, center: Vec = (0, 0, 0)) -> sympy.Expr:
     """Ellipsoid with semi-axes ``radii``: k₀(k₀ − 1)/k₁ with k₀ = abs(p/r) and k₁ = abs(p/r²) (zero on the surface
-    and of the right sign, close to the distance near it; not exact)."""
+    and of the right sign, close to the distance near it; not exact).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(ellipsoid((2, 1, 1)).subs({x: 2, y: 0, z: 0})), 6)
+    0.0
+    """
     rx, ry, rz = (positive(v, "radii") for v in _vec(radii, "radii"))
     cx, cy, cz = _vec(center, "center")
     k0 = length((x - cx) / rx, (y - cy) / ry, (z - cz) / rz)
@@ -155,13 +200,23 @@ def ellipsoid(radii: Vec, center: Vec = (0, 0, 0)) -> sympy.Expr:
 
 
 def half_space(normal: Vec = (0, 0, 1), offset: Number = 0) -> sympy.Expr:
-    """The points p with n̂·p < ``offset`` (n̂ the unit ``normal``), exact."""
+    """The points p with n̂·p < ``offset`` (n̂ the unit ``normal``), exact.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(half_space((0, 0, 1), 1).subs({x: 0, y: 0, z: 3})), 6)
+    2.0
+    """
     nx, ny, nz = unit(normal, "normal")
     return nx * x + ny * y + nz * z - sympy.sympify(offset)
 
 
 def slab(normal: Vec = (0, 0, 1), thickness: Number = 1, offset: Number = 0) -> sympy.Expr:
-    """The points within ``thickness``/2 of the plane n̂·p = ``offset``, exact."""
+    """The points within ``thickness``/2 of the plane n̂·p = ``offset``, exact.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(slab((1, 0, 0), 2).subs({x: 3, y: 0, z: 0})), 6)
+    2.0
+    """
     return sympy.Abs(half_space(normal, offset)) - positive(thickness, "thickness") / 2
 
 
@@ -171,7 +226,12 @@ def _planes(normals, distance) -> sympy.Expr:
 
 def pyramid(base: Number = 1, height: Number = 1, center: Vec = (0, 0, 0)) -> sympy.Expr:
     """Square pyramid along z: its base 2·``base`` wide at z = cz, its apex ``height`` above; the largest of
-    its faces' signed distances (exact inside, a bound outside)."""
+    its faces' signed distances (exact inside, a bound outside).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(pyramid(1, 1).subs({x: 0, y: 0, z: 0.5})), 6)
+    -0.353553
+    """
     b, h = positive(base, "base"), positive(height, "height")
     cx, cy, cz = _vec(center, "center")
     slant = sympy.sqrt(h**2 + b**2)
@@ -180,12 +240,22 @@ def pyramid(base: Number = 1, height: Number = 1, center: Vec = (0, 0, 0)) -> sy
 
 
 def tetrahedron(size: Number = 1) -> sympy.Expr:
-    """Regular tetrahedron centred at the origin, its faces ``size`` from it (exact inside, a bound outside)."""
+    """Regular tetrahedron centred at the origin, its faces ``size`` from it (exact inside, a bound outside).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(tetrahedron(1).subs({x: 0, y: 0, z: 0})), 6)
+    -1.0
+    """
     return _planes([(1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1)], positive(size, "size"))
 
 
 def octahedron(size: Number = 1) -> sympy.Expr:
-    """Regular octahedron centred at the origin, its faces ``size`` from it (exact inside, a bound outside)."""
+    """Regular octahedron centred at the origin, its faces ``size`` from it (exact inside, a bound outside).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(octahedron(1).subs({x: 0, y: 0, z: 0})), 6)
+    -1.0
+    """
     return _planes([(a, b, c) for a in (1, -1) for b in (1, -1) for c in (1, -1)], positive(size, "size"))
 
 
@@ -194,13 +264,23 @@ _PHI = (1 + sympy.sqrt(5)) / 2
 
 def dodecahedron(size: Number = 1) -> sympy.Expr:
     """Regular dodecahedron centred at the origin, its faces ``size`` from it (exact inside, a bound
-    outside)."""
+    outside).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(dodecahedron(1).subs({x: 0, y: 0, z: 0})), 6)
+    -1.0
+    """
     normals = [v for a in (1, -1) for b in (1, -1) for v in ((0, a, b * _PHI), (a, b * _PHI, 0), (b * _PHI, 0, a))]
     return _planes(normals, positive(size, "size"))
 
 
 def icosahedron(size: Number = 1) -> sympy.Expr:
-    """Regular icosahedron centred at the origin, its faces ``size`` from it (exact inside, a bound outside)."""
+    """Regular icosahedron centred at the origin, its faces ``size`` from it (exact inside, a bound outside).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(icosahedron(1).subs({x: 0, y: 0, z: 0})), 6)
+    -1.0
+    """
     normals = [(a, b, c) for a in (1, -1) for b in (1, -1) for c in (1, -1)]
     normals += [v for a in (1, -1) for b in (1, -1) for v in ((0, a / _PHI, b * _PHI), (a / _PHI, b * _PHI, 0),
                                                                 (b * _PHI, 0, a / _PHI))]

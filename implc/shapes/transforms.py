@@ -16,13 +16,25 @@ from .vectors import Number, Vec, unit, vec3
 
 
 def translate(expr: sympy.Expr, offset: Vec) -> sympy.Expr:
-    """``expr`` moved by ``offset`` (dx, dy, dz)."""
+    """``expr`` moved by ``offset`` (dx, dy, dz).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> from implc.shapes import sphere
+    >>> round(float(translate(sphere(1), (1, 0, 0)).subs({x: 1, y: 0, z: 0})), 6)
+    -1.0
+    """
     dx, dy, dz = vec3(offset, "offset")
     return cartesian_form(expr).xreplace({x: x - dx, y: y - dy, z: z - dz})
 
 
 def scale(expr: sympy.Expr, factor: Number) -> sympy.Expr:
-    """Scale about the origin by a number or per-axis (sx, sy, sz); F is not renormalised."""
+    """Scale about the origin by a number or per-axis (sx, sy, sz); F is not renormalised.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> from implc.shapes import sphere
+    >>> round(float(scale(sphere(1), 2).subs({x: 2, y: 0, z: 0})), 6)
+    0.0
+    """
     sx, sy, sz = vec3(factor, "factor") if isinstance(factor, (tuple, list)) else (sympy.sympify(factor),) * 3
     return cartesian_form(expr).xreplace({x: x / sx, y: y / sy, z: z / sz})
 
@@ -51,7 +63,12 @@ def rotate(expr: sympy.Expr, angle: Number, axis: str | Vec = "z") -> sympy.Expr
 
 def transform(expr: sympy.Expr, matrix: Sequence[Sequence[Number]]) -> sympy.Expr:
     """``expr`` mapped by the affine 4×4 ``matrix`` (column vectors: p' = M·p; its last row 0 0 0 1): the
-    original at M⁻¹·p. Exact distances stay exact only where M is rigid."""
+    original at M⁻¹·p. Exact distances stay exact only where M is rigid.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(transform(x, [[1, 0, 0, 2], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]).subs({x: 2, y: 0, z: 0})), 6)
+    0.0
+    """
     m = sympy.Matrix(matrix)
     if m.shape != (4, 4) or list(m[3, :]) != [0, 0, 0, 1]:
         raise ValueError("matrix must be 4×4 with its last row 0 0 0 1")
@@ -63,13 +80,23 @@ def transform(expr: sympy.Expr, matrix: Sequence[Sequence[Number]]) -> sympy.Exp
 
 
 def mirror(expr: sympy.Expr, axis: str = "x") -> sympy.Expr:
-    """The mirror image of ``expr`` across the plane through the origin normal to ``axis``."""
+    """The mirror image of ``expr`` across the plane through the origin normal to ``axis``.
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(mirror(x - 1, 'x').subs({x: 0, y: 0, z: 0})), 6)
+    -1.0
+    """
     a = _axis(axis)
     return cartesian_form(expr).xreplace({a: -a})
 
 
 def symmetric(expr: sympy.Expr, axis: str = "x") -> sympy.Expr:
-    """The half of ``expr`` on the positive side of ``axis``, reflected onto the negative side too (abs(a) for a)."""
+    """The half of ``expr`` on the positive side of ``axis``, reflected onto the negative side too (abs(a) for a).
+
+    >>> from implc.compiler.symbols import x, y, z
+    >>> round(float(symmetric(x - 1, 'x').subs({x: -2, y: 0, z: 0})), 6)
+    1.0
+    """
     a = _axis(axis)
     return cartesian_form(expr).xreplace({a: sympy.Abs(a)})
 
