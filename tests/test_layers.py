@@ -118,6 +118,14 @@ def test_no_module_shadows_the_standard_library():
     assert not names & set(sys.stdlib_module_names)
 
 
+def test_every_package_is_built_into_the_wheel():
+    """The build's package list (pyproject.toml) names every folder of the package: a folder left out is
+    missing from the wheel alone, where a checkout's tests would not notice."""
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    folders = {".".join(p.parent.relative_to(ROOT).parts) for p in PACKAGE.rglob("__init__.py")}
+    assert folders == listed, (sorted(folders - listed), sorted(listed - folders))
+
+
 def test_nothing_is_mounted_into_the_package_from_outside():
     config = tomllib.loads((ROOT / "pyproject.toml").read_text())
     setuptools = config.get("tool", {}).get("setuptools", {})
