@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sympy
 
-from .vectors import Number, positive
+from .vectors import Number, absolute, maximum, minimum, positive
 
 
 def union(*shapes: sympy.Expr) -> sympy.Expr:
@@ -21,7 +21,7 @@ def union(*shapes: sympy.Expr) -> sympy.Expr:
     >>> round(float(union(x - 1, y - 1).subs({x: 2, y: 0, z: 0})), 6)
     -1.0
     """
-    return sympy.Min(*shapes)
+    return minimum(*shapes)
 
 
 def intersection(*shapes: sympy.Expr) -> sympy.Expr:
@@ -31,7 +31,7 @@ def intersection(*shapes: sympy.Expr) -> sympy.Expr:
     >>> round(float(intersection(x - 1, y - 1).subs({x: 2, y: 0, z: 0})), 6)
     1.0
     """
-    return sympy.Max(*shapes)
+    return maximum(*shapes)
 
 
 def difference(a: sympy.Expr, *cut: sympy.Expr) -> sympy.Expr:
@@ -41,11 +41,20 @@ def difference(a: sympy.Expr, *cut: sympy.Expr) -> sympy.Expr:
     >>> round(float(difference(x - 1, x).subs({x: 0.5, y: 0, z: 0})), 6)
     -0.5
     """
-    return sympy.Max(a, *[-c for c in cut])
+    return maximum(a, *[-c for c in cut])
+
+
+def _pairwise(join, shapes):
+    """``shapes`` joined two by two, then the results two by two, to one: each join uses both operands
+    twice, so a balanced tree keeps the expression's depth logarithmic where a chain would be linear."""
+    items = list(shapes)
+    while len(items) > 1:
+        items = [join(items[i], items[i + 1]) if i + 1 < len(items) else items[i] for i in range(0, len(items), 2)]
+    return items[0]
 
 
 def _smooth_min(a: sympy.Expr, b: sympy.Expr, k: sympy.Expr) -> sympy.Expr:
-    return sympy.Min(a, b) - sympy.Max(k - sympy.Abs(a - b), 0) ** 2 / (4 * k)
+    return minimum(a, b) - maximum(k - absolute(a - b), 0) ** 2 / (4 * k)
 
 
 def smooth_union(radius: Number, *shapes: sympy.Expr) -> sympy.Expr:
@@ -58,10 +67,7 @@ def smooth_union(radius: Number, *shapes: sympy.Expr) -> sympy.Expr:
     k = positive(radius, "radius")
     if not shapes:
         raise ValueError("smooth_union needs at least one shape")
-    result = shapes[0]
-    for shape in shapes[1:]:
-        result = _smooth_min(result, shape, k)
-    return result
+    return _pairwise(lambda a, b: _smooth_min(a, b, k), shapes)
 
 
 def smooth_intersection(radius: Number, *shapes: sympy.Expr) -> sympy.Expr:
@@ -93,10 +99,9 @@ def chamfer_union(size: Number, *shapes: sympy.Expr) -> sympy.Expr:
     -0.353553
     """
     c = positive(size, "size")
-    result = shapes[0]
-    for shape in shapes[1:]:
-        result = sympy.Min(result, shape, (result + shape - c) / sympy.sqrt(2))
-    return result
+    if not shapes:
+        raise ValueError("chamfer_union needs at least one shape")
+    return _pairwise(lambda a, b: minimum(a, b, (a + b - c) / sympy.sqrt(2)), shapes)
 
 
 def chamfer_intersection(size: Number, *shapes: sympy.Expr) -> sympy.Expr:

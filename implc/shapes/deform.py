@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import sympy
 
-from ..compiler.symbols import cartesian_form, x, y, z
-from .vectors import Number, Vec, vec3
+from ..compiler.symbols import x, y, z
+from .vectors import Number, Vec, maximum, minimum, substitute, vec3
 
 
 def twist(expr: sympy.Expr, rate: Number) -> sympy.Expr:
@@ -21,7 +21,7 @@ def twist(expr: sympy.Expr, rate: Number) -> sympy.Expr:
     """
     a = sympy.sympify(rate) * z
     c, s = sympy.cos(a), sympy.sin(a)
-    return cartesian_form(expr).xreplace({x: c * x + s * y, y: -s * x + c * y})
+    return substitute(expr, {x: c * x + s * y, y: -s * x + c * y})
 
 
 def bend(expr: sympy.Expr, rate: Number) -> sympy.Expr:
@@ -34,7 +34,7 @@ def bend(expr: sympy.Expr, rate: Number) -> sympy.Expr:
     """
     a = sympy.sympify(rate) * z
     c, s = sympy.cos(a), sympy.sin(a)
-    return cartesian_form(expr).xreplace({x: c * x - s * z, z: s * x + c * z})
+    return substitute(expr, {x: c * x - s * z, z: s * x + c * z})
 
 
 def taper(expr: sympy.Expr, rate: Number, axis_z0: Number = 0) -> sympy.Expr:
@@ -45,7 +45,7 @@ def taper(expr: sympy.Expr, rate: Number, axis_z0: Number = 0) -> sympy.Expr:
     -0.25
     """
     k = 1 + sympy.sympify(rate) * (z - sympy.sympify(axis_z0))
-    return cartesian_form(expr).xreplace({x: x / k, y: y / k})
+    return substitute(expr, {x: x / k, y: y / k})
 
 
 def shear(expr: sympy.Expr, dx_per_z: Number = 0, dy_per_z: Number = 0) -> sympy.Expr:
@@ -55,7 +55,7 @@ def shear(expr: sympy.Expr, dx_per_z: Number = 0, dy_per_z: Number = 0) -> sympy
     >>> round(float(shear(x, 1).subs({x: 1, y: 0, z: 1})), 6)
     0.0
     """
-    return cartesian_form(expr).xreplace({x: x - sympy.sympify(dx_per_z) * z, y: y - sympy.sympify(dy_per_z) * z})
+    return substitute(expr, {x: x - sympy.sympify(dx_per_z) * z, y: y - sympy.sympify(dy_per_z) * z})
 
 
 def elongate(expr: sympy.Expr, half_lengths: Vec) -> sympy.Expr:
@@ -68,5 +68,5 @@ def elongate(expr: sympy.Expr, half_lengths: Vec) -> sympy.Expr:
     0.0
     """
     hx, hy, hz = vec3(half_lengths, "half_lengths")
-    moved = [v - sympy.Min(sympy.Max(v, -h), h) for v, h in ((x, hx), (y, hy), (z, hz))]
-    return cartesian_form(expr).xreplace(dict(zip((x, y, z), moved)))
+    moved = [v - minimum(maximum(v, -h), h) for v, h in ((x, hx), (y, hy), (z, hz))]
+    return substitute(expr, dict(zip((x, y, z), moved)))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import sympy
 
 from ..compiler.symbols import x, y, z
-from .vectors import Number, positive
+from .vectors import Number, absolute, maximum, minimum, positive
 
 
 def _k(period: Number) -> sympy.Expr:
@@ -27,7 +27,7 @@ def gyroid(period: Number = 1, thickness: Number = sympy.Rational(3, 10)) -> sym
     k = _k(period)
     a, b, c = k * x, k * y, k * z
     field = sympy.sin(a) * sympy.cos(b) + sympy.sin(b) * sympy.cos(c) + sympy.sin(c) * sympy.cos(a)
-    return sympy.Abs(field) - positive(thickness, "thickness")
+    return absolute(field) - positive(thickness, "thickness")
 
 
 def schwarz_p(period: Number = 1, thickness: Number = sympy.Rational(3, 10)) -> sympy.Expr:
@@ -38,7 +38,7 @@ def schwarz_p(period: Number = 1, thickness: Number = sympy.Rational(3, 10)) -> 
     -0.3
     """
     k = _k(period)
-    return sympy.Abs(sympy.cos(k * x) + sympy.cos(k * y) + sympy.cos(k * z)) - positive(thickness, "thickness")
+    return absolute(sympy.cos(k * x) + sympy.cos(k * y) + sympy.cos(k * z)) - positive(thickness, "thickness")
 
 
 def diamond(period: Number = 1, thickness: Number = sympy.Rational(3, 10)) -> sympy.Expr:
@@ -53,7 +53,7 @@ def diamond(period: Number = 1, thickness: Number = sympy.Rational(3, 10)) -> sy
     sx, sy, sz = sympy.sin(k * x), sympy.sin(k * y), sympy.sin(k * z)
     cx, cy, cz = sympy.cos(k * x), sympy.cos(k * y), sympy.cos(k * z)
     field = sx * sy * sz + sx * cy * cz + cx * sy * cz + cx * cy * sz
-    return sympy.Abs(field) - positive(thickness, "thickness")
+    return absolute(field) - positive(thickness, "thickness")
 
 
 def neovius(period: Number = 1, thickness: Number = sympy.Rational(3, 10)) -> sympy.Expr:
@@ -65,7 +65,7 @@ def neovius(period: Number = 1, thickness: Number = sympy.Rational(3, 10)) -> sy
     """
     k = _k(period)
     cx, cy, cz = sympy.cos(k * x), sympy.cos(k * y), sympy.cos(k * z)
-    return sympy.Abs(3 * (cx + cy + cz) + 4 * cx * cy * cz) - positive(thickness, "thickness")
+    return absolute(3 * (cx + cy + cz) + 4 * cx * cy * cz) - positive(thickness, "thickness")
 
 
 def infill(solid: sympy.Expr, lattice: sympy.Expr, skin: Number) -> sympy.Expr:
@@ -77,4 +77,4 @@ def infill(solid: sympy.Expr, lattice: sympy.Expr, skin: Number) -> sympy.Expr:
     -0.05
     """
     s = positive(skin, "skin")
-    return sympy.Max(solid, sympy.Min(-solid - s, lattice))  # the skin, and the lattice within the solid
+    return maximum(solid, minimum(-solid - s, lattice))  # the skin, and the lattice within the solid

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import sympy
 
-from .vectors import Number, positive
+from .vectors import Number, absolute, maximum, positive
 
 
 def offset(expr: sympy.Expr, distance: Number) -> sympy.Expr:
@@ -52,7 +52,7 @@ def shell(expr: sympy.Expr, thickness: Number) -> sympy.Expr:
     >>> float(shell(sphere(1), 0.2).subs({x: 0, y: 0, z: 0}))
     0.9
     """
-    return sympy.Abs(expr) - positive(thickness, "thickness") / 2
+    return absolute(expr) - positive(thickness, "thickness") / 2
 
 
 def inner_shell(expr: sympy.Expr, thickness: Number) -> sympy.Expr:
@@ -64,7 +64,7 @@ def inner_shell(expr: sympy.Expr, thickness: Number) -> sympy.Expr:
     0.75
     """
     t = positive(thickness, "thickness")
-    return sympy.Max(expr, -expr - t)
+    return maximum(expr, -expr - t)
 
 
 def clearance(a: sympy.Expr, b: sympy.Expr, gap: Number) -> sympy.Expr:
@@ -74,4 +74,4 @@ def clearance(a: sympy.Expr, b: sympy.Expr, gap: Number) -> sympy.Expr:
     >>> round(float(clearance(x - 1, x, 0.25).subs({x: 0.1, y: 0, z: 0})), 6)
     0.15
     """
-    return sympy.Max(a, -(b - positive(gap, "gap")))
+    return maximum(a, -(b - positive(gap, "gap")))

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import sympy
 
 from ..compiler.symbols import x, y, z
-from .vectors import Number, length, positive, positive_part
+from .vectors import Number, absolute, length, maximum, minimum, positive, positive_part, substitute
 
 
 def circle(radius: Number = 1, center: Sequence = (0, 0)) -> sympy.Expr:
@@ -35,8 +35,8 @@ def rectangle(half_sizes: Sequence = (1, 1), center: Sequence = (0, 0)) -> sympy
     2.0
     """
     (hx, hy), (cx, cy) = (sympy.sympify(v) for v in half_sizes), (sympy.sympify(c) for c in center)
-    q = (sympy.Abs(x - cx) - hx, sympy.Abs(y - cy) - hy)
-    return length(*map(positive_part, q)) + sympy.Min(sympy.Max(*q), 0)
+    q = (absolute(x - cx) - hx, absolute(y - cy) - hy)
+    return length(*map(positive_part, q)) + minimum(maximum(*q), 0)
 
 
 def rounded_rectangle(half_sizes: Sequence = (1, 1), radius: Number = sympy.Rational(1, 10),
@@ -61,7 +61,7 @@ def ring(radius: Number = 1, width: Number = sympy.Rational(1, 5), center: Seque
     >>> round(float(ring(1, 0.2).subs({x: 1.5, y: 0, z: 0})), 6)
     0.4
     """
-    return sympy.Abs(circle(radius, center)) - positive(width, "width") / 2
+    return absolute(circle(radius, center)) - positive(width, "width") / 2
 
 
 def convex_polygon(points: Sequence[Sequence]) -> sympy.Expr:
@@ -81,7 +81,7 @@ def convex_polygon(points: Sequence[Sequence]) -> sympy.Expr:
         if n == 0:
             raise ValueError("a polygon's points must differ")
         edges.append((ey * (x - ax) - ex * (y - ay)) / n)  # > 0 on the right of the edge: outside
-    return sympy.Max(*edges)
+    return maximum(*edges)
 
 
 def regular_polygon(sides: int, radius: Number = 1) -> sympy.Expr:
@@ -117,8 +117,8 @@ def extrude(shape2d: sympy.Expr, height: Number, center: Number = 0) -> sympy.Ex
     >>> float(extrude(circle(1), 2).subs({x: 0, y: 0, z: 3}))
     2.0
     """
-    w = (shape2d, sympy.Abs(z - sympy.sympify(center)) - positive(height, "height") / 2)
-    return sympy.Min(sympy.Max(*w), 0) + length(*map(positive_part, w))
+    w = (shape2d, absolute(z - sympy.sympify(center)) - positive(height, "height") / 2)
+    return minimum(maximum(*w), 0) + length(*map(positive_part, w))
 
 
 def revolve(shape2d: sympy.Expr, offset: Number = 0) -> sympy.Expr:
@@ -130,7 +130,7 @@ def revolve(shape2d: sympy.Expr, offset: Number = 0) -> sympy.Expr:
     >>> round(float(revolve(circle(0.25), 1).subs({x: 1, y: 0, z: 0})), 6)
     -0.25
     """
-    return shape2d.xreplace({x: length(x, y) - sympy.sympify(offset), y: z})
+    return substitute(shape2d, {x: length(x, y) - sympy.sympify(offset), y: z})
 
 
 def loft(bottom: sympy.Expr, top: sympy.Expr, z0: Number, z1: Number) -> sympy.Expr:
@@ -146,4 +146,4 @@ def loft(bottom: sympy.Expr, top: sympy.Expr, z0: Number, z1: Number) -> sympy.E
     if not z1 > z0:
         raise ValueError("loft needs z1 > z0")
     t = (z - z0) / (z1 - z0)
-    return sympy.Max((1 - t) * bottom + t * top, z0 - z, z - z1)
+    return maximum((1 - t) * bottom + t * top, z0 - z, z - z1)

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import sympy
 
 from ..compiler.symbols import x, y, z
-from .vectors import Number, Vec, clamp, length, positive, positive_part, unit
+from .vectors import Number, Vec, absolute, clamp, length, maximum, minimum, positive, positive_part, unit
 from .vectors import vec3 as _vec
 
 
@@ -40,7 +40,7 @@ def box(half_sizes: Vec = (1, 1, 1), center: Vec = (0, 0, 0)) -> sympy.Expr:
     """
     hx, hy, hz = _vec(half_sizes, "half_sizes")
     cx, cy, cz = _vec(center, "center")
-    return sympy.Max(sympy.Abs(x - cx) - hx, sympy.Abs(y - cy) - hy, sympy.Abs(z - cz) - hz)
+    return maximum(absolute(x - cx) - hx, absolute(y - cy) - hy, absolute(z - cz) - hz)
 
 
 def torus(major: Number = 1, minor: Number = sympy.Rational(1, 4), center: Vec = (0, 0, 0)) -> sympy.Expr:
@@ -63,7 +63,7 @@ def cylinder(radius: Number = 1, height: Number = 2, center: Vec = (0, 0, 0)) ->
     2.0
     """
     cx, cy, cz = _vec(center, "center")
-    return sympy.Max(sympy.sqrt((x - cx) ** 2 + (y - cy) ** 2) - radius, sympy.Abs(z - cz) - height / sympy.S(2))
+    return maximum(sympy.sqrt((x - cx) ** 2 + (y - cy) ** 2) - radius, absolute(z - cz) - height / sympy.S(2))
 
 
 def blend(squared_distance: sympy.Expr, radius: Number) -> sympy.Expr:
@@ -108,8 +108,8 @@ def box_exact(half_sizes: Vec = (1, 1, 1), center: Vec = (0, 0, 0)) -> sympy.Exp
     """
     hx, hy, hz = _vec(half_sizes, "half_sizes")
     cx, cy, cz = _vec(center, "center")
-    q = (sympy.Abs(x - cx) - hx, sympy.Abs(y - cy) - hy, sympy.Abs(z - cz) - hz)
-    return length(*map(positive_part, q)) + sympy.Min(sympy.Max(*q), 0)
+    q = (absolute(x - cx) - hx, absolute(y - cy) - hy, absolute(z - cz) - hz)
+    return length(*map(positive_part, q)) + minimum(maximum(*q), 0)
 
 
 def rounded_box(half_sizes: Vec = (1, 1, 1), radius: Number = sympy.Rational(1, 10),
@@ -164,8 +164,8 @@ def capped_cylinder(radius: Number = 1, height: Number = 2, center: Vec = (0, 0,
     2.0
     """
     cx, cy, cz = _vec(center, "center")
-    w = (length(x - cx, y - cy) - positive(radius, "radius"), sympy.Abs(z - cz) - positive(height, "height") / 2)
-    return sympy.Min(sympy.Max(*w), 0) + length(*map(positive_part, w))
+    w = (length(x - cx, y - cy) - positive(radius, "radius"), absolute(z - cz) - positive(height, "height") / 2)
+    return minimum(maximum(*w), 0) + length(*map(positive_part, w))
 
 
 def cone(radius: Number = 1, height: Number = 2, center: Vec = (0, 0, 0)) -> sympy.Expr:
@@ -181,7 +181,7 @@ def cone(radius: Number = 1, height: Number = 2, center: Vec = (0, 0, 0)) -> sym
     r, h = positive(radius, "radius"), positive(height, "height")
     slant = sympy.sqrt(r**2 + h**2)
     side = (h * length(x - cx, y - cy) + r * (z - cz) - r * h / 2) / slant
-    return sympy.Max(side, cz - h / 2 - z)
+    return maximum(side, cz - h / 2 - z)
 
 
 def ellipsoid(radii: Vec, center: Vec = (0, 0, 0)) -> sympy.Expr:
@@ -217,11 +217,11 @@ def slab(normal: Vec = (0, 0, 1), thickness: Number = 1, offset: Number = 0) -> 
     >>> round(float(slab((1, 0, 0), 2).subs({x: 3, y: 0, z: 0})), 6)
     2.0
     """
-    return sympy.Abs(half_space(normal, offset)) - positive(thickness, "thickness") / 2
+    return absolute(half_space(normal, offset)) - positive(thickness, "thickness") / 2
 
 
 def _planes(normals, distance) -> sympy.Expr:
-    return sympy.Max(*[half_space(n, distance) for n in normals])
+    return maximum(*[half_space(n, distance) for n in normals])
 
 
 def pyramid(base: Number = 1, height: Number = 1, center: Vec = (0, 0, 0)) -> sympy.Expr:
@@ -236,7 +236,7 @@ def pyramid(base: Number = 1, height: Number = 1, center: Vec = (0, 0, 0)) -> sy
     cx, cy, cz = _vec(center, "center")
     slant = sympy.sqrt(h**2 + b**2)
     faces = [(s * across * h + b * (z - cz) - b * h) / slant for across in (x - cx, y - cy) for s in (1, -1)]
-    return sympy.Max(*faces, cz - z)
+    return maximum(*faces, cz - z)
 
 
 def tetrahedron(size: Number = 1) -> sympy.Expr:

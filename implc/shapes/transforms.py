@@ -11,8 +11,8 @@ from collections.abc import Sequence
 
 import sympy
 
-from ..compiler.symbols import cartesian_form, x, y, z
-from .vectors import Number, Vec, unit, vec3
+from ..compiler.symbols import x, y, z
+from .vectors import Number, Vec, absolute, substitute, unit, vec3
 
 
 def translate(expr: sympy.Expr, offset: Vec) -> sympy.Expr:
@@ -24,7 +24,7 @@ def translate(expr: sympy.Expr, offset: Vec) -> sympy.Expr:
     -1.0
     """
     dx, dy, dz = vec3(offset, "offset")
-    return cartesian_form(expr).xreplace({x: x - dx, y: y - dy, z: z - dz})
+    return substitute(expr, {x: x - dx, y: y - dy, z: z - dz})
 
 
 def scale(expr: sympy.Expr, factor: Number) -> sympy.Expr:
@@ -36,7 +36,7 @@ def scale(expr: sympy.Expr, factor: Number) -> sympy.Expr:
     0.0
     """
     sx, sy, sz = vec3(factor, "factor") if isinstance(factor, (tuple, list)) else (sympy.sympify(factor),) * 3
-    return cartesian_form(expr).xreplace({x: x / sx, y: y / sy, z: z / sz})
+    return substitute(expr, {x: x / sx, y: y / sy, z: z / sz})
 
 
 def rotate(expr: sympy.Expr, angle: Number, axis: str | Vec = "z") -> sympy.Expr:
@@ -58,7 +58,7 @@ def rotate(expr: sympy.Expr, angle: Number, axis: str | Vec = "z") -> sympy.Expr
     k_dot = kx * x + ky * y + kz * z
     cross = (ky * z - kz * y, kz * x - kx * z, kx * y - ky * x)  # k × p
     back = [p * c - cr * s + kk * k_dot * (1 - c) for p, cr, kk in zip((x, y, z), cross, (kx, ky, kz))]
-    return cartesian_form(expr).xreplace({x: back[0], y: back[1], z: back[2]})
+    return substitute(expr, {x: back[0], y: back[1], z: back[2]})
 
 
 def transform(expr: sympy.Expr, matrix: Sequence[Sequence[Number]]) -> sympy.Expr:
@@ -76,7 +76,7 @@ def transform(expr: sympy.Expr, matrix: Sequence[Sequence[Number]]) -> sympy.Exp
         raise ValueError("matrix must be invertible")
     inverse = m.inv()
     p = inverse * sympy.Matrix([x, y, z, 1])
-    return cartesian_form(expr).xreplace({x: p[0], y: p[1], z: p[2]})
+    return substitute(expr, {x: p[0], y: p[1], z: p[2]})
 
 
 def mirror(expr: sympy.Expr, axis: str = "x") -> sympy.Expr:
@@ -87,7 +87,7 @@ def mirror(expr: sympy.Expr, axis: str = "x") -> sympy.Expr:
     -1.0
     """
     a = _axis(axis)
-    return cartesian_form(expr).xreplace({a: -a})
+    return substitute(expr, {a: -a})
 
 
 def symmetric(expr: sympy.Expr, axis: str = "x") -> sympy.Expr:
@@ -98,7 +98,7 @@ def symmetric(expr: sympy.Expr, axis: str = "x") -> sympy.Expr:
     1.0
     """
     a = _axis(axis)
-    return cartesian_form(expr).xreplace({a: sympy.Abs(a)})
+    return substitute(expr, {a: absolute(a)})
 
 
 def _axis(axis: str):

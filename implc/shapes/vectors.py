@@ -1,4 +1,13 @@
-"""Numbers and points as the shape builders take them, and the few vector operations they share."""
+"""Numbers and points as the shape builders take them, the few vector operations they share, and the
+builders' Min, Max, Abs and substitution.
+
+SymPy's own Min and Max compare every pair of their arguments when they are built (to drop the ones that
+cannot win), and each comparison asks the assumptions system about the difference of two shapes: a part
+of a few hundred operations took minutes to build, most of it in those questions, and again each time a
+transform rebuilt the tree. The builders never need that pruning (the tape engine prunes per octant, with
+proofs), so :func:`minimum`, :func:`maximum` and :func:`absolute` build the node as given, and
+:func:`substitute` rebuilds a shape through them.
+"""
 
 from __future__ import annotations
 
@@ -42,14 +51,64 @@ def length(*components: sympy.Expr) -> sympy.Expr:
     return sympy.sqrt(sympy.Add(*[c**2 for c in components]))
 
 
+def _extremum(kind, args) -> sympy.Expr:
+    flat: list = []
+    for arg in map(sympy.sympify, args):
+        flat.extend(arg.args if isinstance(arg, kind) else (arg,))
+    unique = list(dict.fromkeys(flat))
+    if not unique:
+        raise ValueError(f"{kind.__name__} of no shapes")
+    if len(unique) == 1:
+        return unique[0]
+    if all(a.is_number for a in unique):
+        return kind(*unique)  # numbers only: SymPy's comparison is cheap and exact
+    # SymPy's constructor sorts its arguments even unevaluated, by counting the nodes of each as a tree: a
+    # smooth union shares its operands, and that count doubles with each one. The node keeps our order.
+    node = sympy.Expr.__new__(kind, *unique)
+    node._argset = frozenset(unique)
+    return node
+
+
+def minimum(*args: sympy.Expr) -> sympy.Expr:
+    """min of ``args`` as one Min node (nested Mins merged, repeats dropped), built without comparing them."""
+    return _extremum(sympy.Min, args)
+
+
+def maximum(*args: sympy.Expr) -> sympy.Expr:
+    """max of ``args`` as one Max node, built like :func:`minimum`."""
+    return _extremum(sympy.Max, args)
+
+
+def absolute(v: sympy.Expr) -> sympy.Expr:
+    """abs(v), built without asking for v's sign (a number's is taken)."""
+    v = sympy.sympify(v)
+    return sympy.Abs(v) if v.is_number else sympy.Abs(v, evaluate=False)
+
+
+_REBUILD = {sympy.Min: minimum, sympy.Max: maximum, sympy.Abs: absolute}
+
+
+def _build(func, args):
+    return _REBUILD[func](*args) if func in _REBUILD else func(*args)
+
+
+def substitute(expr: sympy.Expr, mapping: dict) -> sympy.Expr:
+    """``expr`` in Cartesian form with x, y and z replaced as ``mapping`` says, Min, Max and Abs rebuilt
+    through :func:`minimum`, :func:`maximum` and :func:`absolute` (each shared subexpression once, no
+    recursion: a deep part cannot exhaust Python's stack)."""
+    from ..compiler.symbols import cartesian_mapping, replace
+    full = {symbol: value.xreplace(mapping) for symbol, value in cartesian_mapping(expr).items()}
+    return replace(expr, {**mapping, **full}, build=_build)
+
+
 def positive_part(v: sympy.Expr) -> sympy.Expr:
     """max(v, 0)."""
-    return sympy.Max(v, 0)
+    return maximum(v, 0)
 
 
 def clamp(v: sympy.Expr, lo: Number, hi: Number) -> sympy.Expr:
     """v limited to [lo, hi]."""
-    return sympy.Min(sympy.Max(v, lo), hi)
+    return minimum(maximum(v, lo), hi)
 
 
 def unit(v: Vec, name: str = "direction") -> tuple[sympy.Expr, sympy.Expr, sympy.Expr]:

@@ -69,3 +69,24 @@ def test_shapes_compile():
     pts = np.random.default_rng(0).uniform(-2, 2, (50, 3))
     expected = [at(f, *p) for p in pts]
     np.testing.assert_allclose(s.eval(pts), expected, rtol=1e-12, atol=1e-12)
+
+
+def test_substitution_equals_sympys_and_survives_a_deep_part():
+    """The builders' substitution (Min/Max/Abs kept as built) has SymPy's own xreplace's values, and a
+    part nested thousands of operations deep transforms without exhausting Python's stack."""
+    from implc.shapes.vectors import substitute
+    rng = np.random.default_rng(7)
+    part = shapes.difference(shapes.smooth_union(0.1, shapes.sphere(0.5), shapes.box((0.3, 0.6, 0.2))),
+                             shapes.capsule((0, 0, -1), (0, 0, 1), 0.1))
+    mapping = {x: 0.8 * x - 0.6 * y + 0.1, y: 0.6 * x + 0.8 * y, z: sympy.Abs(z) - 0.2}
+    ours = sympy.lambdify((x, y, z), substitute(part, mapping), "numpy")
+    theirs = sympy.lambdify((x, y, z), part.xreplace(mapping), "numpy")
+    p = rng.uniform(-1, 1, (3, 500))
+    np.testing.assert_array_equal(ours(*p), theirs(*p))
+    chain = shapes.sphere(1)
+    for k in range(2000):  # 2000 smooth unions deep, each sharing its operands
+        chain = shapes.smooth_union(0.01, chain, shapes.sphere(0.1, (k / 2000, 0, 0)))
+    moved = shapes.translate(chain, (0, 0, 1))
+    p = rng.uniform(-1, 1, (8, 3))
+    np.testing.assert_allclose(implc.compile(moved, ((-1, 1), (-1, 1), (0, 2))).eval(p + [0, 0, 1]),
+                               implc.compile(chain).eval(p), rtol=0, atol=1e-12)
