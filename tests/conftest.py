@@ -17,6 +17,8 @@ import pytest
 from hypothesis import settings
 from hypothesis.configuration import set_hypothesis_home_dir
 
+from .support.browser import browser  # noqa: F401 - the fixture, for every test that drives the page
+
 sys.dont_write_bytecode = True  # nothing written into the checkout
 settings.register_profile("implc", database=None)  # no .hypothesis/ folder in the checkout
 settings.load_profile("implc")

@@ -48,6 +48,11 @@ def _bounds(text):
     return ((v[0], v[1]), (v[2], v[3]), (v[4], v[5]))
 
 
+def given_bounds(args):
+    """--bounds as ((x0, x1), (y0, y1), (z0, z1)), or None where it is not given."""
+    return _bounds(args.bounds) if args.bounds else None
+
+
 def check_writable(path: Path, suffixes):
     if path.is_dir() and path.suffix.lower() != ".zarr":  # a Zarr store is a folder, replaced whole
         raise UsageError(f"cannot write {path}: it is a folder")

@@ -74,6 +74,9 @@ def build_parser():
     w.add_argument("--export", metavar="DIR", help="write a static viewer folder (page, script, chunks) instead")
     w.add_argument("--mesh", action="store_true", help="show the surface's mesh (as 'implc mesh' makes it) instead "
                                                          "of its voxels; a mesh file is shown as a mesh anyway")
+    w.add_argument("--watch", action="store_true", help="rebuild the scene file each time it (or a module beside "
+                                                          "it) is saved and update the open page in place; an error "
+                                                          "shows there, the last good model stays")
     w.set_defaults(run=cmd_view)
 
     r = sub.add_parser("render", help="render a scene, formula, .npz or .zarr to a PNG")

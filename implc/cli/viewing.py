@@ -31,6 +31,8 @@ def cmd_view(args) -> int:
     if args.export is not None:
         check_folder_writable(Path(args.export), "a static viewer")
     suffix = Path(args.scene).suffix.lower() if args.scene else ""
+    if args.watch:
+        return _watch(args, budget, suffix)
     if suffix in (".npz", ".zarr"):
         refuse_surface_options(args, "voxel", "shown")
         voxels, name, view = voxel_files.load(args.scene), Path(args.scene).stem, None
@@ -64,8 +66,55 @@ def cmd_view(args) -> int:
                  f"{len(voxels)} voxels at {1 << voxels.depth}³")
 
 
-def _view(shown, args, budget: int, what: str) -> int:
-    """Export ``shown`` (the chunks of voxels, or a mesh's payload) as a static viewer, or serve it."""
+def _watch(args, budget: int, suffix: str) -> int:
+    """``implc view SCENE.py --watch``: the scene built in a child process, then rebuilt on every save."""
+    from ..files.scene import SceneError
+    from ..files.scene import load as load_scene
+    from .arguments import TIGHTNESS, given_bounds, tightness_of
+    from .watch import BuildError, Job, Watcher
+    if suffix != ".py" or args.expr is not None:
+        raise UsageError("--watch follows a scene file (a .py path): it rebuilds the file each time it is saved")
+    if args.export is not None:
+        raise UsageError("--watch serves the page: it cannot --export a static viewer")
+    if not Path(args.scene).is_file():
+        load_scene(args.scene)  # the scene loader's own line: no such file, or a folder
+    check_surface_options(args)
+    options = {"workers": args.workers, **TIGHTNESS[tightness_of(args)]}
+    job = Job(str(Path(args.scene).resolve()), args.depth, given_bounds(args), args.mesh, options)
+    name = Path(args.scene).name
+
+    def say(line: str):
+        print(f"{time.strftime('%H:%M:%S')} {line}", file=sys.stderr, flush=True)
+
+    def serving(server):
+        def built(build):
+            server.replace(build.shown())
+            if not args.quiet:
+                say(f"{build.name}: {build.summary()}")
+
+        def failed(line: str):
+            server.report(error=line)
+            say(f"{name}: {line} (the page keeps the last good model)")
+
+        watcher.on_build, watcher.on_error = built, failed
+        watcher.on_start = lambda: server.report(building=True)
+        watcher.start()
+
+    watcher = Watcher(job, on_build=None, on_error=None)
+    try:
+        try:
+            first = watcher.first()
+        except BuildError as error:
+            raise SceneError(str(error)) from None
+        return _view(first.shown(), args, budget, f"{first.summary()}; watching {name} for saves",
+                     serving=serving)
+    finally:
+        watcher.close()
+
+
+def _view(shown, args, budget: int, what: str, serving=None) -> int:
+    """Export ``shown`` (the chunks of voxels, or a mesh's payload) as a static viewer, or serve it
+    (``serving(server)``, where given, is called once the server listens: a live one)."""
     from ..view.page import export
     from ..view.server import DEFAULT_PORT, ViewServer
     name = shown.name
@@ -76,13 +125,15 @@ def _view(shown, args, budget: int, what: str) -> int:
                   f"any static file server shows it, e.g. python3 -m http.server -d {args.export}")
         return 0
     try:
-        server = ViewServer(shown, port=args.port, budget=budget)
+        server = ViewServer(shown, port=args.port, budget=budget, live=serving is not None)
     except OSError as exc:
         raise UsageError(f"cannot listen on 127.0.0.1:{args.port if args.port is not None else DEFAULT_PORT}: "
                          f"{exc.strerror or exc}") from None
     try:
         print(f"implc view: {name}, {what}\n{server.url}\n"
               "(Ctrl-C stops the server)", flush=True)
+        if serving is not None:
+            serving(server)
         if not args.no_browser:
             import webbrowser
             webbrowser.open(server.url)

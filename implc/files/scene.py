@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import runpy
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,10 +68,15 @@ def load(name_or_path: str) -> Scene:
         raise SceneError(f"no scene {name_or_path!r} (known: {', '.join(available())}; or a path to a .py "
                          "scene file)")
     regular_file(path, SceneError, "scene file")  # a folder, a FIFO or a device: refused before it is run
+    folder = str(path.resolve().parent)
+    sys.path.insert(0, folder)  # as ``python part.py`` would: the modules beside the scene import
     try:
         namespace = runpy.run_path(str(path))
     except Exception as exc:  # the scene's own error, reported with its file
         raise SceneError(f"scene {path} failed to load: {type(exc).__name__}: {exc}") from exc
+    finally:
+        if folder in sys.path:
+            sys.path.remove(folder)
     if "surface" not in namespace:
         raise SceneError(f"scene {path} defines no 'surface'")
     return Scene(name=path.stem, surface=_checked_surface(path, namespace["surface"]),

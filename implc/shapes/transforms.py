@@ -1,8 +1,9 @@
 """Transforms: a shape moved, scaled, rotated about any axis, mapped by a 4×4 matrix, mirrored or made
 symmetric, by substituting the coordinates (the shape at p is the original at the inverse image of p).
 
-Rigid motions (translate, rotate, mirror) keep an exact distance exact; scaling by a factor s multiplies it
-by s only where the factor is the same on every axis (``scale`` does not renormalise: F/s would).
+Rigid motions (translate, rotate, mirror) keep an exact distance exact; scaling by a factor s divides it by
+s (the distance to the scaled shape is s times F's) and keeps it a distance only where the factor is the
+same on every axis and F is multiplied by s again (``scale`` does not renormalise: s·F would).
 """
 
 from __future__ import annotations

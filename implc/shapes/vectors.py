@@ -89,7 +89,11 @@ _REBUILD = {sympy.Min: minimum, sympy.Max: maximum, sympy.Abs: absolute}
 
 
 def _build(func, args):
-    return _REBUILD[func](*args) if func in _REBUILD else func(*args)
+    if func in _REBUILD:
+        return _REBUILD[func](*args)
+    if func is sympy.Pow and not args[0].is_number:  # SymPy's Pow asks for the base's sign to simplify: slow
+        return sympy.Pow(*args, evaluate=False)
+    return func(*args)
 
 
 def substitute(expr: sympy.Expr, mapping: dict) -> sympy.Expr:

@@ -13,7 +13,9 @@ import base64
 import html
 import json
 import re
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from ..common.atomic_file import replacing, replacing_folder
 from .json_text import finite
@@ -89,17 +91,45 @@ def embed_html(chunks: LodChunks | MeshPayload, *, max_bytes: int = EMBED_BYTES,
 
 class NotebookView:
     """What ``Voxels.show()`` and ``Mesh.show()`` return: a notebook displays it as the viewer in an iframe
-    (its document inlined, so no server and no second process)."""
+    (its document inlined, so no server and no second process). :meth:`update` redraws it in place, in the
+    same output, with a new model: a new surface (voxelized as the first was), new voxels or a new mesh."""
 
     def __init__(self, chunks: LodChunks | MeshPayload, *, height: int = 480, max_bytes: int = EMBED_BYTES,
-                 budget: int = 1_000_000):
+                 budget: int = 1_000_000, remake: Callable[[Any], LodChunks | MeshPayload] | None = None):
+        """``remake``: what turns the model given to :meth:`update` into chunks (the voxelizer's, from
+        ``Voxels.show()``: a surface voxelized at the same depth)."""
+        self.height, self.max_bytes, self.budget, self.remake = height, max_bytes, budget, remake
         self.document = embed_html(chunks, max_bytes=max_bytes, budget=budget)
-        self.height = height
+        self._handle: Any = None
 
     def _repr_html_(self) -> str:
-        return (f'<iframe srcdoc="{html.escape(self.document, quote=True)}" '
+        return (f'<div class="implc-view"><iframe srcdoc="{html.escape(self.document, quote=True)}" '
                 f'style="width: 100%; height: {self.height}px; border: 0" '
-                f'sandbox="allow-scripts" title="implc viewer"></iframe>')
+                f'sandbox="allow-scripts" title="implc viewer"></iframe></div>')
+
+    def _ipython_display_(self):
+        """Shown in an output of its own that :meth:`update` can replace."""
+        from IPython.display import HTML, display
+        self._handle = display(HTML(self._repr_html_()), display_id=True)
+
+    def update(self, model) -> NotebookView:
+        """Show ``model`` instead, in the output this view was displayed in: a SymPy expression or a
+        compiled surface (for a view of voxels: voxelized at their depth and bounds), voxels or a mesh."""
+        if isinstance(model, (LodChunks, MeshPayload)):
+            chunks = model
+        elif hasattr(model, "faces"):
+            chunks = MeshPayload(model)
+        elif hasattr(model, "coords"):
+            chunks = lod_chunks(model)
+        elif self.remake is not None:
+            chunks = self.remake(model)
+        else:
+            raise TypeError(f"a mesh's view shows meshes: got {type(model).__name__}")
+        self.document = embed_html(chunks, max_bytes=self.max_bytes, budget=self.budget)
+        if self._handle is not None:
+            from IPython.display import HTML
+            self._handle.update(HTML(self._repr_html_()))
+        return self
 
     def save(self, path) -> Path:
         """Write the self-contained document to ``path`` (an .html any browser opens)."""

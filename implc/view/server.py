@@ -11,6 +11,12 @@ Its routes are the page's files, ``meta.json``, ``chunks/<level>-<i>-<j>-<k>.bin
 ``sections/<axis>-<index>-<level>.bin`` (for a mesh, ``mesh.bin`` instead), all served from memory: no file
 system path is ever read, anything else is 404 (a path with ``..`` or ``.`` segments, encoded or not,
 included), a missing or wrong token 403, a foreign Host 403.
+
+A live server (``implc view --watch``) is given new models while it serves (:meth:`ViewServer.replace`),
+each a new *generation*, and a status line (:meth:`ViewServer.report`: building, or the last error). Its
+page asks ``live.json?after=N``, answered as soon as the status has changed since revision N (or after
+:data:`LIVE_WAIT` seconds), and names the generation it draws in each chunk request (``?generation=G``): a
+request for an older one is answered 409, so a page never mixes two models.
 """
 
 from __future__ import annotations
@@ -21,10 +27,12 @@ import secrets
 import socket
 import sys
 import threading
+from dataclasses import dataclass
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from urllib.parse import unquote, urlsplit
+from urllib.parse import parse_qs, unquote, urlsplit
 
+from .json_text import json_bytes
 from .lod_chunks import LodChunks
 from .mesh_payload import MeshPayload
 from .page import ASSET_TYPES, asset
@@ -43,6 +51,18 @@ that, as a page fetching its chunks or many clients at once make, had each conne
 wait for TCP's retransmission of its SYN, a second or more."""
 CHUNK_PATH = re.compile(r"chunks/(\d{1,2})-(\d{1,7})-(\d{1,7})-(\d{1,7})\.bin")
 SECTION_PATH = re.compile(r"sections/(\d)-(\d{1,7})-(\d{1,2})\.bin")
+LIVE_WAIT = 25.0
+"""Seconds a ``live.json`` request waits for news before it is answered with the status unchanged."""
+
+
+@dataclass(frozen=True)
+class _Model:
+    """One generation of what is shown, swapped whole (a request reads one generation throughout)."""
+
+    chunks: LodChunks | MeshPayload
+    meta: bytes
+    mesh: bytes | None
+    generation: int
 
 
 class ViewServer:
@@ -50,11 +70,13 @@ class ViewServer:
     port from :data:`DEFAULT_PORT` on, ``0`` any free port; a given port that is taken raises OSError."""
 
     def __init__(self, chunks: LodChunks | MeshPayload, *, port: int | None = None, budget: int = 1_000_000,
-                 request_seconds: float = REQUEST_SECONDS):
-        self.chunks, self.token = chunks, secrets.token_urlsafe(24)
-        self.request_seconds = request_seconds
-        self.meta = chunks.meta_json(budget)
-        self.mesh = chunks.body() if isinstance(chunks, MeshPayload) else None
+                 request_seconds: float = REQUEST_SECONDS, live: bool = False):
+        self.token = secrets.token_urlsafe(24)
+        self.request_seconds, self.budget, self.live = request_seconds, budget, live
+        self._news = threading.Condition()
+        self._revision, self._building, self._closed = 0, False, False
+        self._error: str | None = None
+        self._model = self._made(chunks, 0)
         self.assets = {name: asset(name) for name in ASSET_TYPES}
         handler = type("Handler", (_Handler,), {"owner": self})
         candidates = [port] if port is not None else [DEFAULT_PORT + i for i in range(PORT_TRIES)] + [0]
@@ -69,6 +91,48 @@ class ViewServer:
         self.port = self.httpd.server_address[1]
         self.hosts = {f"127.0.0.1:{self.port}", f"localhost:{self.port}"}
         self._thread: threading.Thread | None = None
+
+    def _made(self, chunks: LodChunks | MeshPayload, generation: int) -> _Model:
+        meta = chunks.meta(self.budget)
+        if self.live:
+            meta.update(live=True, generation=generation)
+        body = chunks.body() if isinstance(chunks, MeshPayload) else None
+        return _Model(chunks, json_bytes(meta), body, generation)
+
+    @property
+    def chunks(self) -> LodChunks | MeshPayload:
+        return self._model.chunks
+
+    @property
+    def meta(self) -> bytes:
+        return self._model.meta
+
+    @property
+    def generation(self) -> int:
+        return self._model.generation
+
+    def replace(self, chunks: LodChunks | MeshPayload):
+        """Show ``chunks`` from now on (a new generation); clears the error and the building status."""
+        model = self._made(chunks, self._model.generation + 1)  # the payload made before the swap
+        with self._news:
+            self._model, self._error, self._building = model, None, False
+            self._revision += 1
+            self._news.notify_all()
+
+    def report(self, *, error: str | None = None, building: bool = False):
+        """The status the page shows: building a new model, or the error that stopped the last one (the
+        model shown stays)."""
+        with self._news:
+            self._error, self._building = error, building
+            self._revision += 1
+            self._news.notify_all()
+
+    def live_state(self, after: int, wait: float = LIVE_WAIT) -> bytes:
+        """The status as JSON once it is newer than revision ``after`` (or ``wait`` seconds have passed)."""
+        with self._news:
+            self._news.wait_for(lambda: self._revision > after or self._closed, timeout=wait)
+            return json_bytes({"revision": self._revision, "generation": self._model.generation,
+                               "error": self._error, "building": self._building})
 
     @property
     def url(self) -> str:
@@ -85,6 +149,9 @@ class ViewServer:
         return self
 
     def close(self):
+        with self._news:  # a page's waiting live.json is answered now
+            self._closed = True
+            self._news.notify_all()
         if self._thread is not None:
             self.httpd.shutdown()
             self._thread.join()
@@ -97,17 +164,25 @@ class ViewServer:
     def __exit__(self, *exc):
         self.close()
 
-    def resource(self, rest: str) -> tuple[bytes, str] | None:
-        """The body and content type of a route below the token, or None (404)."""
+    def resource(self, rest: str, query: dict | None = None) -> tuple[bytes, str] | HTTPStatus | None:
+        """The body and content type of a route below the token, None (404), or CONFLICT for a request that
+        names an older generation than the one shown."""
+        query = query or {}
         if rest in ("", "index.html"):
             return self.assets["index.html"], ASSET_TYPES["index.html"]
         if rest in ASSET_TYPES:
             return self.assets[rest], ASSET_TYPES[rest]
+        if rest == "live.json" and self.live:
+            after = query.get("after", ["-1"])[-1]
+            return self.live_state(int(after) if re.fullmatch(r"-?\d{1,12}", after) else -1), "application/json"
+        model = self._model
+        if "generation" in query and query["generation"][-1] != str(model.generation):
+            return HTTPStatus.CONFLICT
         if rest == "meta.json":
-            return self.meta, "application/json"
-        if isinstance(self.chunks, MeshPayload):
-            return (self.mesh, "application/octet-stream") if rest == "mesh.bin" and self.mesh is not None else None
-        for pattern, make in ((CHUNK_PATH, self.chunks.chunk), (SECTION_PATH, self.chunks.section)):
+            return model.meta, "application/json"
+        if isinstance(model.chunks, MeshPayload):
+            return (model.mesh, "application/octet-stream") if rest == "mesh.bin" and model.mesh is not None else None
+        for pattern, make in ((CHUNK_PATH, model.chunks.chunk), (SECTION_PATH, model.chunks.section)):
             match = pattern.fullmatch(rest)
             if match:
                 body = make(*map(int, match.groups()))
@@ -190,7 +265,8 @@ class _Handler(BaseHTTPRequestHandler):
             return self._send(HTTPStatus.FORBIDDEN, b"this server answers only to 127.0.0.1\n")
         if not self.path.startswith("/") or self.path.startswith("//"):  # absolute, authority or scheme-relative
             return self._send(HTTPStatus.BAD_REQUEST, b"origin-form request targets only\n")
-        path = unquote(urlsplit(self.path).path)
+        target = urlsplit(self.path)
+        path = unquote(target.path)
         segments = path.split("/")
         if any(s in (".", "..") for s in segments) or "\\" in path or "\x00" in path:
             return self._send(HTTPStatus.NOT_FOUND, b"not found\n")
@@ -202,9 +278,15 @@ class _Handler(BaseHTTPRequestHandler):
             self.send_header("Content-Length", "0")
             self.end_headers()
             return None
-        found = owner.resource("/".join(segments[2:]))
+        try:
+            query = parse_qs(target.query, max_num_fields=8)
+        except ValueError:
+            return self._send(HTTPStatus.BAD_REQUEST, b"too many query fields\n")
+        found = owner.resource("/".join(segments[2:]), query)
         if found is None:
             return self._send(HTTPStatus.NOT_FOUND, b"not found\n")
+        if found is HTTPStatus.CONFLICT:
+            return self._send(found, b"the model changed: this request names an older generation\n")
         return self._send(HTTPStatus.OK, *found)
 
     do_HEAD = do_GET

@@ -143,9 +143,16 @@ class Voxels:
     def show(self, *, height: int = 480, budget: int = 1_000_000, max_bytes: int | None = None) -> Any:
         """The interactive viewer for a notebook (Jupyter displays what this returns): the page and the
         coarsest levels of detail up to ``max_bytes`` (default 24 MiB) inlined in one document, so no
-        server or second process is involved. ``.save("x.html")`` writes it as a file."""
+        server or second process is involved. ``.save("x.html")`` writes it as a file; ``.update(surface)``
+        redraws it in place with a new surface voxelized at this depth (live editing in a notebook)."""
         from ..view.page import EMBED_BYTES, NotebookView, lod_chunks
-        return NotebookView(lod_chunks(self), height=height, budget=budget,
+
+        def remake(surface):  # a new surface, for .update(): voxelized as these voxels were
+            if not isinstance(surface, Surface):
+                from ..engines.surface import compile as compile_surface
+                surface = compile_surface(surface, self.bounds)
+            return lod_chunks(voxelize(surface, self.depth, solid=self.inside is not None))
+        return NotebookView(lod_chunks(self), height=height, budget=budget, remake=remake,
                             max_bytes=EMBED_BYTES if max_bytes is None else max_bytes)
 
     def _repr_html_(self) -> str:

@@ -8,7 +8,6 @@ the voxels it was made from, is cut away, and works served, exported and inlined
 import http.client
 import json
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -31,8 +30,6 @@ from implc.view.page import NotebookView, export, lod_chunks
 from implc.view.render import View, render_voxels
 from implc.view.server import ViewServer
 
-CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run"]
 BACKGROUND = np.array([20, 23, 28])  # Style().background, as the page clears to it
 
 
@@ -270,21 +267,6 @@ def test_a_taken_port_is_named(flower, capsys):
 
 
 # -- the page in a real browser ------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def browser():
-    executable = shutil.which("chromium") or shutil.which("chromium-browser")
-    if executable is None:
-        pytest.skip("no Chromium here (Debian: apt-get install chromium); the page cannot be tested in a browser")
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        pytest.skip("Playwright for Python is not installed (pip install playwright); the page cannot be driven")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
-
-
 def _open(browser, url, size=512):
     page = browser.new_page(viewport={"width": size, "height": size})
     errors = []
@@ -442,9 +424,9 @@ def test_the_notebook_view_is_self_contained(browser, flower, tmp_path):
     shown = voxels.show(height=400)
     assert isinstance(shown, NotebookView)
     html = shown._repr_html_()
-    assert html.startswith("<iframe srcdoc=") and "IMPLC_EMBED" in html
+    assert html.startswith('<div class="implc-view"><iframe srcdoc=') and "IMPLC_EMBED" in html
     assert "http" not in shown.document.split("<body>")[1]  # nothing fetched from anywhere
-    assert voxels._repr_html_().startswith("<iframe srcdoc=")
+    assert voxels._repr_html_().startswith('<div class="implc-view"><iframe srcdoc=')
     path = shown.save(tmp_path / "view.html")
     page, errors = _open(browser, path.as_uri())
     _settle(page)

@@ -20,7 +20,8 @@
   const gl = canvas.getContext("webgl2", { antialias: false, preserveDrawingBuffer: true });
   // timings (ms, performance.now()): when this script started, and its first frame
   const api = { ready: null, requests: 0, deepest: -1, stats: null, setView: null, camera: null, errors: [],
-                timings: { script: performance.now(), firstFrame: null } };
+                timings: { script: performance.now(), firstFrame: null, drawn: {} },
+                generation: 0, drawnGeneration: -1, status: null };
   window.implcViewer = api;
   if (!gl) {
     overlay.textContent = "this browser has no WebGL2";
@@ -166,18 +167,21 @@
       if (!(id in embed.chunks)) return null;
       return base64Bytes(embed.chunks[id]);
     }
-    const response = await fetch(`chunks/${id}.bin`);
-    if (response.status === 404) return null;
+    const response = await fetch(`chunks/${id}.bin${fresh()}`);
+    if (response.status === 404 || response.status === 409) return null;
     if (!response.ok) throw new Error(`chunk ${id}: HTTP ${response.status}`);
     return response.arrayBuffer();
   }
+
+  // a live page names the generation it draws: the server answers 409 for an older one
+  function fresh() { return meta && meta.live ? `?generation=${meta.generation}` : ""; }
 
   let requestedThisFrame = 0;
   function request(level, cell) {
     const id = chunkId(level, cell);
     if (chunks.has(id)) return chunks.get(id);
     requestedThisFrame++;
-    const node = { id, level, cell, state: "queued", count: 0, children: null, m: 0 };
+    const node = { id, level, cell, state: "queued", count: 0, children: null, m: 0, generation: api.generation };
     chunks.set(id, node);
     queue.push(node);
     pump();
@@ -192,7 +196,7 @@
       api.requests++;
       fetchBytes(node.id).then((bytes) => {
         inFlight--;
-        if (bytes === null) { node.state = "missing"; } else { upload(node, bytes); }
+        if (node.generation !== api.generation) { node.state = "stale"; } else if (bytes === null) { node.state = "missing"; } else { upload(node, bytes); }
         pump();
         changed();
       }).catch((error) => {
@@ -236,7 +240,7 @@
   }
 
   // ---- a mesh: mesh.bin, uploaded whole ----
-  const mesh = { state: "none", vao: null, vertices: 0, triangles: 0 };
+  const mesh = { state: "none", vao: null, vertices: 0, triangles: 0, buffers: [] };
 
   async function loadMesh() {
     mesh.state = "loading";
@@ -245,7 +249,7 @@
     try {
       let bytes;
       if (embed) { bytes = base64Bytes(embed.mesh); } else {
-        const response = await fetch("mesh.bin");
+        const response = await fetch(`mesh.bin${fresh()}`);
         if (!response.ok) throw new Error(`mesh.bin: HTTP ${response.status}`);
         bytes = await response.arrayBuffer();
       }
@@ -257,13 +261,16 @@
       const indices = new Uint32Array(bytes, MESH_HEADER + 24 * vertices, 3 * triangles);
       mesh.vao = gl.createVertexArray();
       gl.bindVertexArray(mesh.vao);
+      mesh.buffers = [];
       for (const [location, data] of [[0, positions], [1, normals]]) {
-        gl.bindBuffer(gl.ARRAY_BUFFER, gl.createBuffer());
+        mesh.buffers.push(gl.createBuffer());
+        gl.bindBuffer(gl.ARRAY_BUFFER, mesh.buffers[mesh.buffers.length - 1]);
         gl.bufferData(gl.ARRAY_BUFFER, data, gl.STATIC_DRAW);
         gl.enableVertexAttribArray(location);
         gl.vertexAttribPointer(location, 3, gl.FLOAT, false, 0, 0);
       }
-      gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, gl.createBuffer());
+      mesh.buffers.push(gl.createBuffer());
+      gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, mesh.buffers[mesh.buffers.length - 1]);
       gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, indices, gl.STATIC_DRAW);
       gl.bindVertexArray(null);
       Object.assign(mesh, { vertices, triangles, state: "ready" });
@@ -295,9 +302,10 @@
       const [lo, hi] = meta.bounds[plane.axis];
       gl.uniform1f(meshUniform.clipLimit, lo + plane.fraction * (hi - lo));
     }
-    if (mesh.state === "ready") {
-      gl.bindVertexArray(mesh.vao);
-      gl.drawElements(gl.TRIANGLES, 3 * mesh.triangles, gl.UNSIGNED_INT, 0);
+    const shown = mesh.state === "ready" ? mesh : retired.mesh;  // a live page: the last model until the new one
+    if (shown && shown.state === "ready") {
+      gl.bindVertexArray(shown.vao);
+      gl.drawElements(gl.TRIANGLES, 3 * shown.triangles, gl.UNSIGNED_INT, 0);
       gl.bindVertexArray(null);
     }
   }
@@ -320,8 +328,10 @@
     if (embed) { entry.state = "missing"; return entry; }  // an embedded page has no server to cut for it
     inFlight++;
     api.requests++;
-    fetch(`sections/${id}.bin`).then((r) => (r.ok ? r.arrayBuffer() : null)).then((bytes) => {
+    const generation = api.generation;
+    fetch(`sections/${id}.bin${fresh()}`).then((r) => (r.ok ? r.arrayBuffer() : null)).then((bytes) => {
       inFlight--;
+      if (generation !== api.generation) return;  // the model changed meanwhile: its sections were dropped
       if (bytes === null) { entry.state = "missing"; changed(); return; }
       const header = new Uint32Array(bytes, 0, 8), count = header[5];
       const uv = new Uint32Array(bytes, 32, 2 * count), cells = new Float32Array(3 * count);
@@ -411,6 +421,17 @@
   let pending = false, lastFrame = 0, lastDrawn = 0, lastChunks = 0, lastRequested = 0, firstDrawn = null;
   api.ready = new Promise((resolve) => { firstDrawn = resolve; });
 
+  let prefetch = [];  // a live page's new model: the chunks the camera needed of the last one
+  function drewGeneration() {  // the first frame of each model: when (performance.now()), for live editing's timing
+    if (api.drawnGeneration !== api.generation) {
+      api.timings.drawn[api.generation] = performance.now();
+      // its first frame is up: ask at once for what the last model's cut needed, not level by level
+      for (const node of prefetch) request(node.level, node.cell);
+      prefetch = [];
+    }
+    api.drawnGeneration = api.generation;
+  }
+
   function changed() {
     if (!pending && meta) {
       pending = true;
@@ -436,6 +457,7 @@
       meshOverlay();
       lastRequested = 0;
       lastChunks = mesh.state === "ready" ? 1 : 0;
+      if (mesh.state === "ready") { drewGeneration(); dropRetired(); }
       if (mesh.state === "ready" && firstDrawn) {
         api.timings.firstFrame = performance.now();
         firstDrawn();
@@ -444,7 +466,9 @@
       return;
     }
     requestedThisFrame = 0;
-    const chunksDrawn = selectCut(view, pixelsPerUnit, aspect);
+    let chunksDrawn = selectCut(view, pixelsPerUnit, aspect);
+    if (chunksDrawn.length) { dropRetired(); } else if (retired.chunks.length) { chunksDrawn = retired.chunks; }
+    lastCut = chunksDrawn;
     lastRequested = requestedThisFrame;
     gl.useProgram(program);
     cameraUniforms(uniform, view, aspect, near, far);
@@ -494,6 +518,7 @@
       `${meta.voxels.toLocaleString("en")} voxels in the model\n` +
       `points drawn ${points.toLocaleString("en")} of budget ${budget.toLocaleString("en")}, levels ${levels}, ` +
       `${chunksDrawn.length} chunks${plane.axis >= 0 ? ", cut " + "xyz"[plane.axis] : ""}\nframe ${lastFrame.toFixed(1)} ms`;
+    if (chunksDrawn.length && chunksDrawn !== retired.chunks) drewGeneration();
     if (chunksDrawn.length && firstDrawn) {
       api.timings.firstFrame = performance.now();
       firstDrawn();
@@ -577,18 +602,87 @@
   window.addEventListener("keydown", (e) => { if (e.key === "r" || e.key === "R") resetCamera(); });
   window.addEventListener("resize", changed);
 
+  // ---- a live page (implc view --watch): each new model replaces the last, the camera kept ----
+  const retired = { chunks: [], mesh: null, nodes: [], sections: [] };
+  let lastCut = [];
+  const statusLine = document.getElementById("status");
+
+  function dropRetired() {  // the new model is drawn: free the last one's buffers
+    for (const node of retired.nodes) {
+      if (node.vao) { gl.deleteVertexArray(node.vao); for (const b of node.buffers) gl.deleteBuffer(b); }
+    }
+    if (retired.mesh && retired.mesh.vao) {
+      gl.deleteVertexArray(retired.mesh.vao);
+      for (const b of retired.mesh.buffers) gl.deleteBuffer(b);
+    }
+    for (const entry of retired.sections) if (entry.vao) { gl.deleteBuffer(entry.buffer); gl.deleteVertexArray(entry.vao); }
+    Object.assign(retired, { chunks: [], mesh: null, nodes: [], sections: [] });
+  }
+
+  function frame(newMeta) {  // where the model lies: the bounds' centre and radius, the camera's home
+    const lo = newMeta.bounds.map((b) => b[0]), hi = newMeta.bounds.map((b) => b[1]);
+    center = lo.map((v, a) => (v + hi[a]) / 2);
+    radius = Math.hypot(...hi.map((v, a) => v - lo[a])) / 2;
+    const view = params.get("view") ? params.get("view").split(",").map(Number) : newMeta.view;
+    home = { azimuth: view[0], elevation: view[1], distance: radius / Math.tan(FOV / 2) * 1.05, target: center };
+  }
+
+  async function reload() {
+    const newMeta = await (await fetch("meta.json")).json();
+    dropRetired();
+    retired.chunks = lastCut.filter((node) => node.state === "ready");
+    retired.nodes = Array.from(chunks.values());
+    retired.sections = Array.from(sections.values());
+    if (mesh.state === "ready") retired.mesh = { ...mesh };
+    chunks.clear(); sections.clear(); queue.length = 0;
+    Object.assign(mesh, { state: "none", vao: null, vertices: 0, triangles: 0, buffers: [] });
+    meta = newMeta;
+    api.generation = meta.generation;
+    frame(meta);
+    if (meta.kind === "mesh") { loadMesh(); } else {
+      request(0, [0, 0, 0]);
+      prefetch = retired.chunks.filter((node) => node.level <= meta.max_chunk_level);
+    }
+    changed();
+  }
+
+  function showStatus(state) {
+    api.status = state;
+    statusLine.textContent = state.error ? state.error : state.building ? "building…" : "";
+    statusLine.className = state.error ? "error" : state.building ? "building" : "";
+  }
+
+  async function follow() {
+    let revision = -1;
+    for (;;) {
+      let state;
+      try {
+        const response = await fetch(`live.json?after=${revision}`);
+        if (!response.ok) throw new Error(`HTTP ${response.status}`);
+        state = await response.json();
+      } catch (error) {
+        showStatus({ error: "the implc view server is not answering (stopped?)", building: false });
+        await new Promise((resolve) => setTimeout(resolve, 1000));
+        continue;
+      }
+      revision = state.revision;
+      showStatus(state);
+      if (state.generation !== meta.generation) {
+        try { await reload(); } catch (error) { api.errors.push(String(error)); }
+      }
+    }
+  }
+
   // ---- start: the model's description, then its root chunk ----
   async function start() {
     meta = embed ? embed.meta : await (await fetch("meta.json")).json();
     budget = Number(params.get("budget")) || meta.budget || budget;
-    const lo = meta.bounds.map((b) => b[0]), hi = meta.bounds.map((b) => b[1]);
-    center = lo.map((v, a) => (v + hi[a]) / 2);
-    radius = Math.hypot(...hi.map((v, a) => v - lo[a])) / 2;
-    const view = params.get("view") ? params.get("view").split(",").map(Number) : meta.view;
-    home = { azimuth: view[0], elevation: view[1], distance: radius / Math.tan(FOV / 2) * 1.05, target: center };
+    api.generation = meta.generation || 0;
+    frame(meta);
     Object.assign(camera, JSON.parse(JSON.stringify(home)));
     document.title = `implc view${meta.name ? " · " + meta.name : ""}`;
     if (meta.kind === "mesh") { loadMesh(); changed(); } else { request(0, [0, 0, 0]); }
+    if (meta.live && !embed) follow();
   }
   start().catch((error) => { api.errors.push(String(error)); overlay.textContent = String(error); });
 })();
