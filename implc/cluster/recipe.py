@@ -64,7 +64,7 @@ def recipe_of(surface: Surface) -> SurfaceRecipe:
     if inlined:
         raise TravelError(f"this expression applies the .vm model(s) {', '.join(inlined)}, which cannot travel to a "
                           "cluster's workers inside a SymPy expression; voxelize the model itself there, or run here")
-    source = sympy.srepr(expr)
+    source = sympy.srepr(expr, order="none")  # the operands of sums and products in their stored order
     try:
         back = _read_srepr(source)
     except Exception as exc:  # noqa: BLE001 - any failure to read it back means it cannot travel
@@ -84,12 +84,19 @@ def software() -> str:
 
 
 def _read_srepr(source: str) -> Any:
-    """The expression ``sympy.srepr`` printed (SymPy's own classes only: the names are SymPy's namespace)."""
+    """The expression ``sympy.srepr(expr, order="none")`` printed (SymPy's own classes only: the names are
+    SymPy's namespace), rebuilt node for node: nothing evaluated again, Min and Max with their operands as
+    printed (SymPy's evaluation would prune and sort a part's operands, slowly, into another expression)."""
     import sympy
     from sympy.functions.elementary.piecewise import ExprCondPair
+
+    from ..compiler.symbols import min_max_as_given
     namespace: dict[str, Any] = {name: getattr(sympy, name) for name in dir(sympy) if not name.startswith("_")}
     namespace["ExprCondPair"] = ExprCondPair  # printed by srepr inside Piecewise, not exported by sympy
-    return eval(source, {"__builtins__": {}}, namespace)  # noqa: S307 - text implc printed itself
+    namespace["Min"] = lambda *args: min_max_as_given(sympy.Min, *args)
+    namespace["Max"] = lambda *args: min_max_as_given(sympy.Max, *args)
+    with sympy.evaluate(False):  # every node as printed, in its stored order: the same expression, and fast
+        return eval(source, {"__builtins__": {}}, namespace)  # noqa: S307 - text implc printed itself
 
 
 _BUILT: dict[str, Surface] = {}

@@ -14,6 +14,15 @@ phi = sympy.Symbol("phi", real=True)
 NAMES = ("x", "y", "z", "r", "theta", "phi")
 
 
+def min_max_as_given(kind, *args):
+    """A ``sympy.Min`` or ``sympy.Max`` node of ``args`` in their order, built without SymPy's evaluation
+    (which compares every pair of operands) and without its canonical sort (which counts each operand's
+    nodes as a tree: exponential in a part whose operands share subexpressions)."""
+    node = sympy.Expr.__new__(kind, *args)
+    node._argset = frozenset(args)
+    return node
+
+
 def symbols_in(expr) -> set:
     """The symbols of ``expr``, each shared subexpression visited once (SymPy's ``free_symbols`` walks the
     expression as a tree: a part whose operands are shared, as smooth unions share theirs, doubles the walk

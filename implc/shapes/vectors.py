@@ -62,11 +62,8 @@ def _extremum(kind, args) -> sympy.Expr:
         return unique[0]
     if all(a.is_number for a in unique):
         return kind(*unique)  # numbers only: SymPy's comparison is cheap and exact
-    # SymPy's constructor sorts its arguments even unevaluated, by counting the nodes of each as a tree: a
-    # smooth union shares its operands, and that count doubles with each one. The node keeps our order.
-    node = sympy.Expr.__new__(kind, *unique)
-    node._argset = frozenset(unique)
-    return node
+    from ..compiler.symbols import min_max_as_given
+    return min_max_as_given(kind, *unique)
 
 
 def minimum(*args: sympy.Expr) -> sympy.Expr:

@@ -173,8 +173,12 @@ def test_a_local_cluster_is_started_and_stopped(tmp_path, capsys):
 def test_surfaces_travel_as_text():
     """A SymPy surface as its srepr text, a .vm model as its text: rebuilt, they evaluate the same; a model
     inlined into a SymPy expression cannot travel and says so."""
-    for name in ("paper_blobs", "csg_part", "paper_sin4_sin8"):
-        sc = scene.load(name)
+    from implc import shapes
+    part = shapes.difference(shapes.smooth_union(0.05, shapes.rounded_box((0.6, 0.4, 0.1), 0.02),
+                                                 shapes.array_polar(shapes.sphere(0.1, (0.3, 0, 0.1)), 6)),
+                             shapes.capped_cylinder(0.05, 1))  # built as given: Min/Max unsorted, unpruned
+    for sc in [scene.load(name) for name in ("paper_blobs", "csg_part", "paper_sin4_sin8")] + [
+            scene.Scene("part", part, ((-1, 1),) * 3)]:
         surface = implc.compile(sc.surface, sc.bounds)
         recipe = recipe_of(surface)
         rebuilt = build(recipe)
