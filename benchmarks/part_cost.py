@@ -5,7 +5,8 @@ The part is built from ``implc.shapes`` with ``--operations`` library calls (a r
 with a row of ribs and a polar array of bosses, holes drilled through): each call counted once, however
 many SymPy nodes it makes. Both are compiled once (not timed), then voxelized at ``--depth`` in turns,
 ``--repeats`` times; the table gives the median CPU seconds (all threads) and wall seconds, the voxels
-(cells the surface may cross) and the CPU microseconds per voxel. Example::
+(cells the surface may cross) and the CPU microseconds per voxel, beside a sphere on each engine and the
+part's plate (a rounded box: its most expensive primitive) alone. Example::
 
     python benchmarks/part_cost.py --depth 9 --repeats 5
 """
@@ -63,7 +64,10 @@ def main():
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     expr, calls = part(args.operations)
-    cases = {"sphere": implc.compile(shapes.sphere(0.8)), f"part of {calls} operations": implc.compile(expr)}
+    cases = {"sphere": implc.compile(shapes.sphere(0.8)),
+             "sphere, tape engine": implc.compile(shapes.sphere(0.8), engine="tape"),
+             "its plate alone": implc.compile(shapes.rounded_box((0.8, 0.5, 0.1), 0.04)),
+             f"part of {calls} operations": implc.compile(expr)}
     results: dict = {name: [] for name in cases}
     for name, surface in cases.items():
         timed(surface, max(args.depth - 3, 3))  # warm: kernels and engines loaded
@@ -71,8 +75,9 @@ def main():
         for name, surface in cases.items():
             results[name].append(timed(surface, args.depth))
     print(f"voxelization at {1 << args.depth}³, medians of {args.repeats} (interleaved)")
-    print(f"| {'surface':<24} | {'tape':>5} | {'voxels':>10} | {'CPU s':>7} | {'wall s':>7} | {'CPU µs/voxel':>12} |")
-    print(f"|{'-' * 26}|{'-' * 7}|{'-' * 12}|{'-' * 9}|{'-' * 9}|{'-' * 14}|")
+    print(f"| {'surface':<24} | {'tape':>5} | {'voxels':>10} | {'CPU s':>7} | {'wall s':>7} | {'CPU µs/voxel':>12} "
+          f"| {'engine':>6} |")
+    print(f"|{'-' * 26}|{'-' * 7}|{'-' * 12}|{'-' * 9}|{'-' * 9}|{'-' * 14}|{'-' * 8}|")
     per_voxel = {}
     for name, runs in results.items():
         cpu = statistics.median(r[0] for r in runs)
@@ -80,9 +85,10 @@ def main():
         count = runs[0][2]
         per_voxel[name] = cpu / count * 1e6
         print(f"| {name:<24} | {len(cases[name].tape):>5} | {count:>10,} | {cpu:7.3f} | {wall:7.3f} | "
-              f"{per_voxel[name]:12.3f} |")
-    sphere, modelled = per_voxel.values()
-    print(f"the part costs {modelled / sphere:.2f}× the sphere per voxel")
+              f"{per_voxel[name]:12.3f} | {cases[name].engine:>6} |")
+    sphere, tape_sphere, plate, modelled = per_voxel.values()
+    print(f"per voxel, the part costs {modelled / sphere:.2f}× the sphere (engines chosen as compile does), "
+          f"{modelled / tape_sphere:.2f}× the sphere on the tape engine, {modelled / plate:.2f}× its plate alone")
 
 
 if __name__ == "__main__":
