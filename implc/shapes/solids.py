@@ -21,6 +21,13 @@ def _squared_distance(center):
     return (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2
 
 
+def _size(v: Number, name: str) -> sympy.Expr:
+    """A size as given: a number must be above 0 (an expression, a size that varies over space, is the
+    user's to keep positive)."""
+    value = sympy.sympify(v)
+    return positive(value, name) if value.is_number else value
+
+
 def sphere(radius: Number = 1, center: Vec = (0, 0, 0)) -> sympy.Expr:
     """Signed-distance sphere: ‖p − c‖ − radius.
 
@@ -28,7 +35,7 @@ def sphere(radius: Number = 1, center: Vec = (0, 0, 0)) -> sympy.Expr:
     >>> round(float(sphere(1, (1, 0, 0)).subs({x: 3, y: 0, z: 0})), 6)
     1.0
     """
-    return sympy.sqrt(_squared_distance(center)) - radius
+    return sympy.sqrt(_squared_distance(center)) - _size(radius, "radius")
 
 
 def box(half_sizes: Vec = (1, 1, 1), center: Vec = (0, 0, 0)) -> sympy.Expr:
@@ -52,7 +59,7 @@ def torus(major: Number = 1, minor: Number = sympy.Rational(1, 4), center: Vec =
     """
     cx, cy, cz = _vec(center, "center")
     ring = sympy.sqrt((x - cx) ** 2 + (y - cy) ** 2) - major
-    return ring**2 + (z - cz) ** 2 - minor**2
+    return ring**2 + (z - cz) ** 2 - _size(minor, "minor") ** 2
 
 
 def cylinder(radius: Number = 1, height: Number = 2, center: Vec = (0, 0, 0)) -> sympy.Expr:
@@ -63,7 +70,8 @@ def cylinder(radius: Number = 1, height: Number = 2, center: Vec = (0, 0, 0)) ->
     2.0
     """
     cx, cy, cz = _vec(center, "center")
-    return maximum(sympy.sqrt((x - cx) ** 2 + (y - cy) ** 2) - radius, absolute(z - cz) - height / sympy.S(2))
+    return maximum(sympy.sqrt((x - cx) ** 2 + (y - cy) ** 2) - _size(radius, "radius"),
+                   absolute(z - cz) - _size(height, "height") / sympy.S(2))
 
 
 def blend(squared_distance: sympy.Expr, radius: Number) -> sympy.Expr:

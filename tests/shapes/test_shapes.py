@@ -84,9 +84,20 @@ def test_substitution_equals_sympys_and_survives_a_deep_part():
     p = rng.uniform(-1, 1, (3, 500))
     np.testing.assert_array_equal(ours(*p), theirs(*p))
     chain = shapes.sphere(1)
-    for k in range(2000):  # 2000 smooth unions deep, each sharing its operands
-        chain = shapes.smooth_union(0.01, chain, shapes.sphere(0.1, (k / 2000, 0, 0)))
+    for k in range(500):  # 500 smooth unions deep (each node several levels), each sharing its operands
+        chain = shapes.smooth_union(0.01, chain, shapes.sphere(0.1, (k / 500, 0, 0)))
     moved = shapes.translate(chain, (0, 0, 1))
     p = rng.uniform(-1, 1, (8, 3))
     np.testing.assert_allclose(implc.compile(moved, ((-1, 1), (-1, 1), (0, 2))).eval(p + [0, 0, 1]),
                                implc.compile(chain).eval(p), rtol=0, atol=1e-12)
+
+
+def test_a_size_that_is_a_number_must_be_above_zero():
+    """A negative or zero radius is a mistake (an empty solid), refused in one line; a size that varies over
+    space (an expression) is the user's to keep positive."""
+    for build, name in ((lambda: shapes.sphere(-1), "radius"), (lambda: shapes.torus(1, 0), "minor"),
+                        (lambda: shapes.cylinder(0.5, -2), "height"), (lambda: shapes.cylinder(0, 1), "radius")):
+        with pytest.raises(ValueError, match=f"{name} must be above 0"):
+            build()
+    tapered = shapes.sphere(sympy.Rational(1, 2) + z / 10)
+    assert at(tapered, 0, 0, 0) == -0.5 and at(tapered, 0, 0, 1) == pytest.approx(1 - 0.6)
