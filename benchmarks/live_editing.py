@@ -25,8 +25,6 @@ import tempfile
 import time
 from pathlib import Path
 
-CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
-
 PART = '''"""A heat sink: a rounded plate, {fins} polar fins and a 4 x 4 grid of bosses joined smoothly, 12 holes."""
 import sympy
 from implc import shapes as s
@@ -57,6 +55,7 @@ def until(page, condition: str, timeout: float = 120.0, every: float = 0.005):
 
 def measure(args) -> list[tuple[float, float]]:
     from playwright.sync_api import sync_playwright
+    from suite import CHROMIUM_ARGS  # this folder's: the viewer's benchmarks launch Chromium alike
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         sys.exit("no Chromium here (Debian: apt-get install chromium)")

@@ -26,6 +26,10 @@ from implc.common.threads import default_workers
 from implc.engines.surface import ALL_TERMS
 from implc.files import scene
 
+CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                 "--disable-background-networking", "--disable-component-update", "--no-first-run"]
+"""Headless Chromium drawing WebGL2 in software (SwiftShader), as the viewer's benchmarks run it."""
+
 PAPER_SCENES = ("paper_blobs", "paper_sin4_sin8", "paper_sin3_sin4")
 PAPER_TABLE1 = {  # seconds on the SGI Challenge, 1..7 slaves (Stolte & Kaufman, Table 1)
     "paper_blobs": [88, 45, 34, 26, 21, 20, 14],
@@ -641,9 +645,7 @@ def viewer(args, out):
                    "settled_s": None, "points": None}
             if chromium and sync_playwright:
                 with sync_playwright() as p, ViewServer(chunks, port=0).start() as server:
-                    browser = p.chromium.launch(executable_path=chromium, args=[
-                        "--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                        "--disable-background-networking", "--disable-component-update", "--no-first-run"])
+                    browser = p.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
                     page = browser.new_page(viewport={"width": 1024, "height": 768})
                     t0 = time.perf_counter()
                     page.goto(server.url)

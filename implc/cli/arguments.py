@@ -102,13 +102,13 @@ def surface_from_args(args):
     if Path(args.scene).suffix.lower() == ".vm":  # a model from fidget or MPR
         from ..compiler.vm import load_vm
         model = load_vm(args.scene)
-        return model.name, compile_surface(model, _bounds(args.bounds) if args.bounds else None), None
+        return model.name, compile_surface(model, given_bounds(args)), None
     if Path(args.scene).suffix.lower() in (".npz", ".ply", ".npy"):
         raise UsageError(f"{args.scene} is a voxel file: 'implc {args.command}' takes a scene or --expr"
                          + (" (render reads .npz files)" if args.command == "voxelize" else ""))
     from ..files.scene import load as load_scene
     sc = load_scene(args.scene)
-    bounds = _bounds(args.bounds) if args.bounds else sc.bounds
+    bounds = given_bounds(args) or sc.bounds
     return sc.name, compile_surface(sc.surface, bounds), sc
 
 

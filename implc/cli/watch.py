@@ -78,7 +78,8 @@ class BuildError(Exception):
 def _one_line(exc: BaseException, path: Path) -> str:
     """The exception as one line, with the scene file's last line in its traceback (or the modules' beside
     it)."""
-    cause = exc.__cause__ if exc.__cause__ is not None and "failed to load" in str(exc) else exc
+    from ..errors import SceneError
+    cause = exc.__cause__ if isinstance(exc, SceneError) and exc.__cause__ is not None else exc  # the script's own
     where = ""
     folder = path.resolve().parent
     if isinstance(cause, SyntaxError) and cause.filename:
@@ -113,19 +114,24 @@ def _build(job: Job) -> Build:
         arrays = {"vertices": mesh.vertices, "faces": mesh.faces, "normals": mesh.normals}
     else:
         arrays = {"coords": voxels.coords, "normals": voxels.normals}
-    beside = {str(Path(f).resolve()) for f in (getattr(m, "__file__", None) for m in list(sys.modules.values()))
-              if f and Path(f).resolve().parent == folder}
-    files = sorted(beside | {str(Path(job.path).resolve())})
+    files = sorted(set(_modules_beside(folder).values()) | {str(Path(job.path).resolve())})
     return Build(scene.name, depth, surface.bounds, scene.view, arrays, time.perf_counter() - started, files)
+
+
+def _modules_beside(folder: Path) -> dict[str, str]:
+    """The modules imported from ``folder`` (the scene's): name → resolved file."""
+    found = {}
+    for name, module in list(sys.modules.items()):
+        where = getattr(module, "__file__", None)
+        if where and Path(where).resolve().parent == folder:
+            found[name] = str(Path(where).resolve())
+    return found
 
 
 def _forget_beside(path: str) -> None:
     """Drop the modules imported from the scene's folder, so the next build imports them as saved."""
-    folder = Path(path).resolve().parent
-    for name, module in list(sys.modules.items()):
-        where = getattr(module, "__file__", None)
-        if where and Path(where).resolve().parent == folder:
-            del sys.modules[name]
+    for name in _modules_beside(Path(path).resolve().parent):
+        del sys.modules[name]
 
 
 def _child(connection) -> None:

@@ -44,9 +44,12 @@ def difference(a: sympy.Expr, *cut: sympy.Expr) -> sympy.Expr:
     return maximum(a, *[-c for c in cut])
 
 
-def _pairwise(join, shapes):
+def _pairwise(join, shapes, name: str):
     """``shapes`` joined two by two, then the results two by two, to one: each join uses both operands
-    twice, so a balanced tree keeps the expression's depth logarithmic where a chain would be linear."""
+    twice, so a balanced tree keeps the expression's depth logarithmic where a chain would be linear.
+    ``name``: the operation's, for the error where there is no shape."""
+    if not shapes:
+        raise ValueError(f"{name} needs at least one shape")
     items = list(shapes)
     while len(items) > 1:
         items = [join(items[i], items[i + 1]) if i + 1 < len(items) else items[i] for i in range(0, len(items), 2)]
@@ -65,9 +68,7 @@ def smooth_union(radius: Number, *shapes: sympy.Expr) -> sympy.Expr:
     -1.25
     """
     k = positive(radius, "radius")
-    if not shapes:
-        raise ValueError("smooth_union needs at least one shape")
-    return _pairwise(lambda a, b: _smooth_min(a, b, k), shapes)
+    return _pairwise(lambda a, b: _smooth_min(a, b, k), shapes, "smooth_union")
 
 
 def smooth_intersection(radius: Number, *shapes: sympy.Expr) -> sympy.Expr:
@@ -99,9 +100,7 @@ def chamfer_union(size: Number, *shapes: sympy.Expr) -> sympy.Expr:
     -0.353553
     """
     c = positive(size, "size")
-    if not shapes:
-        raise ValueError("chamfer_union needs at least one shape")
-    return _pairwise(lambda a, b: minimum(a, b, (a + b - c) / sympy.sqrt(2)), shapes)
+    return _pairwise(lambda a, b: minimum(a, b, (a + b - c) / sympy.sqrt(2)), shapes, "chamfer_union")
 
 
 def chamfer_intersection(size: Number, *shapes: sympy.Expr) -> sympy.Expr:

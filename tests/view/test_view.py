@@ -30,6 +30,8 @@ from implc.view.page import NotebookView, export, lod_chunks
 from implc.view.render import View, render_voxels
 from implc.view.server import ViewServer
 
+from ..support.browser import until
+
 BACKGROUND = np.array([20, 23, 28])  # Style().background, as the page clears to it
 
 
@@ -278,12 +280,8 @@ def _open(browser, url, size=512):
 
 
 def _settle(page, timeout=60.0):
-    """Wait until the page has drawn what it wants and fetches nothing more (polled: the server's CSP
-    forbids the string evaluation Playwright's wait_for_function uses)."""
-    deadline = time.monotonic() + timeout
-    while not page.evaluate("window.implcViewer.stats().settled"):
-        assert time.monotonic() < deadline, page.evaluate("window.implcViewer.stats()")
-        time.sleep(0.05)
+    """Wait until the page has drawn what it wants and fetches nothing more."""
+    until(page, "window.implcViewer.stats().settled", timeout)
 
 
 def _pixels(page):
