@@ -35,15 +35,21 @@ def cmd_scenes(args) -> int:
 
 def cmd_voxelize(args) -> int:
     from ..files import voxel_files
-    out = Path(args.output)
-    if args.slices:
+    from ..files.store_place import is_url, place_of
+    remote = is_url(args.output)
+    out: typing.Any = args.output if remote else Path(args.output)
+    if remote and (args.slices or voxel_files.suffix_of(out) != ".zarr"):
+        raise UsageError(f"{out}: an object store's URL takes a .zarr store (write other outputs to a file)")
+    if remote:
+        place_of(out)  # an unknown protocol, a missing library or credentials in the URL: refused before any work
+    elif args.slices:
         check_folder_writable(out, "slices")
     else:
         check_writable(out, voxel_files.SUFFIXES)
     check_surface_options(args)
     name, surface, sc = surface_from_args(args)
     depth = args.depth if args.depth is not None else (sc.depth if sc else 9)
-    zarr_out = out.suffix.lower() == ".zarr" and not args.slices
+    zarr_out = voxel_files.suffix_of(out) == ".zarr" and not args.slices
     if args.resume and not zarr_out:
         raise UsageError("--resume finishes an interrupted .zarr run; other outputs are written whole or not at all")
     if args.cluster is not None:
@@ -54,15 +60,15 @@ def cmd_voxelize(args) -> int:
         from ..files.zarr_writer import write_zarr
         t0 = time.perf_counter()
         result: typing.Any
-        partial = out.with_name(out.name + ".partial")
-        refusable = partial.exists()  # a refusal to start over it is not a run that stopped
+        kept = place_of(out if remote else out.with_name(out.name + ".partial"))
+        refusable = kept.exists()  # a refusal to start over it is not a run that stopped
         try:
             result = write_zarr(surface, depth, out, solid=args.solid, workers=args.workers, cluster=args.cluster,
                                 resume=args.resume, progress=not args.quiet and sys.stderr.isatty(), say=say,
                                 **TIGHTNESS[args.tightness])
         except BaseException as exc:
-            if partial.is_dir() and not (refusable and isinstance(exc, ValueError)):
-                print(f"implc: the finished tasks are kept in {partial}: the same command with --resume "
+            if kept.exists() and not (refusable and isinstance(exc, ValueError)):
+                print(f"implc: the finished tasks are kept in {kept.url}: the same command with --resume "
                       "finishes the store", file=sys.stderr)
             raise
         count, inside, seconds = result.voxels, result.inside_octants, time.perf_counter() - t0

@@ -41,7 +41,8 @@ def build_parser():
     surface_args(v)
     v.add_argument("-o", "--output", required=True,
                    help="output: .npz, .ply (point cloud), .npy (dense), .vdb (OpenVDB occupancy and normals grids) "
-                        "or .zarr (a Zarr v3 store: occupancy, levels of detail, voxels with normals; in shards)")
+                        "or .zarr (a Zarr v3 store: occupancy, levels of detail, voxels with normals; in shards), "
+                        "also at an object store's URL (s3://bucket/run.zarr; credentials from the environment)")
     v.add_argument("--compress", action="store_true", help="deflate the .npz (smaller, several times slower)")
     v.add_argument("--solid", action="store_true",
                    help="also classify the inside (whole octants where F < 0): volume bounds, solid occupancy")
@@ -49,10 +50,11 @@ def build_parser():
                    help="write one 1-bit image per z layer into the folder -o names (with --solid: the solid)")
     v.add_argument("--cluster", metavar="ADDRESS",
                    help="run the tasks on a Dask cluster: tcp://host:port (a running scheduler) or local:N (N worker "
-                        "processes started here); .zarr is written by the workers (a shared folder), other outputs "
-                        "are gathered here first")
+                        "processes started here); .zarr is written by the workers (to a shared folder or an object "
+                        "store's URL), other outputs are gathered here first")
     v.add_argument("--resume", action="store_true",
-                   help="finish the interrupted .zarr run kept in OUT.partial (same surface and options)")
+                   help="finish the interrupted .zarr run kept in OUT.partial, or under the URL (same surface "
+                        "and options)")
     v.set_defaults(run=cmd_voxelize)
 
     m = sub.add_parser("mesh", help="mesh a scene, formula or .vm model: a closed, oriented, intersection-free "

@@ -159,8 +159,10 @@ def cmd_info(args) -> int:
         print(f"model    {args.file}: {model.instructions} instructions, {len(model.tape)} after sharing")
         print(f"bounds   {model.bounds} (suggested by its --scale, or [-1, 1]³)")
         return 0
+    from ..files.store_place import is_url
     folder = Path(args.file)
-    if folder.is_dir() and (folder.suffix.lower() == ".zarr" or (folder / "zarr.json").is_file()):  # NAME.partial too
+    store = folder.is_dir() and (folder.suffix.lower() == ".zarr" or (folder / "zarr.json").is_file())  # .partial too
+    if is_url(args.file) or store:
         from ..files.zarr_store import describe_zarr
         try:
             lines = describe_zarr(args.file)

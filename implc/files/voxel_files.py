@@ -25,6 +25,7 @@ from ..engines.morton import morton_codes
 from ..errors import VoxelFileError
 from ..native.abi import MAX_DEPTH
 from ..voxelizer.voxelize import Voxels, available_memory
+from .store_place import is_url, target_of
 from .vdb import describe_vdb, save_vdb
 
 FORMAT_VERSION = 1
@@ -38,7 +39,7 @@ def suffix_of(path: str | os.PathLike[str]) -> str:
     return Path(path).suffix.lower()
 
 
-def save(voxels: Voxels, path: str | os.PathLike[str], *, compress: bool = False) -> Path:
+def save(voxels: Voxels, path: str | os.PathLike[str], *, compress: bool = False) -> Path | str:
     """Write ``voxels`` in the format named by the extension: .npz, .ply, .npy (dense occupancy), .vdb
     (OpenVDB occupancy and normals grids: :mod:`implc.files.vdb`) or .zarr (a Zarr v3 array of the
     occupancy, written shard by shard: :mod:`implc.files.zarr_store`).
@@ -46,13 +47,14 @@ def save(voxels: Voxels, path: str | os.PathLike[str], *, compress: bool = False
     ``compress``: deflate the .npz (about 3x smaller for Morton-ordered voxels, and several times slower).
     """
     from .zarr_writer import save_zarr
-    path = Path(path)
+    if is_url(path) and suffix_of(path) != ".zarr":
+        raise ValueError(f"{path}: only a .zarr store is written to an object store (write other formats to a file)")
+    path = target_of(path)
     writers = {".npz": lambda v, p: save_npz(v, p, compress=compress), ".ply": save_ply, ".npy": save_dense,
                ".vdb": save_vdb, ".zarr": save_zarr}
     suffix = suffix_of(path)
     if suffix not in writers:
-        raise ValueError(f"unknown output format {path.suffix or '(none)'!r} for {path}: use "
-                         f"{', '.join(SUFFIXES)}")
+        raise ValueError(f"unknown output format {suffix or '(none)'!r} for {path}: use {', '.join(SUFFIXES)}")
     writers[suffix](voxels, path)
     return path
 
@@ -96,7 +98,7 @@ def _check_readable(path: Path) -> str:
 def load(path: str | os.PathLike[str], region: Any = None) -> Voxels:
     """The voxels of an ``.npz`` (:func:`load_npz`) or of a Zarr store (``.zarr``: all, or ``region``,
     cell ranges ((i0, i1), (j0, j1), (k0, k1)): :func:`implc.files.zarr_store.load_zarr`)."""
-    if Path(path).is_dir():
+    if is_url(path) or Path(path).is_dir():
         from .zarr_store import load_zarr
         voxels = load_zarr(path, region)  # checked as an .npz is: a damaged store must not reach native code
         coords, normals, depth, bounds = _validated(path, voxels.coords, voxels.normals, np.asarray(voxels.depth),

@@ -57,6 +57,7 @@ from ..voxelizer.voxelize import (
     paint_cubes,
     volume_bounds,
 )
+from .store_place import is_url, place_of
 
 FORMAT = 2
 """The store's layout version (1: implc 0.2's single occupancy array)."""
@@ -200,14 +201,15 @@ def compressors() -> Any:
     return ZstdCodec(level=0, checksum=True)
 
 
-def create_store(folder: Path, layout: Layout, plan: dict) -> Any:
-    """The group with its occupancy and level-of-detail arrays (rows come once their lengths are known)."""
+def create_store(url: str, layout: Layout, plan: dict) -> Any:
+    """The group with its occupancy and level-of-detail arrays (rows come once their lengths are known), at
+    ``url`` (a folder's path, or an object store's URL)."""
     import zarr
     n = 1 << layout.depth
     about: dict[str, Any] = {"format": FORMAT, "depth": layout.depth, "bounds": [list(b) for b in layout.bounds],
                              "solid": layout.solid, "layout": layout.describe(), "plan": plan,
                              "index": "[i, j, k]: cell (i, j, k) of the grid"}
-    group = zarr.open_group(str(folder), mode="w", zarr_format=3, attributes={"implc": about})
+    group = zarr.open_group(url, mode="w", zarr_format=3, attributes={"implc": about})
     group.create_array("occupancy", shape=(n, n, n), chunks=(layout.chunk,) * 3, shards=(layout.brick,) * 3,
                        dtype="bool", fill_value=False, compressors=compressors())
     for level in range(1, layout.depth):
@@ -267,11 +269,16 @@ def _scan(path) -> None:
 
 
 def _open(path: str | os.PathLike[str]) -> tuple[Any, dict]:
-    """The store's group and its checked ``implc`` attributes; :class:`StoreError` otherwise."""
+    """The store's group and its checked ``implc`` attributes; :class:`StoreError` otherwise. A folder is
+    scanned first (:func:`_scan`); an object store's objects are plain bytes, read by range."""
     import zarr
-    _scan(path)
+    url = place_of(path).url
+    if not is_url(path):
+        _scan(url)
     try:
-        group = zarr.open_group(str(path), mode="r")
+        group = zarr.open_group(url, mode="r")
+    except StoreError:
+        raise
     except Exception as exc:  # zarr raises several kinds for a folder that is not a group
         raise StoreError(f"cannot read {path} as a Zarr store: {type(exc).__name__}: {printable(str(exc), 200)}") \
             from None

@@ -2,8 +2,10 @@
 run here on a pool of threads or on a Dask cluster, each task's voxels written straight into the shards of
 its octant, and the manifest written last (the commit point: a reader refuses a store without it).
 
-``write_zarr`` voxelizes into a store; ``save_zarr`` writes a :class:`implc.Voxels` the same way. A run that
-stops keeps its finished tasks' parts in ``OUT.partial`` (each with its checksum), and ``resume=True``
+``write_zarr`` voxelizes into a store; ``save_zarr`` writes a :class:`implc.Voxels` the same way; either
+writes to a local folder or to an object store's URL (:mod:`implc.files.store_place`). A run that stops
+keeps its finished tasks' parts (each with its checksum): in ``OUT.partial`` for a folder, under the URL
+itself for an object store (whose store has no manifest until the run completes), and ``resume=True``
 finishes it with the same surface and options.
 """
 
@@ -12,13 +14,14 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
+import io
 import json
 import math
 import os
 import re
-import shutil
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -40,7 +43,6 @@ from ..cluster.tasks import (
 )
 from ..common.atomic_file import replacing_folder, resumable_folder
 from ..common.threads import check_workers, default_workers
-from ..common.untrusted import regular_file
 from ..engines.morton import morton_codes
 from ..engines.walk import SubdivisionStats
 from ..errors import StoreError
@@ -52,6 +54,7 @@ from ..voxelizer.voxelize import (
     inside_voxel_count,
     volume_bounds,
 )
+from .store_place import FolderPlace, ObjectPlace, StorePlace, place_of, shown, target_of
 from .zarr_store import (
     STORE_KIND,
     Layout,
@@ -77,7 +80,7 @@ class _FullShards:
     def __init__(self):
         self.encoded: dict[tuple, bytes] = {}
 
-    def write(self, array, origin: np.ndarray, folder: Path) -> None:
+    def write(self, array, origin: np.ndarray, place: StorePlace) -> None:
         import zarr
         shard, chunk = array.shards[0], array.chunks[0]
         if (shard, chunk) not in self.encoded:
@@ -88,11 +91,7 @@ class _FullShards:
                 template[...] = True
                 self.encoded[(shard, chunk)] = (Path(scratch) / "c" / "0" / "0" / "0").read_bytes()
         index = (origin // shard).astype(int)
-        key = folder / array.path / "c" / str(index[0]) / str(index[1]) / str(index[2])
-        key.parent.mkdir(parents=True, exist_ok=True)
-        tmp = key.with_name(f".{key.name}.{os.getpid()}.tmp")
-        tmp.write_bytes(self.encoded[(shard, chunk)])
-        os.replace(tmp, key)
+        place.write(f"{array.path}/c/{index[0]}/{index[1]}/{index[2]}", self.encoded[(shard, chunk)])
 
 
 @dataclass
@@ -110,8 +109,8 @@ class _Level:
 class _TaskWriter:
     """Writes one task's bricks and level-of-detail shards, and records the shard keys it wrote."""
 
-    def __init__(self, group, layout: Layout, folder: Path, full_shards: _FullShards):
-        self.layout, self.folder, self.full_shards = layout, folder, full_shards
+    def __init__(self, group, layout: Layout, place: StorePlace, full_shards: _FullShards):
+        self.layout, self.place, self.full_shards = layout, place, full_shards
         self.levels: list[_Level] = []
         for level in range(max(layout.client_level, 1), layout.depth + 1):
             array = group["occupancy"] if level == layout.depth else group[f"lod/{level}"]
@@ -160,7 +159,7 @@ class _TaskWriter:
         if not full and not block.any():
             return
         if full:
-            self.full_shards.write(lv.array, origin, self.folder)
+            self.full_shards.write(lv.array, origin, self.place)
         else:
             e = lv.edge
             lv.array[origin[0]:origin[0] + e, origin[1]:origin[1] + e, origin[2]:origin[2] + e] = block
@@ -171,58 +170,56 @@ class _TaskWriter:
             self._flush(lv)
 
 
-def _part_path(folder: Path, task: int) -> Path:
-    return folder / "_parts" / f"{task:08d}.npz"
+def _part_name(task: int) -> str:
+    return f"_parts/{task:08d}.npz"
 
 
-def _sum_path(part: Path) -> Path:
+def _sum_name(part: str) -> str:
     """Where a part's SHA-256 is recorded: written after the part is in place, so a part without it (the run
     stopped between the two) or with another is not trusted."""
-    return part.with_suffix(".sha256")
+    return part[:-len(".npz")] + ".sha256"
 
 
-def _digest(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def _trusted_part(folder: Path, task: int) -> Path | None:
-    """Task ``task``'s part where it finished in full and is unaltered (a regular file whose SHA-256 is the
-    one recorded when it was written); None otherwise, the untrusted files removed (the task runs again)."""
-    part, digest = _part_path(folder, task), _sum_path(_part_path(folder, task))
-    if not part.exists() and not part.is_symlink():
+def _trusted_part(place: StorePlace, task: int) -> bytes | None:
+    """Task ``task``'s part where it finished in full and is unaltered (its SHA-256 is the one recorded when
+    it was written); None otherwise, the untrusted objects removed (the task runs again)."""
+    part, digest = _part_name(task), _sum_name(_part_name(task))
+    if not place.exists(part):
         return None
     try:
-        regular_file(part, StoreError, "part file")
-        regular_file(digest, StoreError, "part checksum")
-        if digest.stat().st_size == 64 and digest.read_text("ascii") == _digest(part):
-            return part
-    except (StoreError, OSError, UnicodeDecodeError):
+        recorded = place.read(digest)
+        data = place.read(part)
+        if recorded == hashlib.sha256(data).hexdigest().encode("ascii"):
+            return data
+    except (StoreError, OSError):
         pass
     for stale in (part, digest):
         with contextlib.suppress(OSError):
-            stale.unlink()
+            place.remove(stale)
     return None
 
 
-def _has_parts(folder: Path) -> bool:
-    """Whether a stopped run left finished tasks in ``folder`` (worth keeping for ``resume``)."""
-    parts = folder / "_parts"
-    return parts.is_dir() and any(p.suffix == ".sha256" and not p.name.startswith(".") for p in parts.iterdir())
+def _part(place: StorePlace, task: int) -> Any:
+    """A finished task's part, opened (``with _part(place, task) as part: part["coords"]``)."""
+    return np.load(io.BytesIO(place.read(_part_name(task))))
 
 
-def store_task(folder: Path, layout: Layout, task: int, cell: Any, voxels: TaskVoxels, plan_octants: np.ndarray,
+def _has_parts(place: StorePlace) -> bool:
+    """Whether a stopped run left finished tasks in the store (worth keeping for ``resume``)."""
+    return any(name.endswith(".sha256") and not name.startswith(".") for name in place.names("_parts"))
+
+
+def store_task(target: str, layout: Layout, task: int, cell: Any, voxels: TaskVoxels, plan_octants: np.ndarray,
                full: bool) -> dict:
     """Write one task's shards from what it found (``voxels``; ``full``: its octant lies inside, every
-    brick full) and its part file; the summary the caller assembles the store from."""
+    brick full) and its part, into the store at ``target`` (:func:`implc.files.store_place.place_of`);
+    the summary the caller assembles the store from."""
     import zarr
     t0 = time.perf_counter()
+    place = place_of(target)
     depth, shift = layout.depth, layout.depth - layout.brick_level
-    group = zarr.open_group(str(folder), mode="r+")
-    writer = _TaskWriter(group, layout, folder, _FULL_SHARDS)
+    group = zarr.open_group(place.url, mode="r+")
+    writer = _TaskWriter(group, layout, place, _FULL_SHARDS)
     coords, normals, inside = voxels.coords, voxels.normals, voxels.inside
     fine = inside[inside[:, 3] > layout.brick_level] if len(inside) else inside
     coarse = inside[inside[:, 3] <= layout.brick_level] if len(inside) else inside
@@ -265,17 +262,14 @@ def store_task(folder: Path, layout: Layout, task: int, cell: Any, voxels: TaskV
                "seconds": voxels.seconds + time.perf_counter() - t0,
                "peak_memory": peak_memory(),
                "inside_voxels": inside_voxel_count(np.concatenate([coarse, fine]), depth)}
-    part = _part_path(folder, task)
-    part.parent.mkdir(exist_ok=True)
-    tmp = part.with_name(f".{part.stem}.{os.getpid()}.tmp.npz")
     listed_rows = np.array(listed, np.int64).reshape(-1, 3)
-    np.savez(tmp, coords=coords, normals=normals, octants=fine, coarse=coarse,
+    buffer = io.BytesIO()
+    np.savez(buffer, coords=coords, normals=normals, octants=fine, coarse=coarse,
              bricks=bricks[listed_rows[:, 0]].astype(np.int32), voxel_counts=listed_rows[:, 1],
              octant_counts=listed_rows[:, 2], lod=client_block, summary=np.array(json.dumps(summary)))
-    os.replace(tmp, part)
-    record = _sum_path(part).with_name(f".{part.stem}.{os.getpid()}.tmp.sha256")
-    record.write_text(_digest(part), "ascii")
-    os.replace(record, _sum_path(part))
+    data = buffer.getvalue()
+    place.write(_part_name(task), data)
+    place.write(_sum_name(_part_name(task)), hashlib.sha256(data).hexdigest().encode("ascii"))
     return summary
 
 
@@ -286,9 +280,9 @@ def _write_task(recipe: SurfaceRecipe, folder: str, layout: Layout, options: dic
                 plan_octants: np.ndarray, workers: int = 1, surface=None) -> dict:
     """A task of :func:`write_zarr`: its part if it finished before (a retry, a resumed run), else its
     voxels found and stored."""
-    done = _trusted_part(Path(folder), task)
+    done = _trusted_part(place_of(folder), task)
     if done is not None:
-        with np.load(done) as part:
+        with np.load(io.BytesIO(done)) as part:
             return json.loads(str(part["summary"]))
     if full:
         voxels = TaskVoxels(np.empty((0, 3), np.uint32), np.empty((0, 3), np.float32),
@@ -297,14 +291,15 @@ def _write_task(recipe: SurfaceRecipe, folder: str, layout: Layout, options: dic
         surface = build(recipe) if surface is None else surface
         voxels = task_voxels(surface, layout.depth, cell, layout.task_level, solid=layout.solid, options=options,
                              workers=workers, to_level=cell_level(layout.depth, layout.brick_level, layout.task_level))
-    return store_task(Path(folder), layout, task, cell, voxels, plan_octants, full)
+    return store_task(folder, layout, task, cell, voxels, plan_octants, full)
 
 
 def _write_rows(folder: str, family: str, shard: int, spans: list) -> int:
     """One shard of the row arrays of ``family`` ("voxels": coords and normals; "octants": the solid's
     fine inside octants) from the parts it spans: (task, first row of the task, rows)."""
     import zarr
-    group = zarr.open_group(folder, mode="r+")
+    place = place_of(folder)
+    group = zarr.open_group(place.url, mode="r+")
     names = ("voxels/coords", "voxels/normals") if family == "voxels" else ("inside/octants",)
     members = ("coords", "normals") if family == "voxels" else ("octants",)
     arrays: list[Any] = [group[name] for name in names]
@@ -314,7 +309,7 @@ def _write_rows(folder: str, family: str, shard: int, spans: list) -> int:
     blocks = [np.empty((hi - lo,) + a.shape[1:], a.dtype) for a in arrays]
     for task, start, count in spans:
         a, b = max(lo, start), min(hi, start + count)
-        with np.load(_part_path(Path(folder), task)) as part:
+        with _part(place, task) as part:
             for block, member in zip(blocks, members):
                 block[a - lo:b - lo] = part[member][a - start:b - start]
     for array, block in zip(arrays, blocks):
@@ -325,7 +320,8 @@ def _write_rows(folder: str, family: str, shard: int, spans: list) -> int:
 @dataclass
 class ZarrWrite:
     """What :func:`write_zarr` wrote: counts, statistics, the volume bounds."""
-    path: Path
+    path: Path | str
+    """The store's folder, or its URL."""
     depth: int
     bounds: tuple
     voxels: int
@@ -357,11 +353,13 @@ def write_zarr(surface: Surface, depth: int, path: str | os.PathLike[str], *, so
     """Voxelize ``surface`` at ``depth`` straight into the Zarr v3 store at ``path`` (see the module),
     in memory bounded by the tasks in flight rather than the voxel count.
 
-    ``cluster``: run the tasks on a Dask cluster: ``"local:N"`` (N worker processes started here),
-    a scheduler's address (``"tcp://host:8786"``) or a ``distributed.Client``; the workers must see
-    ``path`` (a shared file system). None: in this process, ``workers`` threads per task. ``resume``:
-    finish the run that ``NAME.partial`` holds (the same surface and options), skipping its finished
-    tasks. ``mean_value_levels``, ``refine_leaves``: as :func:`implc.voxelize`'s. ``say``: receives
+    ``path``: a folder, or the URL of an object store (``s3://bucket/run.zarr``: see
+    :mod:`implc.files.store_place`). ``cluster``: run the tasks on a Dask cluster: ``"local:N"`` (N worker
+    processes started here), a scheduler's address (``"tcp://host:8786"``) or a ``distributed.Client``;
+    the workers must reach ``path`` (a shared file system, or the object store). None: in this process,
+    ``workers`` threads per task. ``resume``: finish the run that stopped (its finished tasks kept in
+    ``NAME.partial``, or under the URL), skipping its finished tasks; the same surface and options.
+    ``mean_value_levels``, ``refine_leaves``: as :func:`implc.voxelize`'s. ``say``: receives
     one-line reports (the dashboard's address)."""
     depth = _check_depth(depth)
     workers = default_workers() if workers is None else check_workers(workers)
@@ -373,14 +371,13 @@ def write_zarr(surface: Surface, depth: int, path: str | os.PathLike[str], *, so
                                         "depth": depth, "solid": layout.solid, "bounds": layout.bounds,
                                         "layout": layout.describe()}))
     t0 = time.perf_counter()
-    path = Path(path)
-    with resumable_folder(path, STORE_KIND, resume=resume, matches=lambda folder: _plan_of(folder) == plan_about,
-                          keep=_has_parts, recognise=is_store_folder, marked=False) as folder:
-        if not (folder / "zarr.json").exists():
-            create_store(folder, layout, plan_about)
+    target = target_of(path)
+    with _writing(target, plan_about, resume=resume) as place:
+        if not place.exists("zarr.json"):
+            create_store(place.url, layout, plan_about)
         cells, plan_inside = plan_tasks(surface, depth, layout.task_level, solid=solid, options=options)
         tasks = _task_list(layout, cells, plan_inside)
-        done = sum(_trusted_part(folder, t) is not None for t in range(len(tasks)))
+        done = sum(_trusted_part(place, t) is not None for t in range(len(tasks)))
         with contextlib.nullcontext() if cluster is None else connect(cluster, say=say) as client:
             threads = workers if client is None else worker_threads(client)
             # here: the surface itself, the tasks on this process's threads; there: the recipe travels
@@ -388,15 +385,15 @@ def write_zarr(surface: Surface, depth: int, path: str | os.PathLike[str], *, so
             t_start = time.perf_counter()
             with task_progress(progress, len(tasks), f"voxelize {1 << depth}³ to Zarr") as advance:
                 summaries = run_tasks(client, function, [(t, *task) for t, task in enumerate(tasks)],
-                                      shared=(recipe, str(folder), layout, options), name="implc-zarr",
+                                      shared=(recipe, place.url, layout, options), name="implc-zarr",
                                       on_result=lambda s: advance(s["voxels"]), threads=threads)
             t_tasks = time.perf_counter()
-            _finish(folder, layout, summaries, client, threads)
+            _finish(place, layout, summaries, client, threads)
         stats = run_stats(depth, threads, t_tasks - t_start,
                           ((s["evaluations"], s["tightened"], s["seconds"]) for s in summaries))
         stats.task_level, stats.tasks = layout.task_level, len(tasks)
     shards = sum(len(s["shards"]) for s in summaries)
-    return ZarrWrite(path, depth, surface.bounds, sum(s["voxels"] for s in summaries),
+    return ZarrWrite(target, depth, surface.bounds, sum(s["voxels"] for s in summaries),
                      sum(s["octants"] + s["coarse"] for s in summaries), sum(s["inside_voxels"] for s in summaries),
                      shards, stats, time.perf_counter() - t0, solid, len(tasks), done,
                      [s["peak_memory"] for s in summaries], [s["shards"] for s in summaries])
@@ -411,12 +408,55 @@ def _surface_key(surface: Surface) -> str:
         return f"tape-{surface.tape.fingerprint()}-{surface.engine}-{surface.directed}-{surface.width}"
 
 
-def _plan_of(folder: Path) -> Any:
+def _about_of(place: StorePlace) -> dict | None:
+    """The ``implc`` attributes of the store at ``place`` (None: no store of implc's there)."""
     try:
-        about = json.loads((folder / "zarr.json").read_text())["attributes"]["implc"]
+        about = json.loads(place.read("zarr.json"))["attributes"]["implc"]
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    return about.get("plan")
+    return about if isinstance(about, dict) else None
+
+
+@contextlib.contextmanager
+def _writing(target: Path | str, plan: dict, *, resume: bool) -> Iterator[StorePlace]:
+    """The place a run writes its store: for a folder, ``NAME.partial`` renamed into place when the block
+    completes (:func:`implc.common.atomic_file.resumable_folder`); for a URL, the URL itself, which must
+    hold nothing (or, to ``resume``, the unfinished store of the same run). An object store cannot replace
+    a store in one step, so an existing complete store there is refused rather than destroyed before its
+    successor exists. A run that fails before finishing any task leaves nothing behind."""
+    if not isinstance(target, str):
+        with resumable_folder(target, STORE_KIND, resume=resume,
+                              matches=lambda folder: (_about_of(FolderPlace(folder)) or {}).get("plan") == plan,
+                              keep=lambda folder: _has_parts(FolderPlace(folder)), recognise=is_store_folder,
+                              marked=False) as folder:
+            yield FolderPlace(folder)
+        return
+    place = ObjectPlace(target)
+    place.check_bucket()
+    about = _about_of(place)
+    if about is None:
+        if place.exists():
+            raise ValueError(f"{shown(target)} holds objects that are not an implc store: implc writes a store "
+                             "only where nothing is (choose another URL, or remove them first)")
+        if resume:
+            raise ValueError(f"nothing to resume: {shown(target)} holds nothing (a run that stops early keeps "
+                             "its finished tasks there)")
+    elif "manifest" in about:
+        raise ValueError(f"{shown(target)} holds a complete store{': nothing to resume' if resume else ''}; an "
+                         "object store cannot replace one in a single step, so implc writes a new store only "
+                         "where nothing is (remove it first, or choose another URL)")
+    elif not resume:
+        raise ValueError(f"{shown(target)} holds an unfinished run: finish it with --resume (resume=True), or "
+                         "remove it to start over")
+    elif about.get("plan") != plan:
+        raise ValueError(f"{shown(target)} holds another run (another surface, depth or options): remove it to "
+                         "start over")
+    try:
+        yield place
+    except BaseException:
+        if not _has_parts(place):
+            place.remove_all()
+        raise
 
 
 def _task_list(layout: Layout, cells: np.ndarray, plan_inside: np.ndarray) -> list[tuple]:
@@ -437,14 +477,14 @@ def _task_list(layout: Layout, cells: np.ndarray, plan_inside: np.ndarray) -> li
     return [(cell, full, np.array(rows, np.int32).reshape(-1, 4)) for _, (cell, full, rows) in sorted(entries.items())]
 
 
-def _finish(folder: Path, layout: Layout, summaries: list[dict], client: Any, threads: int = 1) -> None:
+def _finish(place: StorePlace, layout: Layout, summaries: list[dict], client: Any, threads: int = 1) -> None:
     """After the tasks: the row arrays (shard by shard, one task each), the brick index, the coarse
     octants, the coarse levels of detail, then the manifest; the parts are removed."""
     import zarr
-    group = zarr.open_group(str(folder), mode="r+")
+    group = zarr.open_group(place.url, mode="r+")
     bricks, voxel_counts, octant_counts, coarse, lods = [], [], [], [], []
     for s in summaries:
-        with np.load(_part_path(folder, s["task"])) as part:
+        with _part(place, s["task"]) as part:
             bricks.append(part["bricks"])
             voxel_counts.append(part["voxel_counts"])
             octant_counts.append(part["octant_counts"])
@@ -471,7 +511,7 @@ def _finish(folder: Path, layout: Layout, summaries: list[dict], client: Any, th
             spans = [(summaries[t]["task"], int(starts[t]), int(counts[t])) for t in range(len(summaries))
                      if counts[t] and starts[t] < hi and starts[t] + counts[t] > lo]
             rows_tasks.append((family, shard, spans))
-    run_tasks(client, _write_rows, rows_tasks, shared=(str(folder),), name="implc-rows", threads=threads)
+    run_tasks(client, _write_rows, rows_tasks, shared=(place.url,), name="implc-rows", threads=threads)
     bricks_all = np.concatenate(bricks) if bricks else np.empty((0, 3), np.int32)
     small_array(group, layout, "bricks", bricks_all.reshape(-1, 3).astype(np.int32))
     for name, counts in (("voxels/rows", voxel_counts), ("inside/rows", octant_counts)):
@@ -498,8 +538,9 @@ def _finish(folder: Path, layout: Layout, summaries: list[dict], client: Any, th
                          "inside_octants": int(sum(s["octants"] + s["coarse"] for s in summaries)),
                          "inside_voxels": int(sum(s["inside_voxels"] for s in summaries)),
                          "bricks": int(len(bricks_all)), "shards": int(sum(len(s["shards"]) for s in summaries))}
-    shutil.rmtree(folder / "_parts", ignore_errors=True)
-    _remove_abandoned_writes(folder)
+    place.remove_all("_parts")
+    if isinstance(place, FolderPlace):  # an object store's writes are whole or absent
+        _remove_abandoned_writes(place.folder)
     group.attrs["implc"] = about  # last: the store is complete
 
 
@@ -517,16 +558,29 @@ def _remove_abandoned_writes(folder: Path) -> None:
             path.unlink(missing_ok=True)
 
 
-def save_zarr(voxels: Voxels, path: str | os.PathLike[str]) -> Path:
+@contextlib.contextmanager
+def _replacing(target: Path | str, plan: dict) -> Iterator[StorePlace]:
+    """Where :func:`save_zarr` writes: a folder replaced whole when the block completes, or a URL that holds
+    nothing yet (:func:`_writing`)."""
+    if isinstance(target, str):
+        with _writing(target, plan, resume=False) as place:
+            yield place
+    else:
+        with replacing_folder(target, STORE_KIND, is_store_folder, marked=False) as folder:
+            yield FolderPlace(folder)
+
+
+def save_zarr(voxels: Voxels, path: str | os.PathLike[str]) -> Path | str:
     """Write ``voxels`` (with the inside octants, for a solid) as the store :func:`write_zarr` writes at
-    ``path`` (a folder, conventionally ending in .zarr)."""
-    path = Path(path)
+    ``path`` (a folder, conventionally ending in .zarr, or an object store's URL)."""
     layout = Layout.of(voxels.depth, voxels.bounds, voxels.inside is not None)
     depth, level = layout.depth, layout.task_level
     coords, normals = voxels.coords, voxels.normals
     inside = voxels.inside if voxels.inside is not None else np.empty((0, 4), np.int32)
-    with replacing_folder(path, STORE_KIND, is_store_folder, marked=False) as folder:
-        create_store(folder, layout, {"surface": None, "options": None})
+    target = target_of(path)
+    plan: dict = {"surface": None, "options": None}
+    with _replacing(target, plan) as place:
+        create_store(place.url, layout, plan)
         plan_rows = inside[inside[:, 3] <= level]
         fine = inside[inside[:, 3] > level]
         voxel_cells = coords.astype(np.int64) >> (depth - level)
@@ -541,6 +595,6 @@ def save_zarr(voxels: Voxels, path: str | os.PathLike[str]) -> Path:
             v0, v1 = np.searchsorted(voxel_tasks, [key, key + np.uint64(1)])
             mine = fine[fine_tasks == key]
             found = TaskVoxels(coords[v0:v1], normals[v0:v1], mine, 0, [0] * abi.TIGHTEN_STATS_WORDS, 0.0)
-            summaries.append(store_task(folder, layout, t, cell, found, rows, full))
-        _finish(folder, layout, summaries, None, default_workers())
-    return path
+            summaries.append(store_task(place.url, layout, t, cell, found, rows, full))
+        _finish(place, layout, summaries, None, default_workers())
+    return target

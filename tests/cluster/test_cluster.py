@@ -3,19 +3,15 @@ stores it writes are, array by array, the single-process run's; a worker killed 
 its tasks (a fresh worker joins, the store is the same); ``local:N`` starts and stops its own cluster; a
 surface travels as text and is rebuilt the same. Marked slow: each test starts processes."""
 
-import contextlib
-import json
 import os
 import signal
 import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
-import zarr
 
 import implc
 from implc.cli.commands import main
@@ -24,78 +20,10 @@ from implc.compiler.vm import parse_vm
 from implc.errors import ClusterError
 from implc.files import scene, zarr_writer
 
+from ..support.cluster import Cluster
+from ..support.stores import assert_same_store
+
 pytestmark = pytest.mark.slow
-
-DASK = Path(sys.executable).parent / "dask"
-
-
-def arrays(path) -> dict:
-    group = zarr.open_group(str(path), mode="r")
-    return {name: a for name, a in group.members(max_depth=None) if isinstance(a, zarr.Array)}
-
-
-def assert_same_store(a, b):
-    """Every array equal: the same arrays, and each array's metadata and encoded chunk and shard files
-    byte for byte (the encoding is deterministic; reading a 2048³ occupancy as values is 8 GiB)."""
-    assert arrays(a).keys() == arrays(b).keys()
-    files_a = {p.relative_to(a): p for p in Path(a).rglob("*") if p.is_file()}
-    files_b = {p.relative_to(b): p for p in Path(b).rglob("*") if p.is_file()}
-    assert files_a.keys() == files_b.keys()
-    for name, path in files_a.items():
-        if name != Path("zarr.json"):  # the group's attributes: compared below, key by key
-            assert path.read_bytes() == files_b[name].read_bytes(), name
-    about_a = zarr.open_group(str(a), mode="r").attrs["implc"]
-    about_b = zarr.open_group(str(b), mode="r").attrs["implc"]
-    for key in ("depth", "bounds", "solid", "layout"):
-        assert about_a[key] == about_b[key]
-    for key in ("voxels", "inside_octants", "inside_voxels", "bricks", "shards", "tasks"):
-        assert about_a["manifest"][key] == about_b["manifest"][key], key
-
-
-class Cluster:
-    """A Dask scheduler and workers, each its own process, the kernel cache shared as on one host."""
-
-    def __init__(self, folder: Path):
-        self.folder = folder
-        self.file = folder / "scheduler.json"
-        self.env = dict(os.environ, DASK_DISTRIBUTED__WORKER__DAEMON="False")
-        self.scheduler = subprocess.Popen([str(DASK), "scheduler", "--scheduler-file", str(self.file), "--port", "0",
-                                           "--no-dashboard", "--host", "127.0.0.1"], env=self.env,
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        self.workers: list[subprocess.Popen] = []
-        deadline = time.time() + 60
-        while not self.file.exists() or not self.file.read_text().strip():
-            assert time.time() < deadline, "the scheduler did not start"
-            time.sleep(0.1)
-        self.address = json.loads(self.file.read_text())["address"]
-
-    def add_worker(self) -> subprocess.Popen:
-        worker = subprocess.Popen([str(DASK), "worker", "--scheduler-file", str(self.file), "--nthreads", "1",
-                                   "--no-nanny", "--no-dashboard", "--host", "127.0.0.1",
-                                   "--local-directory", str(self.folder / "work")], env=self.env,
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        self.workers.append(worker)
-        return worker
-
-    def wait_for(self, count: int):
-        from distributed import Client
-        with Client(self.address, timeout="30s") as client:
-            client.wait_for_workers(count, timeout=60)
-
-    def close(self):
-        for process in self.workers + [self.scheduler]:  # the workers first, then their scheduler
-            if process.poll() is None:
-                process.send_signal(signal.SIGTERM)
-                if process is not self.scheduler:
-                    with contextlib.suppress(subprocess.TimeoutExpired):
-                        process.wait(5)
-        for process in self.workers + [self.scheduler]:
-            try:
-                process.wait(3)
-            except subprocess.TimeoutExpired:  # a worker may wait for a scheduler already gone
-                process.kill()
-                process.wait()
-
 
 @pytest.fixture
 def cluster(tmp_path):
