@@ -16,7 +16,9 @@ With ``--task compile`` each process finds the kernel cache empty (Python's byte
 install) and times loading and compiling the case (wall seconds: a first compile spreads its parts over
 processes), the count column then being voxels at ``--depth`` from that compile; ``--task first-voxelize``
 times the same and the first voxelization at ``--depth`` (what compiled kernels compile on their first
-voxelization included); ``--repeats`` is ignored by both.
+voxelization included); ``--repeats`` is ignored by both. ``--task write-zarr`` (``write-npz``,
+``write-vdb``) times whole ``implc voxelize CASE -o OUT`` commands run in the process (wall seconds: the
+voxelization on every core and the writer), with ``--solid`` as solids; the case is then a scene name.
 
 A case is a scene name, "union of 50 spheres", "blend of 90 blobs" or the path of a ``.vm`` model (read
 with ``implc.load_vm`` where the revision has it, else converted to SymPy with ``evaluate=False``, keeping
@@ -47,6 +49,7 @@ except ImportError:
 case, depth, repeats = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 workers = [int(w) for w in sys.argv[4].split(",")]
 task = sys.argv[5]
+solid = sys.argv[6:] == ["--solid"]
 started = time.perf_counter()
 rng = random.Random(7)  # the random cases' centres: the same sequence in every process
 centre = lambda: tuple(sympy.Rational(rng.randint(-75, 75), 100) for _ in range(3))
@@ -103,6 +106,17 @@ if task in ("compile", "first-voxelize"):
     print(json.dumps({"seconds": {workers[0]: seconds}, "voxels": len(v)}))
     sys.exit(0)
 times = {w: [] for w in workers}
+if task.startswith("write-"):
+    import tempfile
+    from implc.cli.commands import main
+    with tempfile.TemporaryDirectory() as tmp:
+        command = ["voxelize", case, "--depth", str(depth), "-o", f"{tmp}/out.{task[6:]}", "--quiet"]
+        command += ["--solid"] if solid else []
+        main(command)  # warm
+        for _ in range(repeats):
+            t0 = time.perf_counter(); assert main(command) == 0; times[workers[0]].append(time.perf_counter() - t0)
+    print(json.dumps({"seconds": {workers[0]: statistics.median(times[workers[0]])}, "voxels": len(v)}))
+    sys.exit(0)
 if task == "implc.mesh":
     implc.mesh(s, depth)  # warm
     for _ in range(repeats):
@@ -127,10 +141,11 @@ print(json.dumps({"seconds": {w: statistics.median(t) for w, t in times.items()}
 CASES = ("paper_blobs", "union of 50 spheres", "blend of 90 blobs", "paper_sin4_sin8", "paper_sin3_sin4")
 
 
-def run(tree: Path, case: str, depth: int, repeats: int, workers: list, cache: Path, task: str) -> dict:
+def run(tree: Path, case: str, depth: int, repeats: int, workers: list, cache: Path, task: str,
+        solid: bool = False) -> dict:
     env = dict(os.environ, PYTHONPATH=str(tree), IMPLC_CACHE_DIR=str(cache))
     out = subprocess.run([sys.executable, "-c", PROBE, case, str(depth), str(repeats), ",".join(map(str, workers)),
-                          task],
+                          task] + (["--solid"] if solid else []),
                          env=env, check=True, capture_output=True, text=True, cwd=tree)
     return json.loads(out.stdout)
 
@@ -143,11 +158,14 @@ def main(argv=None) -> int:
     p.add_argument("--rounds", type=int, default=3, help="processes per revision and case, interleaved")
     p.add_argument("--cases", default=",".join(CASES))
     p.add_argument("--workers", default="1", help="worker counts, comma-separated (e.g. 1,2: adds the yield)")
-    p.add_argument("--task", choices=("voxelize", "mesh", "implc.mesh", "compile", "first-voxelize"),
+    p.add_argument("--task", choices=("voxelize", "mesh", "implc.mesh", "compile", "first-voxelize", "write-npz",
+                                      "write-zarr", "write-vdb"),
                    default="voxelize",
                    help="what is timed: voxelize (wall seconds), mesh (Voxels.mesh(), CPU seconds), implc.mesh "
                         "(voxelizing and meshing, CPU seconds), compile (loading and compiling with an empty "
-                        "kernel cache, wall seconds) or first-voxelize (the same and a first voxelization)")
+                        "kernel cache, wall seconds), first-voxelize (the same and a first voxelization) or "
+                        "write-FORMAT (whole 'implc voxelize -o OUT.FORMAT' commands, wall seconds)")
+    p.add_argument("--solid", action="store_true", help="with write-FORMAT: write solids")
     args = p.parse_args(argv)
     workers = [int(w) for w in args.workers.split(",")]
     if args.task != "voxelize":
@@ -168,7 +186,7 @@ def main(argv=None) -> int:
                 for _ in range(args.rounds):
                     for label, tree in (("old", old), ("new", ROOT)):
                         cache = Path(tempfile.mkdtemp(dir=tmp)) if fresh else Path(tmp) / f"cache-{label}"
-                        r = run(tree, case, args.depth, args.repeats, workers, cache, args.task)
+                        r = run(tree, case, args.depth, args.repeats, workers, cache, args.task, args.solid)
                         for w in workers:
                             times[label, w].append(r["seconds"][str(w)])
                         voxels[label] = r["voxels"]
@@ -179,7 +197,9 @@ def main(argv=None) -> int:
                            check=False)  # best effort: the temporary folder goes anyway
     what = {"voxelize": "Voxelize (wall s)", "mesh": "Mesh (CPU s)", "implc.mesh": "implc.mesh (CPU s)",
             "compile": "Load and compile, empty kernel cache (wall s)",
-            "first-voxelize": "Load, compile and voxelize once, empty kernel cache (wall s)"}[args.task]
+            "first-voxelize": "Load, compile and voxelize once, empty kernel cache (wall s)",
+            **{f"write-{f}": f"`implc voxelize -o OUT.{f}`{' --solid' if args.solid else ''} (wall s)"
+               for f in ("npz", "zarr", "vdb")}}[args.task]
     print(f"### {what} at {1 << args.depth}³: {args.revision} against this tree "
           f"(medians of {args.rounds} processes x {args.repeats} runs)\n")
     header = ["case"]

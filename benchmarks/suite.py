@@ -949,9 +949,64 @@ def cluster(args, out):
     return md
 
 
+WRITER_RUN = r"""
+import json, resource, runpy, sys, time
+sys.argv = ["implc"] + sys.argv[1:]
+t0, c0 = time.perf_counter(), time.process_time()
+try:
+    runpy.run_module("implc", run_name="__main__")
+except SystemExit as exc:
+    if exc.code:
+        raise
+print(json.dumps({"wall": time.perf_counter() - t0, "cpu": time.process_time() - c0,
+                  "peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}), file=sys.stderr)
+"""
+
+
+def writers(args, out):
+    """Whole ``implc voxelize SCENE -o OUT`` commands, one fresh process each, by output format: .npz (the
+    voxelization and one uncompressed write), .zarr (streamed into the store by tasks) and .vdb (from
+    the voxels in memory), shell and solid; the formats interleaved, medians of --repeats; wall and CPU
+    seconds from the command's start to its end (the interpreter's start-up left out, implc's import
+    in), and the process's peak memory."""
+    rows = []
+    formats = args.writer_formats.split(",")
+    for name in args.writer_scenes.split(","):
+        for depth in args.writer_depths:
+            for solid in (False, True):
+                runs: dict = {f: [] for f in formats}
+                with tempfile.TemporaryDirectory() as tmp:
+                    for _ in range(args.repeats):
+                        for fmt in formats:
+                            command = [sys.executable, "-c", WRITER_RUN, "voxelize", name, "--depth", str(depth),
+                                       "-o", str(Path(tmp) / f"out.{fmt}"), "--quiet"] + (["--solid"] if solid else [])
+                            done = subprocess.run(command, capture_output=True, text=True, check=True)
+                            runs[fmt].append(json.loads(done.stderr.strip().splitlines()[-1]))
+                row = {"scene": name, "depth": depth, "solid": solid}
+                for fmt in formats:
+                    row[fmt] = {key: statistics.median(r[key] for r in runs[fmt]) for key in ("wall", "cpu", "peak")}
+                rows.append(row)
+    out["writers"] = rows
+    md = ["### Writers: whole `implc voxelize` commands by output format (one process, all cores)", "",
+          "| scene | grid | | " + " | ".join(f".{f} wall s (×npz) | CPU s | peak MiB" for f in formats) + " |",
+          "|---|---|---|" + "---|---|---|" * len(formats)]
+    for r in rows:
+        base = r[formats[0]]
+        cells = []
+        for f in formats:
+            m = r[f]
+            ratio = m["wall"] / base["wall"]
+            cells.append(f"{m['wall']:.2f} ({ratio:.2f}×) | {m['cpu']:.2f} | {m['peak'] / 2**20:.0f}")
+        md.append(f"| {r['scene']} | {1 << r['depth']}³ | {'solid' if r['solid'] else 'shell'} | " + " | ".join(cells)
+                  + " |")
+    md += ["", "The .zarr store is written as the tasks finish (its memory bounded by the tasks in flight); the "
+           ".npz and .vdb writers take the voxels in memory."]
+    return md
+
+
 SECTIONS = {"table1": table1, "techniques": techniques, "baselines": baselines, "growth": growth,
             "tightness": tightness, "kernels": kernels, "models": models, "solids": solids, "viewer": viewer,
-            "scale": scale, "mesh": mesh, "cluster": cluster}
+            "scale": scale, "mesh": mesh, "cluster": cluster, "writers": writers}
 
 
 def parser():
@@ -989,6 +1044,9 @@ def parser():
     p.add_argument("--mesh-quality-depth", type=int, default=8,
                    help="deepest grid whose meshes pymeshlab checks for self-intersections (slow above)")
     p.add_argument("--cluster-scene", default="paper_blobs", help="scene for the 'cluster' section")
+    p.add_argument("--writer-scenes", default="paper_blobs,paper_sin4_sin8", help="scenes of the 'writers' section")
+    p.add_argument("--writer-depths", default="10,11", help="grid depths of the 'writers' section (1024³, 2048³)")
+    p.add_argument("--writer-formats", default="npz,zarr,vdb", help="output formats compared (the first is the base)")
     p.add_argument("--cluster-depth", type=int, default=11, help="grid of the overhead comparison (default 2048³)")
     p.add_argument("--cluster-big-depth", type=int, default=13, help="one run at this grid (0: none; 8192³)")
     p.add_argument("--cluster-workers", type=int, default=2, help="worker processes (one thread each)")
@@ -1008,6 +1066,7 @@ def main(argv=None) -> int:
     args.growth_depths = [int(d) for d in args.growth_depths.split(",")]
     args.models_depths = [int(d) for d in args.models_depths.split(",")]
     args.solid_depths = [int(d) for d in args.solid_depths.split(",")]
+    args.writer_depths = [int(d) for d in args.writer_depths.split(",")]
     args.viewer_depths = [int(d) for d in args.viewer_depths.split(",")]
     args.scale_depths = [int(d) for d in args.scale_depths.split(",")]
     args.mesh_depths = [int(d) for d in args.mesh_depths.split(",")]

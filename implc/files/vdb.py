@@ -39,7 +39,9 @@ NO_MASK_OR_INACTIVE_VALS = 0  # every inactive value is the background: only act
 
 LEAF, LOWER, UPPER = 3, 7, 12  # log2 of the edge, in voxels, of a leaf, a lower and an upper internal node
 BOUNDARY_VALUE, INSIDE_VALUE = 0.5, 1.0
-LEAF_CHUNK = 1 << 16  # leaves assembled at a time (bounds the writer's temporary memory)
+LEAF_CHUNK = 1 << 12
+"""Leaves assembled at a time: bounds the writer's temporary memory (a leaf's dense values take 6 KiB for
+normals), and small enough to stay in the caches."""
 
 
 class _Writer:
@@ -118,23 +120,33 @@ def _cube_bits(size_log2: int) -> np.ndarray:
     return ((e[:, None, None] << 6) | (e[None, :, None] << 3) | e[None, None, :]).ravel()
 
 
+class _Runs:
+    """Morton-ordered voxels by leaf, shared by the grids: each leaf's voxels are one run (a leaf is an
+    aligned 8³ block); each voxel's bit in its leaf."""
+
+    def __init__(self, coords: np.ndarray):
+        cuts, self.bits = [], np.empty(len(coords), np.uint16)
+        for a in range(0, len(coords), LEAF_CHUNK * 64):  # a block of rows at a time: small temporaries
+            block = coords[a:a + LEAF_CHUNK * 64 + 1]
+            leaf = block >> np.uint32(LEAF)
+            cuts.append(np.flatnonzero(np.any(leaf[1:] != leaf[:-1], axis=1)) + a + 1)
+            low = (block[:LEAF_CHUNK * 64] & np.uint32((1 << LEAF) - 1)).astype(np.uint16)
+            self.bits[a:a + len(low)] = (low[:, 0] << (2 * LEAF)) | (low[:, 1] << LEAF) | low[:, 2]
+        self.starts = np.concatenate([[0], *cuts, [len(coords)]]).astype(np.int64) if len(coords) else \
+            np.zeros(1, np.int64)
+        self.origins = (coords[self.starts[:-1]] >> np.uint32(LEAF)).astype(np.int64) << LEAF
+
+
 class _Leaves:
     """A grid's leaves in OpenVDB's order, filled from Morton-ordered voxels with values (one value or
     one per voxel) and from octants smaller than a leaf with one value. Assembled a chunk of leaves at a
     time into dense (leaves, 512) arrays, so nothing per voxel is sorted or expanded whole."""
 
-    def __init__(self, coords: np.ndarray, values, cubes: np.ndarray, cube_log2: np.ndarray, cube_value,
-                 dtype, width: int):
-        self.coords, self.values, self.cube_value = coords, values, cube_value
+    def __init__(self, runs: _Runs, values, cubes: np.ndarray, cube_log2: np.ndarray, cube_value, dtype, width: int):
+        self.bits, self.values, self.cube_value = runs.bits, values, cube_value
         self.dtype, self.width = dtype, width
         self.value_size = np.dtype(dtype).itemsize * width
-        leaf = coords >> np.uint32(LEAF)
-        if len(coords):  # runs of voxels in one leaf (one run per leaf for Morton-ordered voxels)
-            cut = np.flatnonzero(np.any(leaf[1:] != leaf[:-1], axis=1)) + 1
-            self.run_starts = np.r_[0, cut, len(coords)].astype(np.int64)
-            run_origins = leaf[self.run_starts[:-1]].astype(np.int64) << LEAF
-        else:
-            self.run_starts, run_origins = np.zeros(1, np.int64), np.empty((0, 3), np.int64)
+        self.run_starts, run_origins = runs.starts, runs.origins
         cube_origins = (cubes >> LEAF) << LEAF
         keys = np.concatenate([_order_key(run_origins), _order_key(cube_origins)])
         self.keys, first = np.unique(keys, return_index=True)
@@ -149,27 +161,30 @@ class _Leaves:
     def __len__(self) -> int:
         return len(self.keys)
 
-    def dense(self, first: int, last: int) -> tuple[np.ndarray, np.ndarray]:
-        """Leaves first..last − 1: their active masks (n, 512) bool and values (n, 512[, width])."""
+    def dense(self, first: int, last: int, with_values: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Leaves first..last − 1: their active masks (n, 512) bool and (``with_values``) their values
+        (n, 512[, width])."""
         n = last - first
         active = np.zeros((n, 512), dtype=bool)
         shape = (n, 512) if self.width == 1 else (n, 512, self.width)
-        values = np.zeros(shape, dtype=self.dtype)
+        values = np.zeros(shape, dtype=self.dtype) if with_values else None
         a, b = np.searchsorted(self.run_rank, [first, last])
         runs = self.run_order[a:b]
         lengths = self.run_starts[runs + 1] - self.run_starts[runs]
         index = np.repeat(self.run_starts[runs] - np.r_[0, np.cumsum(lengths)[:-1]], lengths) + np.arange(lengths.sum())
         rank = np.repeat(self.run_rank[a:b] - first, lengths)
-        bit = _offset(self.coords[index], 0, LEAF)
+        bit = self.bits[index]
         active[rank, bit] = True
-        values[rank, bit] = self.values if np.ndim(self.values) == 0 else self.values[index]
+        if values is not None:
+            values[rank, bit] = self.values if np.ndim(self.values) == 0 else self.values[index]
         a, b = np.searchsorted(self.cube_rank, [first, last])
         for s in np.unique(self.cube_log2[a:b]):
             pick = np.flatnonzero(self.cube_log2[a:b] == s) + a
             rank = np.repeat(self.cube_rank[pick] - first, 1 << (3 * int(s)))
             bit = (_offset(self.cubes[pick], 0, LEAF)[:, None] + _cube_bits(int(s))[None]).ravel()
             active[rank, bit] = True
-            values[rank, bit] = self.cube_value
+            if values is not None:
+                values[rank, bit] = self.cube_value
         return active, values
 
 
@@ -196,7 +211,7 @@ class _Grid:
         self.masks = np.empty((len(leaves), 64), dtype=np.uint8)
         for first in range(0, len(leaves), LEAF_CHUNK):
             last = min(first + LEAF_CHUNK, len(leaves))
-            self.masks[first:last] = np.packbits(leaves.dense(first, last)[0], axis=1, bitorder="little")
+            self.masks[first:last] = np.packbits(leaves.dense(first, last, False)[0], axis=1, bitorder="little")
 
     def _internal(self, w: _Writer, child_offsets, tile_offsets, log2dim: int):
         size = 1 << (3 * log2dim)
@@ -237,6 +252,7 @@ class _Grid:
         for first in range(0, len(self.leaves), LEAF_CHUNK):
             last = min(first + LEAF_CHUNK, len(self.leaves))
             active, values = self.leaves.dense(first, last)
+            assert values is not None
             counts = active.sum(axis=1)
             record = 64 + 1 + counts * size
             starts = np.r_[0, np.cumsum(record)[:-1]]
@@ -285,9 +301,12 @@ def _transform(w: _Writer, bounds, depth: int):
         w.pack("ddd", *map(float, vec))
 
 
-def _grid_metadata(name, grid_class, value_type, voxels, extra=()):
-    lo = voxels.min(axis=0) if len(voxels) else np.zeros(3, np.int64)
-    hi = voxels.max(axis=0) if len(voxels) else np.zeros(3, np.int64)
+def _grid_metadata(name, grid_class, value_type, firsts, lasts, extra=()):
+    """A grid's metadata; its bounding box from the (n, 3) first and last cells of each piece of it."""
+    lows = [np.asarray(f, np.int64).reshape(-1, 3).min(axis=0) for f in firsts if len(f)]
+    highs = [np.asarray(e, np.int64).reshape(-1, 3).max(axis=0) for e in lasts if len(e)]
+    lo = np.min(lows, axis=0) if lows else np.zeros(3, np.int64)
+    hi = np.max(highs, axis=0) if highs else np.zeros(3, np.int64)
     return [_string_meta("class", grid_class), _string_meta("creator", "implc"),
             ("file_bbox_max", "vec3i", struct.pack("<iii", *map(int, hi))),
             ("file_bbox_min", "vec3i", struct.pack("<iii", *map(int, lo))),
@@ -307,18 +326,17 @@ def save_vdb(voxels, path) -> Path:
     cubes = inside[small][:, :3].astype(np.int64) << size_log2[small][:, None]
     tiles = {LEAF: _blocks(inside, depth, LEAF, LOWER), LOWER: _blocks(inside, depth, LOWER, UPPER),
              UPPER: _blocks(inside, depth, UPPER, 64)}
-    occupancy = _Grid(_Leaves(coords, np.float32(BOUNDARY_VALUE), cubes, size_log2[small], INSIDE_VALUE,
+    runs = _Runs(coords)
+    occupancy = _Grid(_Leaves(runs, np.float32(BOUNDARY_VALUE), cubes, size_log2[small], INSIDE_VALUE,
                               np.float32, 1), tiles, struct.pack("<f", INSIDE_VALUE), struct.pack("<f", 0.0))
-    normals = _Grid(_Leaves(coords, np.asarray(voxels.normals, dtype=np.float32), np.empty((0, 3), np.int64),
+    normals = _Grid(_Leaves(runs, np.asarray(voxels.normals, dtype=np.float32), np.empty((0, 3), np.int64),
                             np.empty(0, np.int64), 0.0, np.float32, 3), {}, b"", struct.pack("<fff", 0.0, 0.0, 0.0))
-    extent = [coords.astype(np.int64)] if len(coords) else []
-    extent += [cubes, cubes + (1 << size_log2[small])[:, None] - 1]
-    extent += [t for t in tiles.values()] + [t + ((1 << s) - 1) for s, t in tiles.items()]
-    all_cells = np.concatenate([np.reshape(e, (-1, 3)) for e in extent])
+    firsts = [coords, cubes] + list(tiles.values())  # each piece's first and last cells: the bounding box
+    lasts = [coords, cubes + (1 << size_log2[small])[:, None] - 1] + [t + ((1 << s) - 1) for s, t in tiles.items()]
     grids = [("occupancy", "Tree_float_5_4_3", occupancy,
-              _grid_metadata("occupancy", "fog volume", "float", all_cells)),
+              _grid_metadata("occupancy", "fog volume", "float", firsts, lasts)),
              ("normals", "Tree_vec3s_5_4_3", normals,
-              _grid_metadata("normals", "unknown", "vec3s", coords,
+              _grid_metadata("normals", "unknown", "vec3s", [coords], [coords],
                              [_string_meta("vector_type", "covariant normalize")]))]
     with replacing(path) as tmp, open(tmp, "wb") as f:
         w = _Writer(f)

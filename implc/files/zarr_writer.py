@@ -19,7 +19,6 @@ import json
 import math
 import os
 import re
-import tempfile
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -55,6 +54,7 @@ from ..voxelizer.voxelize import (
     volume_bounds,
 )
 from .store_place import FolderPlace, ObjectPlace, StorePlace, place_of, shown, target_of
+from .zarr_shards import ShardEncoder
 from .zarr_store import (
     STORE_KIND,
     Layout,
@@ -72,33 +72,11 @@ if TYPE_CHECKING:
     from ..engines.surface import Surface
 
 
-class _FullShards:
-    """The encoded bytes of an all-True shard, made once per shard shape and copied to each full shard's
-    key: every shard of a solid's inside is the same file, and compressing 16 MiB of True for each would
-    cost more than the task's own shards."""
-
-    def __init__(self):
-        self.encoded: dict[tuple, bytes] = {}
-
-    def write(self, array, origin: np.ndarray, place: StorePlace) -> None:
-        import zarr
-        shard, chunk = array.shards[0], array.chunks[0]
-        if (shard, chunk) not in self.encoded:
-            with tempfile.TemporaryDirectory() as scratch:
-                template = zarr.create_array(store=scratch, shape=(shard,) * 3, chunks=(chunk,) * 3,
-                                             shards=(shard,) * 3, dtype="bool", fill_value=False, zarr_format=3,
-                                             compressors=compressors())
-                template[...] = True
-                self.encoded[(shard, chunk)] = (Path(scratch) / "c" / "0" / "0" / "0").read_bytes()
-        index = (origin // shard).astype(int)
-        place.write(f"{array.path}/c/{index[0]}/{index[1]}/{index[2]}", self.encoded[(shard, chunk)])
-
-
 @dataclass
 class _Level:
     """One level's shard being filled by a task (bricks arrive in Morton order, so a shard is complete
     when a brick outside it arrives)."""
-    array: Any
+    array: ShardEncoder | None
     level: int
     edge: int
     origin: np.ndarray | None = None
@@ -109,11 +87,12 @@ class _Level:
 class _TaskWriter:
     """Writes one task's bricks and level-of-detail shards, and records the shard keys it wrote."""
 
-    def __init__(self, group, layout: Layout, place: StorePlace, full_shards: _FullShards):
-        self.layout, self.place, self.full_shards = layout, place, full_shards
+    def __init__(self, encoders: dict[str, ShardEncoder], layout: Layout, place: StorePlace):
+        self.layout, self.place = layout, place
         self.levels: list[_Level] = []
         for level in range(max(layout.client_level, 1), layout.depth + 1):
-            array = group["occupancy"] if level == layout.depth else group[f"lod/{level}"]
+            array = None if level <= layout.client_level else \
+                encoders["occupancy" if level == layout.depth else f"lod/{level}"]  # the caller writes the others
             edge = (layout.brick if level == layout.depth else layout.lod_shard(level)) \
                 if level > layout.client_level else 1 << (level - layout.task_level)
             self.levels.append(_Level(array, level, edge))
@@ -130,11 +109,18 @@ class _TaskWriter:
             paint(block, origin, depth, depth, coords, octants)
         for lv in reversed(self.levels):
             shard_origin = ((origin >> (depth - lv.level)) // lv.edge) * lv.edge
+            size = max(1, edge >> (depth - lv.level))
+            if size == lv.edge and lv.level > self.layout.client_level:
+                # the brick is this level's whole shard (the occupancy's): written as it is, no copy
+                self._flush(lv)
+                self._write(lv, shard_origin, None if full else block)
+                if block is not None:
+                    block = pooled(block) if block.shape[0] > 1 else block
+                continue
             if lv.origin is None or np.any(shard_origin != lv.origin):
                 self._flush(lv)
                 lv.origin, lv.block, lv.full = shard_origin, np.zeros((lv.edge,) * 3, bool), True
             lo = (origin >> (depth - lv.level)) - shard_origin
-            size = max(1, edge >> (depth - lv.level))
             assert lv.block is not None
             target = lv.block[lo[0]:lo[0] + size, lo[1]:lo[1] + size, lo[2]:lo[2] + size]
             if full:
@@ -155,14 +141,16 @@ class _TaskWriter:
         if lv.level <= self.layout.client_level:  # the caller writes this level: kept for the part
             self.client_block = block
             return
-        full = lv.full and block.all()
-        if not full and not block.any():
+        self._write(lv, origin, None if lv.full and block.all() else block)
+
+    def _write(self, lv: _Level, origin: np.ndarray, block: np.ndarray | None) -> None:
+        """Write one shard of ``lv`` at ``origin``: ``block``, or all inside (None); an empty one is not
+        written (it reads as the fill value)."""
+        assert lv.array is not None
+        data = lv.array.full() if block is None else lv.array.encode(block)
+        if data is None:  # empty: not written
             return
-        if full:
-            self.full_shards.write(lv.array, origin, self.place)
-        else:
-            e = lv.edge
-            lv.array[origin[0]:origin[0] + e, origin[1]:origin[1] + e, origin[2]:origin[2] + e] = block
+        self.place.write(lv.array.key(origin // lv.edge), data)
         self.written.append(f"{lv.array.path}/{'/'.join(map(str, (origin // lv.edge).tolist()))}")
 
     def finish(self) -> None:
@@ -214,12 +202,10 @@ def store_task(target: str, layout: Layout, task: int, cell: Any, voxels: TaskVo
     """Write one task's shards from what it found (``voxels``; ``full``: its octant lies inside, every
     brick full) and its part, into the store at ``target`` (:func:`implc.files.store_place.place_of`);
     the summary the caller assembles the store from."""
-    import zarr
     t0 = time.perf_counter()
     place = place_of(target)
     depth, shift = layout.depth, layout.depth - layout.brick_level
-    group = zarr.open_group(place.url, mode="r+")
-    writer = _TaskWriter(group, layout, place, _FULL_SHARDS)
+    writer = _TaskWriter(_encoders(place.url, layout), layout, place)
     coords, normals, inside = voxels.coords, voxels.normals, voxels.inside
     fine = inside[inside[:, 3] > layout.brick_level] if len(inside) else inside
     coarse = inside[inside[:, 3] <= layout.brick_level] if len(inside) else inside
@@ -236,17 +222,16 @@ def store_task(target: str, layout: Layout, task: int, cell: Any, voxels: TaskVo
             per = 1 << (layout.brick_level - int(row[3]))
             steps = np.array(list(np.ndindex(per, per, per)), np.int64).reshape(-1, 3)
             full_bricks = np.concatenate([full_bricks, row[:3].astype(np.int64) * per + steps])
-    voxel_bricks = coords.astype(np.int64) >> shift
-    fine_bricks = first_cells(fine, depth) >> shift if len(fine) else np.empty((0, 3), np.int64)
-    all_bricks = np.concatenate([voxel_bricks, fine_bricks, full_bricks])
-    keys = morton_codes(all_bricks) if len(all_bricks) else np.empty(0, np.uint64)
+    # the rows come in Morton order, so each brick's rows are one run: the runs' heads name the bricks
+    v_heads, v_spans = _brick_runs(coords.astype(np.int64) >> shift)
+    f_heads, f_spans = _brick_runs(first_cells(fine, depth) >> shift if len(fine) else np.empty((0, 3), np.int64))
+    candidates = np.concatenate([v_heads, f_heads, full_bricks])
+    keys = morton_codes(candidates) if len(candidates) else np.empty(0, np.uint64)
     unique_keys, first = np.unique(keys, return_index=True)
-    bricks = all_bricks[first]
-    vkeys = keys[:len(voxel_bricks)]
-    fkeys = keys[len(voxel_bricks):len(voxel_bricks) + len(fine_bricks)]
-    full_keys = set(keys[len(voxel_bricks) + len(fine_bricks):].tolist())
-    v_rows = np.searchsorted(vkeys, unique_keys, side="left"), np.searchsorted(vkeys, unique_keys, side="right")
-    f_rows = np.searchsorted(fkeys, unique_keys, side="left"), np.searchsorted(fkeys, unique_keys, side="right")
+    bricks = candidates[first]
+    full_keys = set(keys[len(v_heads) + len(f_heads):].tolist())
+    v_rows = _rows_of(keys[:len(v_heads)], v_spans, unique_keys)
+    f_rows = _rows_of(keys[len(v_heads):len(v_heads) + len(f_heads)], f_spans, unique_keys)
     listed = []  # bricks holding rows (voxels or fine octants), with their row counts
     for b, key in enumerate(unique_keys.tolist()):
         v0, v1, f0, f1 = v_rows[0][b], v_rows[1][b], f_rows[0][b], f_rows[1][b]
@@ -273,7 +258,36 @@ def store_task(target: str, layout: Layout, task: int, cell: Any, voxels: TaskVo
     return summary
 
 
-_FULL_SHARDS = _FullShards()  # per process: the encoded full shard of each shape, made on first use
+@functools.lru_cache(maxsize=4)
+def _encoders(url: str, layout: Layout) -> dict[str, ShardEncoder]:
+    """The shard encoders of the arrays the tasks write (the occupancy and the finer levels of detail) of
+    the store at ``url``, made once per process for all its tasks: their metadata, which ``layout``
+    fixes, does not change during a run, and opening the arrays took as long as painting a task's bricks."""
+    import zarr
+    group = zarr.open_group(url, mode="r+")
+    names = ["occupancy"] + [f"lod/{k}" for k in range(layout.client_level + 1, layout.depth)]
+    return {name: ShardEncoder(group[name]) for name in names}
+
+
+def _brick_runs(bricks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The bricks of rows in Morton order (each brick's rows one run): each run's brick and its (first,
+    end) rows."""
+    if not len(bricks):
+        return bricks.reshape(0, 3), np.empty((0, 2), np.int64)
+    change = np.flatnonzero(np.any(bricks[1:] != bricks[:-1], axis=1)) + 1
+    starts = np.concatenate([[0], change])
+    return bricks[starts], np.stack([starts, np.concatenate([change, [len(bricks)]])], axis=1)
+
+
+def _rows_of(run_keys: np.ndarray, spans: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each brick key of ``keys``, the (first, end) rows of its run among ``run_keys`` (sorted), or an
+    empty span where it has none."""
+    at = np.searchsorted(run_keys, keys)
+    found = at < len(run_keys)
+    found[found] = run_keys[at[found]] == keys[found]
+    first, end = np.zeros(len(keys), np.int64), np.zeros(len(keys), np.int64)
+    first[found], end[found] = spans[at[found], 0], spans[at[found], 1]
+    return first, end
 
 
 def _write_task(recipe: SurfaceRecipe, folder: str, layout: Layout, options: dict, task: int, cell, full: bool,
@@ -312,8 +326,11 @@ def _write_rows(folder: str, family: str, shard: int, spans: list) -> int:
         with _part(place, task) as part:
             for block, member in zip(blocks, members):
                 block[a - lo:b - lo] = part[member][a - start:b - start]
-    for array, block in zip(arrays, blocks):
-        array[lo:hi] = block
+    for array, block in zip(arrays, blocks):  # encoded here: zarr's own writes take turns on one thread
+        encoder = ShardEncoder(array)
+        data = encoder.encode(block)
+        if data is not None:
+            place.write(encoder.key((shard, 0)), data)
     return hi - lo
 
 
