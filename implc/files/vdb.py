@@ -90,12 +90,21 @@ def _offset(coords: np.ndarray, child_log2: int, log2dim: int) -> np.ndarray:
 
 def _order_key(origins: np.ndarray) -> np.ndarray:
     """Sort key giving OpenVDB's order of nodes (root table by (x, y, z), then children by offset), for
-    voxel-coordinate origins of non-negative cells below 2^21."""
-    o = origins.astype(np.int64)
-    root = o >> UPPER
-    key = (root[:, 0] << 18) | (root[:, 1] << 9) | root[:, 2]
-    key = (key << 15) | _offset(o, LOWER, UPPER - LOWER)
-    return (key << 12) | _offset(o, LEAF, LOWER - LEAF)
+    voxel-coordinate origins of non-negative cells below 2^21. Computed a block of rows at a time, axis by
+    axis: temporaries of the whole array cost more than the arithmetic."""
+    key = np.empty(len(origins), np.int64)
+    step = LEAF_CHUNK * 64
+    for a in range(0, len(origins), step):
+        o = origins[a:a + step]
+        k = np.zeros(len(o), np.int64)
+        for axis in range(3):
+            c = o[:, axis].astype(np.int64)
+            shift = 2 - axis  # x the most significant of the three at each level
+            k |= (c >> UPPER) << (27 + 9 * shift)
+            k |= ((c >> LOWER) & ((1 << (UPPER - LOWER)) - 1)) << (12 + 5 * shift)
+            k |= ((c >> LEAF) & ((1 << (LOWER - LEAF)) - 1)) << (4 * shift)
+        key[a:a + step] = k
+    return key
 
 
 def _blocks(inside: np.ndarray, depth: int, lo_log2: int, hi_log2: int) -> np.ndarray:
@@ -147,16 +156,20 @@ class _Leaves:
         self.dtype, self.width = dtype, width
         self.value_size = np.dtype(dtype).itemsize * width
         self.run_starts, run_origins = runs.starts, runs.origins
-        cube_origins = (cubes >> LEAF) << LEAF
-        keys = np.concatenate([_order_key(run_origins), _order_key(cube_origins)])
+        run_keys = _order_key(run_origins)
+        # the cubes grouped by leaf (one sort), each leaf's key computed once
+        cube_keys = _order_key((cubes >> LEAF) << LEAF)
+        order = np.argsort(cube_keys, kind="stable")
+        self.cubes, self.cube_log2, cube_keys = cubes[order], cube_log2[order], cube_keys[order]
+        heads = np.flatnonzero(np.r_[True, cube_keys[1:] != cube_keys[:-1]]) if len(cube_keys) else \
+            np.empty(0, np.int64)
+        keys = np.concatenate([run_keys, cube_keys[heads]])
         self.keys, first = np.unique(keys, return_index=True)
-        self.origins = np.concatenate([run_origins, cube_origins])[first]
-        run_rank = np.searchsorted(self.keys, keys[:len(run_origins)])
+        self.origins = np.concatenate([run_origins, (self.cubes[heads] >> LEAF) << LEAF])[first]
+        run_rank = np.searchsorted(self.keys, run_keys)
         self.run_order = np.argsort(run_rank, kind="stable")
         self.run_rank = run_rank[self.run_order]
-        cube_rank = np.searchsorted(self.keys, keys[len(run_origins):])
-        order = np.argsort(cube_rank, kind="stable")
-        self.cubes, self.cube_log2, self.cube_rank = cubes[order], cube_log2[order], cube_rank[order]
+        self.cube_rank = np.repeat(np.searchsorted(self.keys, cube_keys[heads]), np.diff(np.r_[heads, len(cube_keys)]))
 
     def __len__(self) -> int:
         return len(self.keys)
@@ -301,12 +314,25 @@ def _transform(w: _Writer, bounds, depth: int):
         w.pack("ddd", *map(float, vec))
 
 
-def _grid_metadata(name, grid_class, value_type, firsts, lasts, extra=()):
-    """A grid's metadata; its bounding box from the (n, 3) first and last cells of each piece of it."""
-    lows = [np.asarray(f, np.int64).reshape(-1, 3).min(axis=0) for f in firsts if len(f)]
-    highs = [np.asarray(e, np.int64).reshape(-1, 3).max(axis=0) for e in lasts if len(e)]
-    lo = np.min(lows, axis=0) if lows else np.zeros(3, np.int64)
-    hi = np.max(highs, axis=0) if highs else np.zeros(3, np.int64)
+def _box(pieces) -> tuple[np.ndarray, np.ndarray]:
+    """The first and last cells of the cubes of ``pieces``: (first cells (n, 3), their edges' log2 (n,) or
+    one for all), a block of rows at a time."""
+    lows, highs = [], []
+    for firsts, edge_log2 in pieces:
+        for a in range(0, len(firsts), LEAF_CHUNK * 64):
+            block = firsts[a:a + LEAF_CHUNK * 64].astype(np.int64)
+            edge = np.left_shift(1, np.asarray(edge_log2 if np.ndim(edge_log2) == 0 else edge_log2[a:a + len(block)],
+                                               np.int64))
+            lows.append(block.min(axis=0))
+            highs.append((block + (np.reshape(edge, (-1, 1)) - 1)).max(axis=0))
+    if not lows:
+        return np.zeros(3, np.int64), np.zeros(3, np.int64)
+    return np.min(lows, axis=0), np.max(highs, axis=0)
+
+
+def _grid_metadata(name, grid_class, value_type, box, extra=()):
+    """A grid's metadata, its bounding box ``box`` (:func:`_box`)."""
+    lo, hi = box
     return [_string_meta("class", grid_class), _string_meta("creator", "implc"),
             ("file_bbox_max", "vec3i", struct.pack("<iii", *map(int, hi))),
             ("file_bbox_min", "vec3i", struct.pack("<iii", *map(int, lo))),
@@ -323,7 +349,7 @@ def save_vdb(voxels, path) -> Path:
     inside = voxels.inside if voxels.inside is not None else np.empty((0, 4), dtype=np.int32)
     size_log2 = depth - inside[:, 3].astype(np.int64)
     small = size_log2 < LEAF
-    cubes = inside[small][:, :3].astype(np.int64) << size_log2[small][:, None]
+    cubes = np.left_shift(inside[small, :3].astype(np.uint32), size_log2[small, None].astype(np.uint32))
     tiles = {LEAF: _blocks(inside, depth, LEAF, LOWER), LOWER: _blocks(inside, depth, LOWER, UPPER),
              UPPER: _blocks(inside, depth, UPPER, 64)}
     runs = _Runs(coords)
@@ -331,12 +357,12 @@ def save_vdb(voxels, path) -> Path:
                               np.float32, 1), tiles, struct.pack("<f", INSIDE_VALUE), struct.pack("<f", 0.0))
     normals = _Grid(_Leaves(runs, np.asarray(voxels.normals, dtype=np.float32), np.empty((0, 3), np.int64),
                             np.empty(0, np.int64), 0.0, np.float32, 3), {}, b"", struct.pack("<fff", 0.0, 0.0, 0.0))
-    firsts = [coords, cubes] + list(tiles.values())  # each piece's first and last cells: the bounding box
-    lasts = [coords, cubes + (1 << size_log2[small])[:, None] - 1] + [t + ((1 << s) - 1) for s, t in tiles.items()]
+    voxel_box = _box([(coords, 0)])
     grids = [("occupancy", "Tree_float_5_4_3", occupancy,
-              _grid_metadata("occupancy", "fog volume", "float", firsts, lasts)),
+              _grid_metadata("occupancy", "fog volume", "float",
+                             _box([(coords, 0), (cubes, size_log2[small])] + [(t, s) for s, t in tiles.items()]))),
              ("normals", "Tree_vec3s_5_4_3", normals,
-              _grid_metadata("normals", "unknown", "vec3s", [coords], [coords],
+              _grid_metadata("normals", "unknown", "vec3s", voxel_box,
                              [_string_meta("vector_type", "covariant normalize")]))]
     with replacing(path) as tmp, open(tmp, "wb") as f:
         w = _Writer(f)

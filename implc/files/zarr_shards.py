@@ -81,8 +81,8 @@ class ShardEncoder:
         for coords in self.order:
             where = tuple(slice(c * n, (c + 1) * n) for c, n in zip(coords, self.chunk))
             chunk = np.ascontiguousarray(block[where], self.dtype)
-            if np.array_equal(chunk, np.broadcast_to(self.fill, chunk.shape)):
-                continue
+            if not chunk.any() if self.fill == 0 else np.array_equal(chunk, np.broadcast_to(self.fill, chunk.shape)):
+                continue  # all the fill value (for 0: any() is the same test, and faster)
             data = bytes(self.compressor.encode(chunk))
             index[tuple(coords)] = (offset, len(data))
             pieces.append(data)

@@ -36,6 +36,8 @@ READ_BACK = textwrap.dedent("""
         entry = {"active_voxels": int(grid.activeVoxelCount()), "on_values_by_depth": depths,
                  "values": values, "active": active, "class": str(grid.gridClass),
                  "vector_type": str(grid.metadata.get("vector_type", "")),
+                 "file_bbox": [list(grid.metadata["file_bbox_min"]), list(grid.metadata["file_bbox_max"])],
+                 "active_bbox": [list(c) for c in grid.evalActiveVoxelBoundingBox()],
                  "world": [list(grid.transform.indexToWorld(tuple(map(float, c)))) for c in query["cells"][:8]]}
         n = int(query["dense"])
         if n:
@@ -103,6 +105,8 @@ def test_solid_reads_back_as_the_voxelization(reference, tmp_path, expr, bounds)
     assert occupancy["active_voxels"] == len(voxels) + voxels.inside_voxels()
     assert occupancy["on_values_by_depth"].get("2", 0) == _lower_tile_count(voxels) > 0  # inside 8³ blocks as tiles
     assert occupancy["class"] == "fog volume"
+    assert occupancy["file_bbox"] == occupancy["active_bbox"]  # the metadata's box is the active voxels' box
+    assert normals["file_bbox"] == normals["active_bbox"]
     # normals: exactly the voxels' float32 normals, nothing else active
     assert np.array_equal(np.array(normals["values"], dtype=np.float32), voxels.normals)
     assert normals["active_voxels"] == len(voxels) and normals["vector_type"] == "covariant normalize"
