@@ -69,6 +69,10 @@ class StorePlace:
         """The object ``name`` with ``data``, all of it or (a crash in the middle) none of it."""
         raise NotImplementedError
 
+    def open(self, name: str) -> Any:
+        """The object ``name`` as a seekable binary file, read as it is asked for."""
+        raise NotImplementedError
+
     def exists(self, name: str = "") -> bool:
         raise NotImplementedError
 
@@ -101,6 +105,11 @@ class FolderPlace(StorePlace):
         path = self._path(name)
         regular_file(path, StoreError, "store file")
         return path.read_bytes()
+
+    def open(self, name: str) -> Any:
+        path = self._path(name)
+        regular_file(path, StoreError, "store file")
+        return open(path, "rb")
 
     def write(self, name: str, data: bytes) -> None:
         path = self._path(name)
@@ -180,6 +189,10 @@ class ObjectPlace(StorePlace):
     def read(self, name: str) -> bytes:
         with self._named():
             return self.fs.cat_file(self._path(name))
+
+    def open(self, name: str) -> Any:
+        with self._named():
+            return self.fs.open(self._path(name), "rb")
 
     def write(self, name: str, data: bytes) -> None:
         with self._named():

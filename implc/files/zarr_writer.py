@@ -187,9 +187,12 @@ def _trusted_part(place: StorePlace, task: int) -> bytes | None:
     return None
 
 
-def _part(place: StorePlace, task: int) -> Any:
-    """A finished task's part, opened (``with _part(place, task) as part: part["coords"]``)."""
-    return np.load(io.BytesIO(place.read(_part_name(task))))
+@contextlib.contextmanager
+def _part(place: StorePlace, task: int) -> Iterator[Any]:
+    """A finished task's part, opened (``with _part(place, task) as part: part["coords"]``): its members are
+    read as they are asked for (the caller of the small ones does not read the rows)."""
+    with place.open(_part_name(task)) as f, np.load(f) as part:
+        yield part
 
 
 def _has_parts(place: StorePlace) -> bool:
