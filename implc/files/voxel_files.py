@@ -98,7 +98,8 @@ def _check_readable(path: Path) -> str:
 def load(path: str | os.PathLike[str], region: Any = None) -> Voxels:
     """The voxels of an ``.npz`` (:func:`load_npz`) or of a Zarr store (``.zarr``: all, or ``region``,
     cell ranges ((i0, i1), (j0, j1), (k0, k1)): :func:`implc.files.zarr_store.load_zarr`)."""
-    if is_url(path) or Path(path).is_dir():
+    path = target_of(path)  # a store's URL as given, file:// as its path
+    if isinstance(path, str) or path.is_dir():
         from .zarr_store import load_zarr
         voxels = load_zarr(path, region)  # checked as an .npz is: a damaged store must not reach native code
         coords, normals, depth, bounds = _validated(path, voxels.coords, voxels.normals, np.asarray(voxels.depth),

@@ -139,6 +139,18 @@ def test_nothing_is_replaced_at_a_url(memory, small_bricks, monkeypatch):
     assert not fs.exists(f"{root}/failed.zarr")
 
 
+def test_a_file_url_is_a_folder(tmp_path, small_bricks):
+    """file:// URLs are local folders, written through a .partial folder and renamed as plain paths are."""
+    surface = implc.compile(shapes.torus(0.5, 0.2))
+    written = zarr_writer.write_zarr(surface, 5, f"file://{tmp_path}/t.zarr")
+    assert written.path == tmp_path / "t.zarr" and (tmp_path / "t.zarr" / "zarr.json").is_file()
+    zarr_writer.write_zarr(surface, 5, tmp_path / "p.zarr")
+    assert_same_store(tmp_path / "p.zarr", tmp_path / "t.zarr")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.zarr", "t.zarr"]
+    np.testing.assert_array_equal(voxel_files.load(f"file://{tmp_path}/t.zarr").coords,
+                                  zarr_store.load_zarr(tmp_path / "p.zarr").coords)
+
+
 @pytest.mark.parametrize("target,words", [
     ("s3://key:secret@bucket/run.zarr", "carry no credentials"),
     ("nosuchprotocol://bucket/run.zarr", "cannot reach"),
