@@ -305,7 +305,7 @@ def _open(path: str | os.PathLike[str]) -> tuple[Any, dict]:
     manifest = about.get("manifest")
     if not isinstance(manifest, dict) or manifest.get("complete") is not True:
         raise StoreError(f"{path}: an incomplete implc Zarr store (no manifest: the run that wrote it stopped; "
-                         "'implc voxelize ... --resume' finishes it from NAME.partial)")
+                         "'implc voxelize ... --resume' finishes it: from NAME.partial, or under its URL)")
     counts = ("tasks", "voxels", "inside_octants", "inside_voxels", "bricks", "shards")
     n = 1 << depth
     if not all(type(manifest.get(name)) is int and 0 <= manifest[name] <= n**3 for name in counts):

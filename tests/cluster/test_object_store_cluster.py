@@ -10,17 +10,16 @@ import subprocess
 import sys
 import time
 
-import numpy as np
 import pytest
 
 import implc
 from implc.cli.commands import main
 from implc.errors import StoreError
-from implc.files import scene, voxel_files, zarr_store, zarr_writer
+from implc.files import scene, zarr_store, zarr_writer
 
 from ..support.cluster import Cluster
 from ..support.s3 import SECRET, s3  # noqa: F401 - the fixture
-from ..support.stores import assert_same_store, store_objects
+from ..support.stores import assert_same_reads, assert_same_store, store_objects
 
 pytestmark = pytest.mark.slow
 
@@ -58,12 +57,7 @@ def test_a_cluster_writes_the_folders_store_to_s3(cluster, s3, tmp_path, capfd):
     assert main(["voxelize", "paper_blobs", "--depth", "9", "--solid", "-o", url, "--cluster", cluster.address]) == 0
     assert_same_store(here, url)
     assert not any(name.startswith("_parts") for name in _names(url))
-    region = ((100, 300), (0, 512), (250, 260))
-    for read in (None, region):
-        a, b = zarr_store.load_zarr(here, read), voxel_files.load(url, read)
-        np.testing.assert_array_equal(a.coords, b.coords)
-        np.testing.assert_array_equal(a.normals, b.normals)
-        np.testing.assert_array_equal(a.inside, b.inside)
+    assert_same_reads(here, url, ((100, 300), (0, 512), (250, 260)))
     assert main(["info", url]) == 0
     for name, source in (("here", str(here)), ("there", url)):
         assert main(["view", source, "--export", str(tmp_path / f"{name}.view"), "--quiet"]) == 0

@@ -18,7 +18,7 @@ from implc.compiler.symbols import x, y, z
 from implc.errors import StoreError
 from implc.files import voxel_files, zarr_store, zarr_writer
 
-from ..support.stores import arrays, assert_same_store, store_objects
+from ..support.stores import arrays, assert_same_reads, assert_same_store, store_objects
 
 HOLLOW = Max(shapes.box((0.7, 0.7, 0.7)), -(sqrt(x**2 + y**2 + z**2) - Rational(3, 10)))
 
@@ -50,12 +50,7 @@ def test_a_store_at_a_url_is_the_folders_store(tmp_path, memory, small_bricks):
     assert written.path == url and written.tasks > 8
     assert_same_store(folder, url)
     assert not any(name.startswith("_parts") for name in store_objects(url)), "the parts were left"
-    region = ((5, 35), (0, 23), (17, 64))
-    for read in (None, region):
-        here, there = zarr_store.load_zarr(folder, read), voxel_files.load(url, read)
-        np.testing.assert_array_equal(there.coords, here.coords)
-        np.testing.assert_array_equal(there.normals, here.normals)
-        np.testing.assert_array_equal(there.inside, here.inside)
+    assert_same_reads(folder, url, ((5, 35), (0, 23), (17, 64)))
     voxels = zarr_store.load_zarr(folder)
     voxel_files.save(voxels, f"{memory}/saved.zarr")
     zarr_writer.save_zarr(voxels, tmp_path / "saved.zarr")

@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+import numpy as np
 import zarr
 
 
@@ -38,3 +39,14 @@ def assert_same_store(a, b):
         assert about_a[key] == about_b[key]
     for key in ("voxels", "inside_octants", "inside_voxels", "bricks", "shards", "tasks"):
         assert about_a["manifest"][key] == about_b["manifest"][key], key
+
+
+def assert_same_reads(a, b, region):
+    """The voxels, normals and inside octants read from the stores ``a`` and ``b`` (a folder, a URL) equal,
+    whole and in ``region``."""
+    from implc.files import voxel_files
+    for read in (None, region):
+        here, there = voxel_files.load(a, read), voxel_files.load(b, read)
+        np.testing.assert_array_equal(there.coords, here.coords)
+        np.testing.assert_array_equal(there.normals, here.normals)
+        np.testing.assert_array_equal(there.inside, here.inside)
