@@ -165,14 +165,16 @@ class ObjectPlace(StorePlace):
 
     @contextlib.contextmanager
     def _named(self):
-        """The filesystem's errors with the store's URL in them ("Access Denied" alone names nothing); a
-        missing object stays a FileNotFoundError."""
+        """The filesystem's errors as one :class:`StoreError` naming the store's URL ("Access Denied" alone
+        names nothing; the libraries raise their own kinds too: botocore's EndpointConnectionError and
+        NoCredentialsError are not OSErrors); a missing object stays a FileNotFoundError."""
         try:
             yield
         except FileNotFoundError:
             raise
-        except OSError as exc:
-            raise StoreError(f"{self.url}: {printable(str(exc), 200)}") from None
+        except Exception as exc:  # noqa: BLE001 - whatever the object store's library raises, named
+            kind = "" if isinstance(exc, OSError) else f"{type(exc).__name__}: "
+            raise StoreError(f"{self.url}: {kind}{printable(str(exc), 200)}") from None
 
     def check_bucket(self) -> None:
         """Refuse, naming it, a bucket (the URL's first component, on the stores that have buckets) that

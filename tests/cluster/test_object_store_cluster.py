@@ -113,3 +113,23 @@ def test_a_missing_bucket_is_one_line(s3, tmp_path, capsys):  # noqa: F811
     code = main(["voxelize", "--expr", "x - 0.1", "--depth", "5", "-o", "s3://implc-no-such-bucket/x.zarr", "--quiet"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "bucket 'implc-no-such-bucket' does not exist" in err, err
+
+
+def test_an_unreachable_endpoint_is_one_line(monkeypatch, capsys):
+    """No S3 server where AWS_ENDPOINT_URL points: botocore's own error (not an OSError), as one line."""
+    import socket
+
+    import s3fs
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]  # closed again: nothing listens there
+    monkeypatch.setenv("AWS_ENDPOINT_URL", f"http://127.0.0.1:{port}")
+    monkeypatch.setenv("AWS_ACCESS_KEY_ID", "implc-test-key")
+    monkeypatch.setenv("AWS_SECRET_ACCESS_KEY", SECRET)
+    s3fs.S3FileSystem.clear_instance_cache()
+    try:
+        code = main(["voxelize", "--expr", "x - 0.1", "--depth", "4", "-o", "s3://implc-bucket/x.zarr", "--quiet"])
+    finally:
+        s3fs.S3FileSystem.clear_instance_cache()
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Could not connect" in err and SECRET not in err, err
