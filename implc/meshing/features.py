@@ -1,5 +1,7 @@
 """Feature cells, where the analytic normals at the surface's crossings disagree (a crease or corner of
-Min/Max CSG): their cell and face points (dual contouring's QEF minimisers) and the fans around them."""
+Min/Max CSG): their cell and face points (dual contouring's QEF minimisers) and the fans around them. Every
+added point is placed where its sampled sign agrees with one of its cell's (or face's) corners where a
+place tried does (:func:`_joined`), so that the mesh's pieces are the grid samples' own."""
 
 from __future__ import annotations
 
@@ -16,6 +18,34 @@ QEF_CUTOFF = 0.01
 along those directions)."""
 POINT_MARGIN = 1.0 / 32
 """Cell and face points stay this fraction of the cell inside their cell or face."""
+NEAR_CORNER = 1.0 / 8
+"""Where a point's sign meets none of its corners', it is tried this fraction of the way from each corner
+toward the centre instead (1/16 of the cell from the corner along each axis: inside the margin)."""
+
+
+def _joined(grid: Grid, points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """``points`` (m, 3), each moved where F's sampled sign there agrees with the sign at one of its
+    ``corners`` (m, k, 3) at least, if it does not already: the centre of the corners first, then near
+    each corner in turn. A point whose sign meets none of its neighbours' would be a closed bubble of a few
+    triangles around it, a sign change of F at the point alone that the grid's samples do not show (Scene
+    2 had 298 of its 318 components so); a point that agrees with a corner shares its side's component.
+    Where no try agrees (F changes sign between every corner and the point), the point stays."""
+    m, k, _ = corners.shape
+    corner_in = grid.values(corners.reshape(-1, 3)).reshape(m, k) < 0  # NaN: outside, as the mesher takes it
+    lonely = np.flatnonzero(~np.any(corner_in == (grid.values(points) < 0)[:, None], axis=1))
+    if not len(lonely):
+        return points
+    points = points.copy()
+    centre = corners.mean(axis=1)
+    tries = [centre] + [corners[:, c] + (centre - corners[:, c]) * NEAR_CORNER for c in range(k)]
+    for t in tries:
+        if not len(lonely):
+            break
+        inside = grid.values(t[lonely]) < 0
+        agree = np.any(corner_in[lonely] == inside[:, None], axis=1)
+        points[lonely[agree]] = t[lonely[agree]]
+        lonely = lonely[~agree]
+    return points
 
 
 def fan_triangles(grid: Grid, index: KeyIndex, cells, signs, feature, cell_points: Points,
@@ -94,8 +124,10 @@ def place_points(grid, feature_cells, fanned_cells, index: KeyIndex, positions, 
     margin = (hi - lo) * POINT_MARGIN
     qef = np.clip(_qef(grid.runtime, p, nrm, ok), lo + margin, hi - margin)
     qef = np.where(ok.any(1)[:, None], qef, (lo + hi) / 2)
+    qef = _joined(grid, qef, grid.world(feature_cells[:, None] + CORNERS[None]))
     others = fanned_cells
-    centres = (grid.world(others) + grid.world(others + 1)) / 2
+    centres = _joined(grid, (grid.world(others) + grid.world(others + 1)) / 2,
+                      grid.world(others[:, None] + CORNERS[None]))
     ids = np.concatenate([grid.cell_key(feature_cells), grid.cell_key(others)])
     first = np.unique(ids, return_index=True)[1]  # a feature cell's QEF point wins over its centre
     cell_points = Points(grid, ids[first], np.concatenate([qef, centres])[first])
@@ -118,6 +150,11 @@ def place_points(grid, feature_cells, fanned_cells, index: KeyIndex, positions, 
             point = np.clip(_qef(grid.runtime, p, nrm, ok, project_out=axis), lo + margin, hi - margin)
             point = np.where(ok.any(1)[:, None], point, (lo + hi) / 2)
             point[:, axis] = lo[:, axis]
+            square = feature_cells + side * np.eye(3, dtype=np.int64)[axis]
+            steps = np.zeros((4, 3), np.int64)
+            steps[[1, 2], b] = 1
+            steps[[2, 3], c] = 1
+            point = _joined(grid, point, grid.world(square[:, None] + steps[None]))
             face_ids.append(ids)
             face_pos.append(point)
     ids, first = np.unique(np.concatenate(face_ids), return_index=True)

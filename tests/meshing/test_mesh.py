@@ -338,11 +338,15 @@ def test_a_slab_across_an_axis_mid_cell_passes_the_exact_intersection_test():
     check_mesh(implc.compile(expr, ((-0.39, 0.55), (-0.75, 0.53), (-0.56, 0.58))), 6, numpy_f(expr))
 
 
-def test_a_cap_around_an_inside_face_point_where_no_corner_of_the_face_is_inside():
+def test_a_cap_around_an_inside_face_point_where_no_corner_of_the_face_is_inside(monkeypatch):
     """Found by fuzzing (test_fuzz_random_csg_meshes): a crease reaching a face of the bounds where F is
     positive at every grid corner, but negative at the face point of a feature cell's square there. The
     fan's tetrahedra reached the face around that point and the face got no cap (it was skipped for having
-    no negative corner): 8 edges in one face only. The cap now closes it."""
+    no negative corner): 8 edges in one face only. The cap now closes it. (Points are now moved where
+    their sign meets a corner's, which avoids this case here; it remains where no place tried agrees, so
+    the points are left where the QEF put them, as then.)"""
+    from implc.meshing import features
+    monkeypatch.setattr(features, "_joined", lambda grid, points, corners: points)
     r16 = sympy.Rational(1, 16)
     expr = sympy.Max(sympy.Min(sympy.Abs(z + sympy.Rational(3, 8)) - sympy.Rational(1, 32),
                                (43 * x + 43 * y + 38 * z - 3) / 100),

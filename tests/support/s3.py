@@ -59,7 +59,8 @@ class S3Server:
 def s3(tmp_path_factory):
     """The server, with this process's environment pointing at it for the module's tests (s3fs's cached
     filesystems forgotten on the way in and out, so that none reaches another endpoint)."""
-    pytest.importorskip("s3fs", reason="s3fs is part of the test extra: pip install -e '.[test]'")
+    for module in ("s3fs", "moto"):
+        pytest.importorskip(module, reason=f"{module} comes with the s3test extra: pip install -e '.[s3test]'")
     import s3fs
     server = S3Server(tmp_path_factory.mktemp("s3"))
     saved = {name: os.environ.get(name) for name in server.env}
