@@ -223,8 +223,9 @@ def run_tasks(client: Any, function: Callable[..., Any], tasks: Sequence[tuple],
     """``function(*shared, *task)`` for every task: on ``client``'s workers (None: here, ``threads`` at a time),
     results in the tasks' order; ``on_result`` sees each as it arrives. ``shared`` travels with every
     task (a recipe is text: small, and a worker that joins late needs nothing else). Ctrl-C or a
-    failure cancels the tasks still queued or running before it propagates; a cluster without workers for
-    ``no_workers_seconds`` and a scheduler that goes away are each a ClusterError."""
+    failure cancels the tasks still queued before it propagates (one already running finishes: Dask
+    cannot stop it); a cluster without workers for ``no_workers_seconds`` and a scheduler that goes away
+    are each a ClusterError."""
     if client is None:
         return _run_here(function, tasks, shared, on_result, threads)
     results: list[Any] = [None] * len(tasks)
