@@ -59,8 +59,6 @@ class StorePlace:
 
     url: str
     """What zarr opens the store's group by (a local path, or the URL)."""
-    remote: bool
-    """An object store: nothing is renamed, the manifest alone commits the store."""
 
     def read(self, name: str) -> bytes:
         raise NotImplementedError
@@ -91,8 +89,6 @@ class StorePlace:
 
 class FolderPlace(StorePlace):
     """A store in a local folder (the files are untrusted input: links and FIFOs are refused)."""
-
-    remote = False
 
     def __init__(self, folder: Path):
         self.folder = Path(folder)
@@ -137,8 +133,6 @@ class FolderPlace(StorePlace):
 
 class ObjectPlace(StorePlace):
     """A store under a URL of an fsspec filesystem (an object store, or ``memory://`` in tests)."""
-
-    remote = True
 
     def __init__(self, url: str):
         parts = urlsplit(url)
@@ -227,8 +221,3 @@ class ObjectPlace(StorePlace):
 def place_of(target: Any) -> StorePlace:
     """The place a target names: an fsspec URL, or a local folder (a path or ``file://`` URL)."""
     return ObjectPlace(target) if is_url(target) else FolderPlace(local_path(target))
-
-
-def shown(target: Any) -> str:
-    """A target as messages name it."""
-    return str(target) if is_url(target) else str(local_path(target))

@@ -314,20 +314,25 @@ def _transform(w: _Writer, bounds, depth: int):
         w.pack("ddd", *map(float, vec))
 
 
-def _box(pieces) -> tuple[np.ndarray, np.ndarray]:
-    """The first and last cells of the cubes of ``pieces``: (first cells (n, 3), their edges' log2 (n,) or
-    one for all), a block of rows at a time."""
+def _extent(firsts: np.ndarray, edge_log2) -> tuple[np.ndarray, np.ndarray] | None:
+    """The first and last cells of the cubes whose first cells are ``firsts`` (n, 3) and whose edges'
+    log2 are ``edge_log2`` ((n,), or one for all), a block of rows at a time; None for no cube."""
     lows, highs = [], []
-    for firsts, edge_log2 in pieces:
-        for a in range(0, len(firsts), LEAF_CHUNK * 64):
-            block = firsts[a:a + LEAF_CHUNK * 64].astype(np.int64)
-            edge = np.left_shift(1, np.asarray(edge_log2 if np.ndim(edge_log2) == 0 else edge_log2[a:a + len(block)],
-                                               np.int64))
-            lows.append(block.min(axis=0))
-            highs.append((block + (np.reshape(edge, (-1, 1)) - 1)).max(axis=0))
-    if not lows:
+    for a in range(0, len(firsts), LEAF_CHUNK * 64):
+        block = firsts[a:a + LEAF_CHUNK * 64].astype(np.int64)
+        edge = np.left_shift(1, np.asarray(edge_log2 if np.ndim(edge_log2) == 0 else edge_log2[a:a + len(block)],
+                                           np.int64))
+        lows.append(block.min(axis=0))
+        highs.append((block + (np.reshape(edge, (-1, 1)) - 1)).max(axis=0))
+    return (np.min(lows, axis=0), np.max(highs, axis=0)) if lows else None
+
+
+def _box(extents) -> tuple[np.ndarray, np.ndarray]:
+    """The bounding box of the :func:`_extent` of each piece of a grid (zeros for an empty grid)."""
+    found = [e for e in extents if e is not None]
+    if not found:
         return np.zeros(3, np.int64), np.zeros(3, np.int64)
-    return np.min(lows, axis=0), np.max(highs, axis=0)
+    return np.min([lo for lo, _ in found], axis=0), np.max([hi for _, hi in found], axis=0)
 
 
 def _grid_metadata(name, grid_class, value_type, box, extra=()):
@@ -357,12 +362,13 @@ def save_vdb(voxels, path) -> Path:
                               np.float32, 1), tiles, struct.pack("<f", INSIDE_VALUE), struct.pack("<f", 0.0))
     normals = _Grid(_Leaves(runs, np.asarray(voxels.normals, dtype=np.float32), np.empty((0, 3), np.int64),
                             np.empty(0, np.int64), 0.0, np.float32, 3), {}, b"", struct.pack("<fff", 0.0, 0.0, 0.0))
-    voxel_box = _box([(coords, 0)])
+    voxels_extent = _extent(coords, 0)  # both grids' boxes hold it: one pass over the voxels
     grids = [("occupancy", "Tree_float_5_4_3", occupancy,
               _grid_metadata("occupancy", "fog volume", "float",
-                             _box([(coords, 0), (cubes, size_log2[small])] + [(t, s) for s, t in tiles.items()]))),
+                             _box([voxels_extent, _extent(cubes, size_log2[small])]
+                                  + [_extent(t, s) for s, t in tiles.items()]))),
              ("normals", "Tree_vec3s_5_4_3", normals,
-              _grid_metadata("normals", "unknown", "vec3s", voxel_box,
+              _grid_metadata("normals", "unknown", "vec3s", _box([voxels_extent]),
                              [_string_meta("vector_type", "covariant normalize")]))]
     with replacing(path) as tmp, open(tmp, "wb") as f:
         w = _Writer(f)

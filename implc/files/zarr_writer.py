@@ -53,7 +53,7 @@ from ..voxelizer.voxelize import (
     inside_voxel_count,
     volume_bounds,
 )
-from .store_place import FolderPlace, ObjectPlace, StorePlace, place_of, shown, target_of
+from .store_place import FolderPlace, ObjectPlace, StorePlace, place_of, target_of
 from .zarr_shards import ShardEncoder
 from .zarr_store import (
     STORE_KIND,
@@ -456,20 +456,20 @@ def _writing(target: Path | str, plan: dict, *, resume: bool) -> Iterator[StoreP
     about = _about_of(place)
     if about is None:
         if place.exists():
-            raise ValueError(f"{shown(target)} holds objects that are not an implc store: implc writes a store "
+            raise ValueError(f"{target} holds objects that are not an implc store: implc writes a store "
                              "only where nothing is (choose another URL, or remove them first)")
         if resume:
-            raise ValueError(f"nothing to resume: {shown(target)} holds nothing (a run that stops early keeps "
+            raise ValueError(f"nothing to resume: {target} holds nothing (a run that stops early keeps "
                              "its finished tasks there)")
     elif "manifest" in about:
-        raise ValueError(f"{shown(target)} holds a complete store{': nothing to resume' if resume else ''}; an "
+        raise ValueError(f"{target} holds a complete store{': nothing to resume' if resume else ''}; an "
                          "object store cannot replace one in a single step, so implc writes a new store only "
                          "where nothing is (remove it first, or choose another URL)")
     elif not resume:
-        raise ValueError(f"{shown(target)} holds an unfinished run: finish it with --resume (resume=True), or "
+        raise ValueError(f"{target} holds an unfinished run: finish it with --resume (resume=True), or "
                          "remove it to start over")
     elif about.get("plan") != plan:
-        raise ValueError(f"{shown(target)} holds another run (another surface, depth or options): remove it to "
+        raise ValueError(f"{target} holds another run (another surface, depth or options): remove it to "
                          "start over")
     try:
         yield place

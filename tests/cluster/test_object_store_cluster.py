@@ -17,7 +17,7 @@ from implc.cli.commands import main
 from implc.errors import StoreError
 from implc.files import scene, zarr_store, zarr_writer
 
-from ..support.cluster import Cluster
+from ..support.cluster import Cluster, landed_after_interrupt
 from ..support.s3 import SECRET, s3  # noqa: F401 - the fixture
 from ..support.stores import assert_same_reads, assert_same_store, store_objects
 
@@ -95,16 +95,7 @@ def test_a_killed_worker_and_ctrl_c_then_resume_on_s3(cluster, s3, tmp_path):  #
     _, err = run.communicate(timeout=60)
     assert run.returncode == 130, err
     assert "--resume" in err and SECRET not in err
-    at_interrupt = _parts(url)
-    kept, deadline = at_interrupt, time.time() + 60
-    while True:  # the tasks running on the two workers finish (Dask cannot stop a running task); no more start
-        time.sleep(3)
-        now = _parts(url)
-        if now == kept or time.time() > deadline:
-            break
-        kept = now
-    assert _parts(url) == kept, "tasks went on after the interrupt"
-    assert len(set(kept) - set(at_interrupt)) <= 2, "more tasks finished after the interrupt than were running"
+    kept = landed_after_interrupt(lambda: _parts(url))
     assert 5 <= len(kept) < 52
     with pytest.raises(StoreError, match="incomplete"):
         zarr_store.load_zarr(url)

@@ -55,3 +55,20 @@ class Cluster:
             except subprocess.TimeoutExpired:  # a worker may wait for a scheduler already gone
                 process.kill()
                 process.wait()
+
+
+def landed_after_interrupt(landed, workers: int = 2) -> list:
+    """What ``landed()`` lists (the finished tasks' parts) once it stays the same for 3 s after an
+    interrupt (60 s at most): the tasks running on the workers at the interrupt finish, as Dask cannot
+    stop a running task, but no more start. Asserts both, and returns the listing."""
+    at_interrupt = kept = landed()
+    deadline = time.time() + 60
+    while True:
+        time.sleep(3)
+        now = landed()
+        if now == kept or time.time() > deadline:
+            break
+        kept = now
+    assert landed() == kept, "tasks went on after the interrupt"
+    assert len(set(kept) - set(at_interrupt)) <= workers, "more tasks finished after the interrupt than were running"
+    return kept
