@@ -47,11 +47,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .caps import cap_triangles, close_over_reached_faces
-from .features import fan_triangles, feature_cells, place_points
+from .dual import CELL_POINT, dual_rows, dual_triangles, dual_vertices, dual_witnesses
+from .features import _qef, fan_triangles, feature_cells, place_points
 from .grid import CORNERS_PER_CELL, NO_POINTS, Cells, Effort, Grid, KeyIndex, never
 from .proofs import regular
 from .simplify import SimplifyStats
-from .vertices import fill_normals, surface_vertices
+from .vertices import _unit, fill_normals, surface_vertices
 
 MAX_DEPTH = 14
 """The deepest grid contoured: vertex keys hold (2^depth + 1)³ corners times 64 kinds of edge."""
@@ -73,6 +74,8 @@ class MeshStats:
     regular_cells: int = 0
     unproven_cells: int = 0
     feature_cells: int = 0
+    dual_cells: int = 0
+    dual_counts: dict = field(default_factory=dict)
     added_cells: int = 0
     cap_triangles: int = 0
     triangles: int = 0
@@ -91,7 +94,7 @@ class MeshStats:
 
 
 def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bool = True, witnesses: bool = False,
-            effort: Effort = Effort()):
+            effort: Effort = Effort(), lean: bool = True):
     """The mesh of ``surface`` (an :class:`implc.Surface`) from the cells the voxelizer kept at ``depth``
     ((N, 3) cell indices): see the module's docstring for what it promises. ``features=False`` keeps the
     Kuhn split everywhere (creases chamfered). ``witnesses=True`` keeps, for each vertex, the ends of the
@@ -126,7 +129,9 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     t2 = time.perf_counter()
     vertices, normals, ends = surface_vertices(grid, index.keys(), NO_POINTS, NO_POINTS, witnesses)
     t3 = time.perf_counter()
-    feature_rows = feature_cells(runtime, todo.cells, kuhn, owner, normals) if features else []
+    feature_rows = feature_cells(runtime, todo.cells, kuhn, owner, normals) if features else np.zeros(0, np.int64)
+    if lean:  # a dual cell's crease is its QEF vertex's: only the others' are fanned
+        feature_rows = feature_rows[~dual_rows(grid, todo, np.zeros(0, bool))[feature_rows]]
     proven_rows = np.zeros(0, np.int64)  # rows of todo proven regular already (not proven again below)
     if len(feature_rows) and not surface.has_kinks:  # a smooth F: a crease only where its gradient may vanish
         bent_regular = regular(grid, todo.cells[feature_rows])
@@ -134,8 +139,12 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     stats.feature_cells = len(feature_rows)
     mesh = _Pieces(vertices, normals, ends, kuhn, owner, caps)
     del vertices, normals, ends, kuhn, owner, caps  # the pieces hold them, and let each go once it is joined
+    fanned = np.zeros(len(todo.cells), bool)
     if len(feature_rows):
-        stats.added_cells += _with_features(grid, todo, feature_rows, index, mesh)
+        added, fanned = _with_features(grid, todo, feature_rows, index, mesh)
+        stats.added_cells += added
+    if lean:
+        stats.dual_cells, stats.dual_counts = _with_dual(grid, todo, fanned, index, mesh, features)
     del index
     grid.forget_samples()
     stats.cap_triangles = sum(map(len, mesh.caps.values()))
@@ -225,10 +234,11 @@ class _Pieces:
         return out[0], out[1], faces, (out[2] if with_ends else None)
 
 
-def _with_features(grid, todo: Cells, feature_rows, index: KeyIndex, mesh: _Pieces) -> int:
+def _with_features(grid, todo: Cells, feature_rows, index: KeyIndex, mesh: _Pieces) -> tuple[int, np.ndarray]:
     """Fan the feature cells (rows of ``todo``) and their neighbours from cell and face points in place of
     their Kuhn split: their triangles in ``mesh`` replaced, the caps made again where a feature cell
-    touches the bounds, new vertices numbered on in ``index``. Returns the cells the signs added."""
+    touches the bounds, new vertices numbered on in ``index``. Returns (the cells the signs added, per row of
+    ``todo`` whether it is fanned or was added here: those keep the tetrahedral construction)."""
     feature_cells = todo.cells[feature_rows]
     feature_keys = np.sort(grid.cell_key(feature_cells))
 
@@ -264,6 +274,7 @@ def _with_features(grid, todo: Cells, feature_rows, index: KeyIndex, mesh: _Piec
     fan = fan_triangles(grid, index, todo.cells[rows], todo.signs[rows], is_feature(todo.cells[rows]),
                          cell_points, face_points, is_feature)
     mesh.more = [kuhn, fan]
+    fanned[before:] = True  # the cells the signs added keep the tetrahedral construction too
     # the caps again where a feature cell lies on a face of the bounds (its square fanned from a face point)
     redo = {(axis, side) for axis in range(3) for side in (0, 1)
             if np.any(feature_cells[:, axis] == side * (grid.n - 1))}
@@ -273,4 +284,30 @@ def _with_features(grid, todo: Cells, feature_rows, index: KeyIndex, mesh: _Piec
     keys = index.keys()[first_new:]
     vertices, normals, ends = surface_vertices(grid, keys, cell_points, face_points, mesh.ends is not None)
     mesh.add_vertices(vertices, normals, ends)
-    return added
+    return added, fanned
+
+
+def _with_dual(grid, todo: Cells, other, index: KeyIndex, mesh: _Pieces, sharp: bool):
+    """One vertex for each dual cell (:mod:`implc.meshing.dual`; ``other``: rows of ``todo`` that keep the
+    tetrahedral construction) in place of its tetrahedral triangles. Returns the dual cells and the dual
+    construction's counts."""
+    dual = dual_rows(grid, todo, other)
+    rows = np.flatnonzero(dual)
+    if not len(rows):
+        return 0, {}
+    first = mesh.vertices
+    cells = todo.cells[rows]
+    points = dual_vertices(grid, cells, index, first, mesh.normals,
+                           (lambda p, n, ok: _qef(grid.runtime, p, n, ok)) if sharp else None)
+    numbers = np.full(len(todo.cells), -1, np.int64)
+    numbers[rows] = index.number(grid.cell_key(cells) * 8 + CELL_POINT)
+    where = np.full((len(todo.cells), 3), np.nan)
+    where[rows] = points
+    faces, counts = dual_triangles(grid, todo, dual, numbers, where, index)
+    keep = ~dual[mesh.owner]
+    mesh.keep = keep if mesh.keep is None else mesh.keep & keep
+    mesh.more.append(faces)
+    normals = _unit(grid.gradients(points))
+    ends = dual_witnesses(grid, cells, todo.signs[rows]) if mesh.ends is not None else None
+    mesh.add_vertices(points, normals, ends)
+    return len(rows), counts

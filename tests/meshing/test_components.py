@@ -8,6 +8,7 @@ import pytest
 import implc
 from implc.files.scene import load as load_scene
 from implc.meshing import features
+from implc.meshing.contour import contour
 
 from ..support.components import components, lone_point_bubbles, sign_regions
 
@@ -23,10 +24,16 @@ def test_no_bubble_around_an_added_point(scene2, monkeypatch):
     no component is a bubble around one of them now; left where the QEF and the centres put them (the
     control), 90 were."""
     surface, bounds = scene2
-    mesh = implc.mesh(surface, 6, witnesses=True)
+    voxels = implc.voxelize(surface, 6)
+
+    def fanned():  # the tetrahedral construction everywhere: every crease cell fanned
+        return contour(surface, voxels.coords, 6, voxels.bounds, witnesses=True, lean=False)
+
+    mesh = fanned()
     assert mesh.stats.feature_cells > 0 and lone_point_bubbles(mesh, 6, bounds) == 0
+    assert lone_point_bubbles(implc.mesh(surface, 6, witnesses=True), 6, bounds) == 0
     monkeypatch.setattr(features, "_joined", lambda grid, points, corners: points)
-    assert lone_point_bubbles(implc.mesh(surface, 6, witnesses=True), 6, bounds) > 50
+    assert lone_point_bubbles(fanned(), 6, bounds) > 50
 
 
 def test_kuhn_components_are_the_borders_of_the_sampled_regions(scene2):

@@ -252,22 +252,31 @@ def edge_parameters(mesh):
     rows = np.flatnonzero(np.any(a != b, axis=1))
     a, b, v = a[rows], b[rows], mesh.vertices[rows]
     length = np.linalg.norm(b - a, axis=1)
-    return rows, length, np.einsum("ij,ij->i", v - a, b - a) / length**2
+    t = np.einsum("ij,ij->i", v - a, b - a) / length**2
+    on = np.all(np.abs(a + t[:, None] * (b - a) - v) <= 1e-12, axis=1)  # not a dual vertex (inside its cell)
+    return rows[on], length[on], t[on]
 
 
 @pytest.mark.parametrize("depth", [5, 7])
 def test_vertices_lie_on_a_ball_and_their_normals_are_its_normals_near_them(depth):
-    """A ball's distance and normal in closed form: every vertex on an edge lies on the sphere but for its
+    """A ball's distance and normal in closed form. The tetrahedral construction's vertices (on edges; the
+    dual vertices' QEF points come from them): every vertex on an edge lies on the sphere but for its
     nudge (NUDGE of the edge) and Newton's last step's error, quadratic in that step (at most ROOT_TOLERANCE
     of the edge): F = |p|² − r² is quadratic along an edge of length L, F'' = 2L² per unit of t, so after a
     Newton step s, F = L²s² and the point lies L²s² / 2r from the sphere: within ROOT_TOLERANCE² · L / 2r of
     the edge (measured: up to 0.49 of that); or, where the root
     lies within EDGE_MARGIN of an edge's end, at that margin. Its normal is the sphere's normal at a point at
-    most ROOT_TOLERANCE of the edge away (within that distance over r, in radians)."""
+    most ROOT_TOLERANCE of the edge away (within that distance over r, in radians).
+    The dual mesh (every crossed cell of a ball is dual): each vertex, where the tangent planes at its
+    cell's crossings meet, lies within the sagitta of a cell's diagonal D = √3·h (D² / 2r: a point of a
+    tangent plane that far from its tangency) of the sphere, give or take its crossings' own distance (up
+    to EDGE_MARGIN + NUDGE of the edge); its normal is F's gradient there, the sphere's normal there."""
     from implc.meshing.vertices import EDGE_MARGIN, NUDGE, ROOT_TOLERANCE
     r = np.sqrt(0.5)
-    mesh = implc.voxelize(implc.compile(x**2 + y**2 + z**2 - sympy.Rational(1, 2)), depth).mesh(witnesses=True)
+    surface = implc.compile(x**2 + y**2 + z**2 - sympy.Rational(1, 2))
+    mesh = _tetrahedral(surface, depth, witnesses=True)
     rows, length, t = edge_parameters(mesh)
+    assert len(rows) == len(mesh.vertices)
     v, n = mesh.vertices[rows], mesh.normals[rows]
     distance = np.abs(np.linalg.norm(v, axis=1) - r)
     at_margin = (t < EDGE_MARGIN + 2 * NUDGE) | (t > 1 - EDGE_MARGIN - 2 * NUDGE)
@@ -277,6 +286,13 @@ def test_vertices_lie_on_a_ball_and_their_normals_are_its_normals_near_them(dept
     assert np.all(distance[at_margin] <= (EDGE_MARGIN + NUDGE) * length[at_margin])
     angle = np.arccos(np.clip(np.einsum("ij,ij->i", n, v / np.linalg.norm(v, axis=1)[:, None]), -1, 1))
     assert np.all(angle <= ROOT_TOLERANCE * length / r)
+    dual = implc.mesh(surface, depth)
+    h = 2 / 2**depth
+    assert dual.stats.dual_cells == dual.stats.crossed_cells == len(dual.vertices)
+    radius = np.linalg.norm(dual.vertices, axis=1)
+    assert np.all(np.abs(radius - r) <= 3 * h * h / (2 * r) + (EDGE_MARGIN + NUDGE) * h)
+    cosine = np.einsum("ij,ij->i", dual.normals, dual.vertices / radius[:, None])
+    assert np.all(cosine >= 1 - 1e-12)
 
 
 def test_a_face_on_a_grid_plane_keeps_its_vertices_at_the_edges_margin():
@@ -285,7 +301,8 @@ def test_a_face_on_a_grid_plane_keeps_its_vertices_at_the_edges_margin():
     from implc.meshing.vertices import EDGE_MARGIN, NUDGE
     box = sympy.Max(sympy.Abs(x) - sympy.Rational(1, 2), sympy.Abs(y) - sympy.Rational(2, 5),
                     sympy.Abs(z) - sympy.Rational(3, 10))
-    mesh = implc.voxelize(implc.compile(box), 6).mesh(witnesses=True)
+    voxels = implc.voxelize(implc.compile(box), 6)
+    mesh = contour(voxels.surface, voxels.coords, 6, voxels.bounds, witnesses=True, lean=False)
     rows, length, _ = edge_parameters(mesh)
     face = np.abs(mesh.normals[rows, 0]) == 1
     assert face.sum() > 1000
@@ -471,7 +488,7 @@ def test_vertices_and_corners_done_in_chunks_keep_every_promise(name, monkeypatc
 
     s, f = surface_and_f(name)
     whole = implc.voxelize(s, 5, solid=True).mesh(witnesses=True)
-    assert whole.stats.feature_cells > 0 or name == "heightfield"
+    assert whole.stats.dual_cells > 0 and (whole.stats.feature_cells > 0 or name != "vm")
     assert whole.stats.cap_triangles > 0 or name != "heightfield"
     assert len(whole.vertices) > 10 * 97
     chunked = check_mesh(s, 5, f, effort=Effort(vertex_chunk=97))
@@ -749,7 +766,7 @@ def test_area_and_volume_as_trimesh_measures_them():
     import trimesh
 
     expr, bounds = SURFACES["box_minus_ball"]
-    mesh = implc.mesh(implc.compile(expr, bounds), 5)
+    mesh = implc.mesh(implc.compile(expr, bounds), 6)
     assert len(mesh.faces) > 10 * 1000
     other = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
     area, volume = mesh.measures(rows=1000)
@@ -925,7 +942,7 @@ def test_cells_proven_regular_hold_a_graph_and_a_singular_point_stays_unproven(e
     n = 1 << depth
     apex_cells = {(i, j, 19) for i in (15, 16) for j in (15, 16)}  # the apex (0, 0, 0.2) is their corner
     assert apex_cells <= unproven, "a cell at the cone's apex counted regular"
-    crossed = _crossed_cells(m, n)
+    crossed = _crossed_cells(_tetrahedral(surface, depth), n)
     regular = np.array([c for c in crossed if c not in unproven])
     assert len(regular) == stats.regular_cells
     graph = _graph_along_some_direction(numpy_f(cone), regular, np.full(3, -1.0), np.full(3, 2 / n))
@@ -984,7 +1001,7 @@ def test_a_boxs_edges_and_corners_are_proven_regular_by_the_diagonals():
     assert tape.stats.crossed_cells == jit.stats.crossed_cells
     assert jit.stats.unproven_cells >= 100, "the case the test is for: creases the partials leave open"
     assert tape.stats.unproven_cells == 0
-    crossed = np.array(sorted(_crossed_cells(tape, n)))
+    crossed = np.array(sorted(_crossed_cells(_tetrahedral(implc.compile(box, engine="tape"), depth), n)))
     graph = _graph_along_some_direction(numpy_f(box), crossed, np.full(3, -1.0), np.full(3, 2 / n))
     assert graph.all(), crossed[~graph][:5].tolist()
 
@@ -998,12 +1015,12 @@ def test_a_smooth_f_is_fanned_only_where_its_gradient_may_vanish():
     torus = (sympy.sqrt(x**2 + y**2) - 0.5)**2 + z**2 - 0.15**2
     smooth, kinked = implc.compile(torus), implc.compile(sympy.Max(torus, z - 5))
     assert not smooth.has_kinks and kinked.has_kinks
-    plain, fanned = implc.mesh(smooth, 5), implc.mesh(kinked, 5)
+    plain, fanned = _tetrahedral(smooth, 5), _tetrahedral(kinked, 5)
     assert fanned.stats.feature_cells > 100 and plain.stats.feature_cells == 0
     assert plain.stats.unproven_cells == 0
     cone = x**2 + y**2 - (z - sympy.Rational(1, 5))**2
     s = implc.compile(cone)
-    sharp, chamfered = implc.mesh(s, 5), implc.mesh(s, 5, features=False)
+    sharp, chamfered = _tetrahedral(s, 5), _tetrahedral(s, 5, features=False)
     assert 0 < sharp.stats.feature_cells <= sharp.stats.unproven_cells
     apex = np.array([0, 0, 0.2])
     nearest = [np.min(np.linalg.norm(m.vertices - apex, axis=1)) / (2 / 32) for m in (sharp, chamfered)]
@@ -1011,6 +1028,12 @@ def test_a_smooth_f_is_fanned_only_where_its_gradient_may_vanish():
     for m in (plain, fanned, sharp):
         check = m.check()
         assert check["open_edges"] == check["overused_edges"] == check["degenerate"] == 0, check
+
+
+def _tetrahedral(surface, depth, **options):
+    """The mesh of the tetrahedral construction everywhere (no dual cells): each triangle in one cell."""
+    voxels = implc.voxelize(surface, depth, **implc.NATURAL)
+    return contour(surface, voxels.coords, depth, voxels.bounds, lean=False, **options)
 
 
 def _crossed_cells_in(mesh, lo, step):
@@ -1057,7 +1080,7 @@ def test_a_partial_needs_its_sign_only_where_the_surface_may_be(engine):
     sign (sampled through numpy), yet the cell is proven regular: over its lower half ∂F/∂z > 0, and over
     its upper half F > 0, so the surface there is a graph over the xy face (checked on lines along z)."""
     expr = (z - 0.2) * (1.6 - z) + ((x - 0.5) ** 2 + (y - 0.5) ** 2) / 10
-    m = implc.mesh(implc.compile(expr, ((0, 4),) * 3, engine=engine), 2)
+    m = _tetrahedral(implc.compile(expr, ((0, 4),) * 3, engine=engine), 2)
     cell = np.array([[0, 0, 0]])
     assert (0, 0, 0) in _crossed_cells_in(m, np.zeros(3), np.ones(3))
     g = np.linspace(0, 1, 11)

@@ -112,7 +112,8 @@ def test_a_box_keeps_an_eighth_of_its_triangles_at_256():
     surface = implc.compile(BOX)
     voxels = implc.voxelize(surface, 8)
     mesh = voxels.mesh(simplify=0.01 * 2 / 256)
-    assert mesh.stats.simplified.triangles_before > 500_000 and len(mesh.faces) < 500_000 / 8
+    before = mesh.stats.simplified.triangles_before
+    assert before > 100_000 and len(mesh.faces) < before / 8
     again = voxels.mesh(simplify=0.01 * 2 / 256)
     assert np.array_equal(mesh.faces, again.faces) and np.array_equal(mesh.vertices, again.vertices)
     u, d = np.unique(np.sort(np.concatenate([mesh.faces[:, [0, 1]], mesh.faces[:, [1, 2]], mesh.faces[:, [2, 0]]]),

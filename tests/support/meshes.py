@@ -158,8 +158,10 @@ def assert_vertices_on_sign_changes(mesh: Mesh, f, bounds, depth, kept):
 
 
 def assert_on_witness_edges_in_kept_cells(mesh: Mesh, bounds, depth, kept):
-    """Each vertex not named by itself lies strictly inside the segment between its witnesses, which lie in
-    one cell of the 2^depth grid, a cell the voxelizer kept (``kept``)."""
+    """Each vertex not named by itself lies strictly inside the segment between its witnesses (a vertex on
+    an edge), or strictly inside the one cell of the 2^depth grid that has both witnesses among its corners
+    (a dual vertex, one per cell: its witnesses are the ends of an edge of that cell); the witnesses lie in
+    one cell, a cell the voxelizer kept (``kept``)."""
     w = mesh.witnesses
     lo = np.array([b[0] for b in bounds], float)
     hi = np.array([b[1] for b in bounds], float)
@@ -167,12 +169,20 @@ def assert_on_witness_edges_in_kept_cells(mesh: Mesh, bounds, depth, kept):
     itself = np.all(w[:, 0] == w[:, 1], axis=1)
     a, b, p = w[~itself, 0], w[~itself, 1], mesh.vertices[~itself]
     t = np.einsum("ij,ij->i", p - a, b - a) / np.einsum("ij,ij->i", b - a, b - a)
-    assert np.all((t > 0) & (t < 1))
-    assert np.allclose(a + t[:, None] * (b - a), p, rtol=0, atol=1e-12)
-    ga, gb = (a - lo) / (hi - lo) * n, (b - lo) / (hi - lo) * n
+    on_segment = np.all(np.abs(a + t[:, None] * (b - a) - p) <= 1e-12, axis=1)
+    assert np.all((t[on_segment] > 0) & (t[on_segment] < 1))
+    ga, gb, gp = ((u - lo) / (hi - lo) * n for u in (a, b, p))
     cell = np.floor(np.minimum(ga, gb) + 1e-9)
     cell = np.minimum(cell, n - 1)
     assert np.all(np.maximum(ga, gb) <= cell + 1 + 1e-9), "witnesses in different cells"
+    inner = ~on_segment  # a dual vertex: strictly inside its cell, the witnesses two of that cell's corners
+    cell_of_point = np.floor(gp[inner])
+    assert np.all((gp[inner] > cell_of_point) & (cell_of_point < n)), "a dual vertex on a grid plane"
+    for ends in (ga[inner], gb[inner]):
+        corner = np.round(ends)
+        assert np.allclose(ends, corner, rtol=0, atol=1e-9), "a dual vertex's witness that is not a grid corner"
+        assert np.all((corner >= cell_of_point) & (corner <= cell_of_point + 1)), "a dual vertex outside its cell"
+    cell[inner] = cell_of_point
     keys = (cell[:, 0] * n + cell[:, 1]) * n + cell[:, 2]
     kept_keys = (kept[:, 0].astype(np.int64) * n + kept[:, 1]) * n + kept[:, 2]
     assert np.all(np.isin(keys.astype(np.int64), kept_keys)), "a vertex in a cell the voxelizer did not keep"
