@@ -765,6 +765,14 @@ def mesh_quality(vertices, faces, surface, cell, self_intersections: bool) -> di
     angle = np.degrees(np.arccos(np.clip(cosine[np.isfinite(cosine)], -1, 1)))
     row["normal_deviation_median_deg"] = float(np.median(angle)) if len(angle) else 0.0
     row["normal_deviation_p99_deg"] = float(np.percentile(angle, 99)) if len(angle) else 0.0
+    worst = np.full(len(faces), 180.0)  # each triangle's smallest angle
+    for k in range(3):
+        u, v = p[:, (k + 1) % 3] - p[:, k], p[:, (k + 2) % 3] - p[:, k]
+        with np.errstate(all="ignore"):
+            cosine = np.einsum("ij,ij->i", u, v) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1)
+        worst = np.minimum(worst, np.degrees(np.arccos(np.clip(np.nan_to_num(cosine, nan=1.0), -1, 1))))
+    row["under_5_percent"] = float(np.mean(worst < 5) * 100) if len(faces) else 0.0
+    row["min_angle_p1_deg"] = float(np.percentile(worst, 1)) if len(faces) else 0.0
     return row
 
 
@@ -829,12 +837,12 @@ def mesh(args, out):
     out["mesh"] = rows
     md = ["### Meshes: implc.mesh against scikit-image's marching cubes on the dense grid (CPU seconds, medians)", "",
           "| surface | grid | voxelize s | implc.mesh s (voxelize natural + contour) | implc.mesh / voxelize "
-          "| triangles | unproven cells "
+          "| triangles | under 5°, 1st pct of min angle ° | unproven cells "
           "| open, flipped, degenerate "
           "| manifold3d "
           "| self-intersecting | max distance (cells) | normal vs ∇F median, p99 ° | marching cubes: sample + mc s "
           "| peak GiB | triangles | open edges | manifold3d | self-intersecting | max distance |",
-          "|---" * 19 + "|"]
+          "|---" * 20 + "|"]
     fmt = lambda v: "–" if v is None else str(v)  # noqa: E731
     for r in rows:
         q, mc = r["implc"], r["marching_cubes"]
@@ -845,6 +853,7 @@ def mesh(args, out):
         md.append(f"| {r['surface']} | {1 << r['depth']}³ | {r['voxelize_cpu_s']:.3f} | {r['implc_mesh_cpu_s']:.3f} "
                   f"({r['natural_voxelize_cpu_s']:.3f} + {r['mesh_cpu_s']:.3f}) | "
                   f"{r['implc_mesh_cpu_s'] / r['voxelize_cpu_s']:.1f}× | {r['triangles']} | "
+                  f"{q['under_5_percent']:.2f}%, {q['min_angle_p1_deg']:.1f} | "
                   f"{r['unproven_cells']} of {r['crossed_cells']} | {q['open_edges']}, "
                   f"{q['flipped_edges']}, {q['degenerate']} | {fmt(q['manifold3d'])} | {fmt(q['self_intersecting'])} | "
                   f"{q['max_distance_cells']:.3f} | {q['normal_deviation_median_deg']:.1f}, "

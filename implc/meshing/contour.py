@@ -1,7 +1,12 @@
 """Contouring: the boundary of the solid {F < 0} within the bounds as a closed, oriented triangle mesh.
 
-The mesh is the zero set of the piecewise-linear function that takes F's sampled signs at the vertices of
-a tetrahedralization of the voxel grid, cut by the bounds' faces where the solid reaches them:
+Two constructions share the grid's cells. A crossed cell whose sampled signs leave one sheet, away from
+the bounds, is a *dual cell*: one vertex, dual contouring's quads between such cells, and the stitch to
+the others (:mod:`implc.meshing.dual`, which says why nothing meets). Every other crossed cell (about one
+in a hundred on the paper's scenes: ambiguous sign patterns, the cells on the bounds) keeps the
+*tetrahedral construction*, the zero set of the piecewise-linear function that takes F's sampled signs at
+the vertices of a tetrahedralization of the grid, cut by the bounds' faces where the solid reaches them.
+``lean=False`` uses the tetrahedral construction everywhere, as follows:
 
 - **the tetrahedralization**: each cell is split into the six Kuhn (Freudenthal) tetrahedra around its
   main diagonal, the same split in every cell, so neighbours agree on their shared faces (each face cut
@@ -24,7 +29,8 @@ a tetrahedralization of the voxel grid, cut by the bounds' faces where the solid
   corner whose sides are split at every corner the triangles beyond them use (:func:`_block_fans`): a
   box's face costs a few triangles per block edge instead of two per square.
 
-What follows by construction, for any placement of the surface vertices strictly inside their edges:
+What follows by construction for the tetrahedral cells, for any placement of the surface vertices strictly
+inside their edges:
 every edge of the mesh lies in exactly two triangles, consistently oriented (outward: from the negative
 to the positive side); no two triangles meet except in a shared edge or vertex, since each triangle lies
 in its own tetrahedron and meets the tetrahedron's faces only in the segments shared with its neighbours;
@@ -35,8 +41,9 @@ sample agrees with the enclosures), so the mesh is closed whatever the rounding 
 
 Vertex keys: every mesh vertex is named by an int64 whose low three bits say what it is (:data:`GRID`: a
 grid corner or the crossing on a grid edge; :data:`FACE_CORNER`, :data:`CELL_CORNER`, :data:`FACE_CELL`:
-the crossing on an edge from a face or cell point; :data:`FACE_POINT`: a face point on a cap), so that
-the cells that share a vertex name it alike.
+the crossing on an edge from a face or cell point; :data:`FACE_POINT`: a face point on a cap;
+:data:`implc.meshing.dual.CELL_POINT`: a dual cell's vertex), so that the cells that share a vertex name it
+alike.
 """
 
 from __future__ import annotations
@@ -96,12 +103,15 @@ class MeshStats:
 def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bool = True, witnesses: bool = False,
             effort: Effort = Effort(), lean: bool = True):
     """The mesh of ``surface`` (an :class:`implc.Surface`) from the cells the voxelizer kept at ``depth``
-    ((N, 3) cell indices): see the module's docstring for what it promises. ``features=False`` keeps the
-    Kuhn split everywhere (creases chamfered). ``witnesses=True`` keeps, for each vertex, the ends of the
-    edge it was found on (``Mesh.witnesses``, (V, 2, 3): two points of one cell where F has opposite
-    signs, the negative one first), so that anyone can check where it lies. ``effort``: how the work is
+    ((N, 3) cell indices): see the module's docstring for what it promises. ``features=False``: dual
+    vertices at the mean of their crossings, not the QEF point (creases chamfered; with ``lean=False`` the
+    Kuhn split everywhere). ``witnesses=True`` keeps, for each vertex, two points of one cell where F has
+    opposite signs, the negative one first (``Mesh.witnesses``, (V, 2, 3)): the ends of the edge it was
+    found on, or for a dual vertex (strictly inside its cell, off every such edge) the ends of an edge of
+    its cell that changes sign; so that anyone can check where it lies. ``effort``: how the work is
     chunked and how far the proofs of regular cells look (:class:`implc.meshing.grid.Effort`; the mesh's
-    promises hold for any). Returns an :class:`implc.Mesh`."""
+    promises hold for any). ``lean=False``: the tetrahedral construction in every cell (about three
+    vertices a crossed cell; the feature cells fanned). Returns an :class:`implc.Mesh`."""
     if not 1 <= depth <= MAX_DEPTH:
         raise ValueError(f"meshes are made at depth 1 to {MAX_DEPTH}, not {depth}")
     from .triangle_mesh import Mesh
@@ -123,15 +133,20 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     crossed = np.flatnonzero(todo.crossed())
     stats.crossed_cells = len(crossed)
     index = KeyIndex(runtime, 4 * len(crossed))
-    kuhn, owner = index.kuhn_triangles(grid, todo.cells[crossed], todo.signs[crossed])
-    np.take(crossed, owner, out=owner, mode="clip")  # rows of todo.cells, in place (no fresh memory)
+    # the dual cells' candidates number their edges' crossings; the others are split the Kuhn way
+    candidates = np.flatnonzero(dual_rows(grid, todo, np.zeros(0, bool))) if lean else np.zeros(0, np.int64)
+    tetrahedral = np.setdiff1d(crossed, candidates, assume_unique=True) if len(candidates) else crossed
+    kuhn, owner = index.kuhn_triangles(grid, todo.cells[tetrahedral], todo.signs[tetrahedral])
+    np.take(tetrahedral, owner, out=owner, mode="clip")  # rows of todo.cells, in place (no fresh memory)
+    edges = index.dual_edges(grid, todo.cells[candidates], todo.signs[candidates])
     caps = {face: index.number(triangles) for face, triangles in caps.items()}
     t2 = time.perf_counter()
     vertices, normals, ends = surface_vertices(grid, index.keys(), NO_POINTS, NO_POINTS, witnesses)
     t3 = time.perf_counter()
-    feature_rows = feature_cells(runtime, todo.cells, kuhn, owner, normals) if features else np.zeros(0, np.int64)
-    if lean:  # a dual cell's crease is its QEF vertex's: only the others' are fanned
-        feature_rows = feature_rows[~dual_rows(grid, todo, np.zeros(0, bool))[feature_rows]]
+    # with dual cells a crease is their QEF vertices' (the few tetrahedral cells chamfer theirs: fanning
+    # them would take their dual neighbours too, for thin triangles); without, the feature cells are fanned
+    fanning = features and not lean
+    feature_rows = feature_cells(runtime, todo.cells, kuhn, owner, normals) if fanning else np.zeros(0, np.int64)
     proven_rows = np.zeros(0, np.int64)  # rows of todo proven regular already (not proven again below)
     if len(feature_rows) and not surface.has_kinks:  # a smooth F: a crease only where its gradient may vanish
         bent_regular = regular(grid, todo.cells[feature_rows])
@@ -143,8 +158,9 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     if len(feature_rows):
         added, fanned = _with_features(grid, todo, feature_rows, index, mesh)
         stats.added_cells += added
-    if lean:
-        stats.dual_cells, stats.dual_counts = _with_dual(grid, todo, fanned, index, mesh, features)
+    if len(candidates):
+        stats.dual_cells, stats.dual_counts = _with_dual(grid, todo, candidates, edges, fanned, index, mesh, features)
+    del edges
     del index
     grid.forget_samples()
     stats.cap_triangles = sum(map(len, mesh.caps.values()))
@@ -195,7 +211,7 @@ class _Pieces:
         source_faces, keep, more = self.faces, self.keep, self.more
         self.vertices = self.normals = self.ends = self.faces = self.owner = self.keep = None
         self.added, self.more, self.caps = [], [], {}
-        if keep is None and not caps:
+        if keep is None and not caps and not more:
             return first[0], first[1], source_faces, first[2]
         kept = len(source_faces) if keep is None else int(np.count_nonzero(keep))
         faces = np.empty((kept + sum(map(len, more)) + sum(map(len, caps)), 3), np.int64)
@@ -287,25 +303,20 @@ def _with_features(grid, todo: Cells, feature_rows, index: KeyIndex, mesh: _Piec
     return added, fanned
 
 
-def _with_dual(grid, todo: Cells, other, index: KeyIndex, mesh: _Pieces, sharp: bool):
-    """One vertex for each dual cell (:mod:`implc.meshing.dual`; ``other``: rows of ``todo`` that keep the
-    tetrahedral construction) in place of its tetrahedral triangles. Returns the dual cells and the dual
-    construction's counts."""
-    dual = dual_rows(grid, todo, other)
-    rows = np.flatnonzero(dual)
+def _with_dual(grid, todo: Cells, candidates, edges, other, index: KeyIndex, mesh: _Pieces, sharp: bool):
+    """One vertex for each dual cell: the ``candidates`` (rows of ``todo``, ``edges`` their crossings'
+    vertex numbers) but those ``other`` marks (fanned: they keep the tetrahedral construction); ``sharp``:
+    QEF vertices (else the crossings' mean). Returns the dual cells and the dual construction's counts."""
+    keep = ~other[candidates]
+    rows, edges = candidates[keep], edges[keep]
     if not len(rows):
         return 0, {}
-    first = mesh.vertices
     cells = todo.cells[rows]
-    points = dual_vertices(grid, cells, index, first, mesh.normals,
+    points = dual_vertices(grid, cells, edges, mesh.vertices, mesh.normals,
                            (lambda p, n, ok: _qef(grid.runtime, p, n, ok)) if sharp else None)
-    numbers = np.full(len(todo.cells), -1, np.int64)
-    numbers[rows] = index.number(grid.cell_key(cells) * 8 + CELL_POINT)
-    where = np.full((len(todo.cells), 3), np.nan)
-    where[rows] = points
-    faces, counts = dual_triangles(grid, todo, dual, numbers, where, index)
-    keep = ~dual[mesh.owner]
-    mesh.keep = keep if mesh.keep is None else mesh.keep & keep
+    first = index.count
+    index.number(grid.cell_key(cells) * 8 + CELL_POINT)
+    faces, counts = dual_triangles(grid, todo, rows, edges, first, points, index)
     mesh.more.append(faces)
     normals = _unit(grid.gradients(points))
     ends = dual_witnesses(grid, cells, todo.signs[rows]) if mesh.ends is not None else None

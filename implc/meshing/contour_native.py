@@ -2,8 +2,9 @@
 numbered in it and their signs (``implc_cell_corners``, ``implc_corner_signs``), marching tetrahedra over
 the Kuhn split of each cell with its vertices numbered through that index (``implc_kuhn_triangles``) and
 over the fans of feature cells and their neighbours (``implc_fan_triangles``), the cells whose normals
-disagree (``implc_bent_cells``) and their points (``implc_qef``), and the corners and sampled values at
-the ends of grid edges (``implc_edge_ends``).
+disagree (``implc_bent_cells``) and their points (``implc_qef``), the corners and sampled values at
+the ends of grid edges (``implc_edge_ends``), and the dual cells' crossings and triangles
+(``implc_dual_edges``, ``implc_dual_triangles``).
 
 The index is open addressing with linear probing over ``2^bits`` slots of two words (key, number); an
 empty slot holds key −1. A key's first slot is the Fibonacci hash of its corner (the key without its low
@@ -29,6 +30,7 @@ from ..compiler.llvm.control import (
     at,
     const,
     define,
+    define_internal,
     for_range,
     if_,
     intrinsic,
@@ -40,11 +42,15 @@ from ..compiler.llvm.control import (
 from ..native import abi
 from ..native.jit import Source
 from ..native.runtime import Library
+from .tables import DUAL_PACKED, EDGE_ROW, FACE_ROW, FACE_ROW_START, SHAPE_ROW
 
 GOLDEN = 0x9E3779B97F4A7C15
 """2^64/φ: Fibonacci hashing of a key's corner (its bits above the low six)."""
 
 
+ORIENT_ERROR = 1e-15
+"""A filtered orientation's sign is taken only where |det| exceeds this times its permanent (Shewchuk's
+bound for the determinant of rounded differences is about 7.8e-16 of it)."""
 PREFETCH_AHEAD = 16
 """How many keys ahead the loops over many keys prefetch the index's slots: a big index misses the cache on
 nearly every lookup, and the misses of independent keys overlap."""
@@ -687,11 +693,250 @@ def emit_edge_roots(module: ir.Module):
     b.ret(counted.get())
 
 
+def _filtered_orientation(b: ir.IRBuilder, a, p, q, r):
+    """The sign of ((p − a) × (q − a)) · (r − a) where the doubles certify it (+1 or −1), else 0: |det| must
+    exceed :data:`implc.meshing.dual.ORIENT_ERROR` times its permanent (Shewchuk's bound for rounded
+    differences)."""
+    double = ir.DoubleType()
+    fabs = intrinsic(b.module, "llvm.fabs.f64", 1)
+    u = [b.fsub(p[i], a[i]) for i in range(3)]
+    v = [b.fsub(q[i], a[i]) for i in range(3)]
+    w = [b.fsub(r[i], a[i]) for i in range(3)]
+    det = const(double, 0.0)
+    perm = const(double, 0.0)
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        first, second = b.fmul(u[j], v[k]), b.fmul(u[k], v[j])
+        det = b.fadd(det, b.fmul(w[i], b.fsub(first, second)))
+        perm = b.fadd(perm, b.fmul(b.call(fabs, [w[i]]), b.fadd(b.call(fabs, [first]), b.call(fabs, [second]))))
+    sure = b.fcmp_ordered(">", b.call(fabs, [det]), b.fmul(const(double, ORIENT_ERROR), perm))
+    positive = b.select(b.fcmp_ordered(">", det, const(double, 0.0)), const(I64, 1), const(I64, -1))
+    return b.select(sure, positive, const(I64, 0))
+
+
+def _emit_ju_split(module: ir.Module):
+    """``implc_ju_split(quad, ends)`` (internal): bit 0 set where the quad (four points, counter-clockwise
+    about the edge from ``ends[0:3]`` to ``ends[3:6]``) may be split along its diagonal 0-2, bit 1 along 1-3:
+    both triangles have the edge's upper end certainly above and its lower end certainly below (Ju and
+    Udeshi's test), on the doubles and again on their float32 roundings."""
+    double = ir.DoubleType()
+    pointer = double.as_pointer()
+    fn, b = define_internal(module, "implc_ju_split", I64, [pointer, pointer])
+    quad, ends = fn.args
+    result = const(I64, 0)
+    for narrow in (False, True):
+        def value(ptr, i):
+            x = load_at(b, ptr, i)
+            return b.fpext(b.fptrunc(x, ir.FloatType()), double) if narrow else x
+        q = [[value(quad, 3 * k + i) for i in range(3)] for k in range(4)]
+        low = [value(ends, i) for i in range(3)]
+        high = [value(ends, 3 + i) for i in range(3)]
+        bits = const(I64, 0)
+        for bit, (i, j, k, m) in enumerate(((0, 1, 2, 3), (1, 2, 3, 0))):
+            ok = ir.Constant(ir.IntType(1), 1)
+            for t in ((i, j, k), (i, k, m)):
+                a, p, r = (q[c] for c in t)
+                ok = b.and_(ok, b.icmp_signed("==", _filtered_orientation(b, a, p, r, high), const(I64, 1)))
+                ok = b.and_(ok, b.icmp_signed("==", _filtered_orientation(b, a, p, r, low), const(I64, -1)))
+            bits = b.or_(bits, b.shl(b.zext(ok, I64), const(I64, bit)))
+        result = bits if not narrow else b.and_(result, bits)
+    b.ret(result)
+    return fn
+
+
+def emit_dual_edges(module: ir.Module):
+    """``implc_dual_edges(lowest, offsets, signs, n, tables, table, bits, uniques, limit, state, numbers)``: the
+    number of the vertex on each of a cell's 12 edges that change sign (``tables``: the edges' lower
+    corners, then their codes, in :data:`implc.meshing.dual.CELL_EDGES` order), inserted in the index where
+    absent, −1 where the edge keeps its sign; 12 per cell into ``numbers``. state[0]: keys in the index.
+    Stops before a cell when the index holds ``limit`` keys or more; returns the cells done."""
+    fn, b = define(module, abi.DUAL_EDGES)
+    lowest, offsets, sign_bytes, n, tables, table, bits, uniques, limit, state, numbers = fn.args
+    count = Local(b, I64, load_at(b, state, 0), "count")
+    one, eight, twelve = const(I64, 1), const(I64, 8), const(I64, 12)
+    with _cells_while_room(b, n, count, limit) as (c, done):
+        base = load_at(b, lowest, c)
+        signs = b.zext(load_at(b, sign_bytes, c), I64)
+        with for_range(b, twelve) as e:
+            corner, code = load_at(b, tables, e), load_at(b, tables, b.add(e, twelve))
+            crosses = b.and_(b.xor(b.lshr(signs, corner), b.lshr(signs, b.or_(corner, code))), one)
+            key = b.mul(b.add(b.mul(b.add(base, load_at(b, offsets, corner)), eight), code), eight)
+            number = Local(b, I64, -1, "edge_number")
+            with if_(b, b.icmp_signed("!=", crosses, const(I64, 0))):
+                number.set(_number(b, table, bits, key, const(I64, 1), count, uniques))
+            store_at(b, number.get(), numbers, b.add(b.mul(c, twelve), e))
+    store_at(b, count.get(), state, 0)
+    b.ret(done.get())
+
+
+def emit_dual_triangles(module: ir.Module):
+    """``implc_dual_triangles(cells, signs, edges, vertex, points, start, m, tables, geometry, cell_table,
+    cell_bits, dual_of_row, table, bits, faces, counts)``: the triangles of m dual cells
+    (:mod:`implc.meshing.dual`): ``cells`` their indices (three each), ``signs`` a byte each (bit c: F < 0
+    at corner c), ``edges`` the vertex numbers of their 12 edges (:func:`emit_dual_edges`); ``vertex`` and
+    ``points``: every dual cell's vertex number and position, by dual row (these m are rows ``start`` on);
+    ``cell_table``/``cell_bits``: the contoured cells' index (cell key → row), ``dual_of_row`` each row's
+    dual row (−1: not dual); ``table``/``bits``: the vertex index (the face diagonals' crossings looked up
+    there, never inserted); ``geometry``: the grid's (see :func:`emit_edge_ends`); ``tables``:
+    :data:`implc.meshing.tables.DUAL_PACKED`.
+
+    Each sign-changing edge is made by the first dual cell around it (counter-clockwise about its axis from
+    the cell beyond its lower corner), each face toward a cell that is not dual by its dual cell. Three
+    vertex numbers per triangle into ``faces``; counts[0..4] += quads, edges fanned, edges stitched,
+    cones, lookups that found nothing (0 unless the cells are not closed). Returns the triangles written."""
+    fn, b = define(module, abi.DUAL_TRIANGLES)
+    (cells, sign_bytes, edges, vertex, points, start, m, tables, geometry, cell_table, cell_bits, dual_of_row, table,
+     bits, faces, counts) = fn.args
+    double = ir.DoubleType()
+    split = _emit_ju_split(module)
+    n = b.fptosi(load_at(b, geometry, 1), I64)
+    k = b.fptosi(load_at(b, geometry, 0), I64)
+    lo = [load_at(b, geometry, 2 + i) for i in range(3)]
+    step = [load_at(b, geometry, 5 + i) for i in range(3)]
+    zero, one, three, twelve = const(I64, 0), const(I64, 1), const(I64, 3), const(I64, 12)
+    written = Local(b, I64, 0, "written")
+    tally = [Local(b, I64, 0, f"tally{i}") for i in range(5)]
+    unused = Local(b, I64, 0, "unused")  # the lookups insert nothing: the index's count stays
+    quad = local_array(b, double, 12, "quad")
+    ends = local_array(b, double, 6, "ends")
+    ring = local_array(b, I64, 4, "ring")
+
+    def emit(p, q, r, flip=None):
+        if flip is not None:
+            p, r = b.select(flip, r, p), b.select(flip, p, r)
+        at_ = b.mul(written.get(), three)
+        for i, value in enumerate((p, q, r)):
+            store_at(b, value, faces, b.add(at_, const(I64, i)))
+        written.set(b.add(written.get(), one))
+
+    def count(i, condition=None):
+        tally[i].set(b.add(tally[i].get(), one if condition is None else b.zext(condition, I64)))
+
+    def dual_at(cell):
+        """The dual row of the contoured cell at ``cell`` (three i64), −1 where it is not dual; counts a cell
+        that is not contoured."""
+        key = b.add(b.mul(b.add(b.mul(cell[0], n), cell[1]), n), cell[2])
+        row = _number(b, cell_table, cell_bits, key, zero, unused, cell_table)
+        found = b.icmp_signed(">=", row, zero)
+        count(4, b.not_(found))
+        return b.select(found, load_at(b, dual_of_row, b.select(found, row, zero)), const(I64, -1))
+
+    with for_range(b, m) as r:
+        cell = [load_at(b, cells, b.add(b.mul(r, three), const(I64, i))) for i in range(3)]
+        signs = b.zext(load_at(b, sign_bytes, r), I64)
+        apex = load_at(b, vertex, b.add(start, r))
+        with for_range(b, twelve) as e:
+            row = b.mul(e, const(I64, EDGE_ROW))
+            u, axis, mine = (load_at(b, tables, b.add(row, const(I64, i))) for i in range(3))
+            crosses = b.and_(b.xor(b.lshr(signs, u), b.lshr(signs, b.or_(u, b.shl(one, axis)))), one)
+            with if_(b, b.icmp_signed("!=", crosses, zero)):
+                first = Local(b, I64, 4, "first")
+                for kk in range(4):
+                    delta = [load_at(b, tables, b.add(row, const(I64, 3 + 3 * kk + i))) for i in range(3)]
+                    dual = dual_at([b.add(cell[i], delta[i]) for i in range(3)])
+                    store_at(b, dual, ring, kk)
+                    take = b.and_(b.icmp_signed(">=", dual, zero), b.icmp_signed("==", first.get(), const(I64, 4)))
+                    first.set(b.select(take, const(I64, kk), first.get()))
+                with if_(b, b.icmp_signed("==", first.get(), mine)):
+                    root = load_at(b, edges, b.add(b.mul(r, twelve), e))
+                    flip = b.icmp_signed("==", b.and_(b.lshr(signs, u), one), zero)  # the lower end outside
+                    rows = [load_at(b, ring, kk) for kk in range(4)]
+                    lean = ir.Constant(ir.IntType(1), 1)
+                    for kk in range(4):
+                        lean = b.and_(lean, b.icmp_signed(">=", rows[kk], zero))
+                    safe = [b.select(b.icmp_signed(">=", rows[kk], zero), rows[kk], zero) for kk in range(4)]
+                    v = [load_at(b, vertex, safe[kk]) for kk in range(4)]
+                    fan = Local(b, ir.IntType(1), ir.Constant(ir.IntType(1), 1), "fan")
+                    with if_(b, lean):
+                        for kk in range(4):
+                            for i in range(3):
+                                store_at(b, load_at(b, points, b.add(b.mul(safe[kk], three), const(I64, i))), quad,
+                                         3 * kk + i)
+                        for i in range(3):
+                            corner = b.add(cell[i], b.and_(b.lshr(u, const(I64, i)), one))
+                            low = b.fadd(lo[i], b.fmul(b.sitofp(corner, double), step[i]))
+                            up = b.add(corner, b.zext(b.icmp_signed("==", axis, const(I64, i)), I64))
+                            store_at(b, low, ends, i)
+                            store_at(b, b.fadd(lo[i], b.fmul(b.sitofp(up, double), step[i])), ends, 3 + i)
+                        ok = b.call(split, [quad, ends])
+                        diagonals = []
+                        for p_, q_ in ((0, 2), (1, 3)):
+                            total = const(double, 0.0)
+                            for i in range(3):
+                                d = b.fsub(load_at(b, quad, 3 * p_ + i), load_at(b, quad, 3 * q_ + i))
+                                total = b.fadd(total, b.fmul(d, d))
+                            diagonals.append(total)
+                        first_ok = b.icmp_signed("!=", b.and_(ok, one), zero)
+                        second_ok = b.icmp_signed("!=", b.and_(ok, const(I64, 2)), zero)
+                        use_first = b.and_(first_ok, b.or_(b.fcmp_ordered("<=", diagonals[0], diagonals[1]),
+                                                           b.not_(second_ok)))
+                        use_second = b.and_(second_ok, b.not_(use_first))
+                        with if_(b, use_first):
+                            emit(v[0], v[1], v[2], flip)
+                            emit(v[0], v[2], v[3], flip)
+                        with if_(b, use_second):
+                            emit(v[1], v[2], v[3], flip)
+                            emit(v[1], v[3], v[0], flip)
+                        split_ = b.or_(use_first, use_second)
+                        count(0, split_)
+                        count(1, b.not_(split_))
+                        fan.set(b.not_(split_))
+                    count(2, b.not_(lean))
+                    with if_(b, fan.get()):
+                        for kk in range(4):
+                            pair = b.and_(b.icmp_signed(">=", rows[kk], zero), b.icmp_signed(">=", rows[(kk + 1) % 4],
+                                                                                              zero))
+                            with if_(b, pair):
+                                emit(root, v[kk], v[(kk + 1) % 4], flip)
+        # the cones over the faces toward cells that are not dual
+        for face in range(6):
+            base = FACE_ROW_START + face * FACE_ROW
+            face_axis, side, *local = DUAL_PACKED[base:base + 6].tolist()
+            inside_count = const(I64, 0)
+            for corner in local:
+                inside_count = b.add(inside_count, b.and_(b.lshr(signs, const(I64, corner)), one))
+            crossed = b.and_(b.icmp_signed(">", inside_count, zero), b.icmp_signed("<", inside_count, const(I64, 4)))
+            with if_(b, crossed):
+                beyond = [b.add(cell[i], const(I64, (1 if side else -1) if i == face_axis else 0)) for i in range(3)]
+                with if_(b, b.icmp_signed("<", dual_at(beyond), zero)):
+                    for shape in range(2):
+                        at_ = base + 6 + shape * SHAPE_ROW
+                        corners = DUAL_PACKED[at_:at_ + 3].tolist()
+                        inside = [b.icmp_signed("!=", b.and_(b.lshr(signs, const(I64, c)), one), zero) for c in corners]
+                        mixed = b.xor(b.or_(b.or_(inside[0], inside[1]), inside[2]),
+                                      b.and_(b.and_(inside[0], inside[1]), inside[2]))
+                        with if_(b, mixed):
+                            numbers = []
+                            for j in range(3):
+                                edge, lower, code = DUAL_PACKED[at_ + 3 + 3 * j:at_ + 6 + 3 * j].tolist()
+                                if edge >= 0:
+                                    numbers.append(load_at(b, edges, b.add(b.mul(r, twelve), const(I64, edge))))
+                                    continue
+                                corner = [b.add(cell[i], const(I64, lower >> i & 1)) for i in range(3)]
+                                corner_key = b.add(b.mul(b.add(b.mul(corner[0], k), corner[1]), k), corner[2])
+                                key = b.mul(b.add(b.mul(corner_key, const(I64, 8)), const(I64, code)), const(I64, 8))
+                                number = _number(b, table, bits, key, zero, unused, table)
+                                used = b.xor(inside[j], inside[(j + 1) % 3])  # a crossing on the diagonal
+                                count(4, b.and_(used, b.icmp_signed("<", number, zero)))
+                                numbers.append(number)
+                            entry, leave = const(I64, -1), const(I64, -1)
+                            for j in range(3):
+                                now, after = inside[j], inside[(j + 1) % 3]
+                                entry = b.select(b.and_(b.not_(now), after), numbers[j], entry)
+                                leave = b.select(b.and_(now, b.not_(after)), numbers[j], leave)
+                            emit(apex, entry, leave)
+                            count(3)
+    for i in range(5):
+        slot = at(b, counts, i)
+        b.store(b.add(b.load(slot), tally[i].get()), slot)
+    b.ret(written.get())
+
+
 def build_contouring() -> ir.Module:
     """The contouring module."""
     module = ir.Module(name="implc_contouring")
     for emit in (emit_hash_index, emit_cell_corners, emit_corner_signs, emit_kuhn_triangles, emit_fan_triangles,
-                 emit_qef, emit_bent_cells, emit_edge_ends, emit_edge_roots, emit_corner_points):
+                 emit_qef, emit_bent_cells, emit_edge_ends, emit_edge_roots, emit_corner_points, emit_dual_edges,
+                 emit_dual_triangles):
         emit(module)
     return module
 

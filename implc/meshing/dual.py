@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .grid import Cells, Grid, KeyIndex, grid_edge_key, square_edge_key
-from .tables import CORNERS, SQUARE, face_axes, face_shapes
+from .grid import Cells, Grid, KeyIndex
+from .tables import CORNERS, DUAL_PACKED, KUHN_CHUNK
 
 CELL_POINT = 5
 """The kind of a dual vertex's key (see :mod:`implc.meshing.contour`): the cell's key × 8 + 5."""
@@ -43,11 +43,6 @@ DUAL_MARGIN = 1.0 / 256
 """A dual vertex stays this fraction of its cell inside every face of it (as a surface vertex stays inside
 its edge): a face of the solid on a grid plane moves that little inward; and a file's float32 rounding
 keeps the vertex inside its cell wherever a cell spans 2^9 float32 steps of its coordinates or more."""
-ORIENT_ERROR = 1e-15
-"""A filtered orientation's sign is taken only where |det| exceeds this times its permanent (Shewchuk's
-bound for a 3×3 determinant of rounded differences is about 7.8e-16)."""
-
-
 def _connected(corners: list[int]) -> bool:
     if not corners:
         return True
@@ -78,168 +73,55 @@ def dual_rows(grid: Grid, todo: Cells, other: np.ndarray) -> np.ndarray:
     return dual
 
 
-def _orientation_signs(a, b, c, p):
-    """The sign of ((b − a) × (c − a)) · (p − a) per row where the doubles certify it, else 0."""
-    u, v, w = b - a, c - a, p - a
-    cross = np.cross(u, v)
-    det = np.einsum("ij,ij->i", cross, w)
-    perm = (np.abs(w[:, 0]) * (np.abs(u[:, 1] * v[:, 2]) + np.abs(u[:, 2] * v[:, 1]))
-            + np.abs(w[:, 1]) * (np.abs(u[:, 0] * v[:, 2]) + np.abs(u[:, 2] * v[:, 0]))
-            + np.abs(w[:, 2]) * (np.abs(u[:, 0] * v[:, 1]) + np.abs(u[:, 1] * v[:, 0])))
-    sure = np.abs(det) > ORIENT_ERROR * perm
-    return np.where(sure, np.sign(det), 0)
-
-
-def _splits(v0, v1, v2, v3, p1, p2):
-    """Whether the quad v0 v1 v2 v3 (counter-clockwise about p1 → p2) may be split along v0 v2: both its
-    triangles have p2 strictly above and p1 strictly below (Ju and Udeshi's test)."""
-    ok = np.ones(len(v0), bool)
-    for a, b, c in ((v0, v1, v2), (v0, v2, v3)):
-        ok &= (_orientation_signs(a, b, c, p2) > 0) & (_orientation_signs(a, b, c, p1) < 0)
-    return ok
-
-
-def _float32(points):
-    return points.astype(np.float32).astype(np.float64)
-
-
-def dual_vertices(grid: Grid, cells: np.ndarray, index: KeyIndex, positions, normals, qef):
-    """Each dual cell's vertex: the QEF point of its grid edges' crossings (``positions``, ``normals``:
-    the vertices numbered in ``index``; ``qef(points, normals, present)``: the solver, None for the mean
-    of the crossings), :data:`DUAL_MARGIN` inside the cell (its centre where no crossing has a usable
-    normal)."""
-    corner_keys = grid.key(cells)[:, None] + grid.key(CORNERS)
-    keys = np.stack([grid_edge_key(corner_keys[:, u], 1 << a) for u in range(8) for a in range(3)
-                     if not u >> a & 1], 1)
-    rows = index.number(keys, insert=False)
-    present: np.ndarray = rows >= 0
-    np.maximum(rows, 0, out=rows)
+def dual_vertices(grid: Grid, cells: np.ndarray, edges: np.ndarray, positions, normals, qef) -> np.ndarray:
+    """Each dual cell's vertex: the QEF point of its edges' crossings (``edges``: their vertex numbers,
+    (m, 12), −1 where the edge keeps its sign; ``positions``, ``normals``: those vertices';
+    ``qef(points, normals, present)``: the solver, None for the mean of the crossings: creases chamfered),
+    :data:`DUAL_MARGIN` inside the cell (its centre where no crossing has a usable normal)."""
+    present: np.ndarray = edges >= 0
+    rows = np.maximum(edges, 0)
     p, n = np.take(positions, rows, axis=0), np.take(normals, rows, axis=0)
     ok = present & ~np.isnan(n[..., 0])
     n[~ok] = 0
     lo, hi = grid.world(cells), grid.world(cells + 1)
     margin = (hi - lo) * DUAL_MARGIN
-    if qef is None:  # the mean of the crossings (creases chamfered)
+    if qef is None:
         mean = np.einsum("ijk,ij->ik", p, present) / np.maximum(present.sum(1), 1)[:, None]
-        crossed = np.asarray(present.any(1))
-        return np.clip(np.where(crossed[:, None], mean, (lo + hi) / 2), lo + margin, hi - margin)
+        return np.clip(mean, lo + margin, hi - margin)
     point = np.clip(qef(p, n, ok), lo + margin, hi - margin)
     return np.where(ok.any(1)[:, None], point, (lo + hi) / 2)
 
 
-def dual_triangles(grid: Grid, todo: Cells, dual: np.ndarray, numbers: np.ndarray, points: np.ndarray,
+def dual_triangles(grid: Grid, todo: Cells, rows: np.ndarray, edges: np.ndarray, first: int, points: np.ndarray,
                    index: KeyIndex) -> tuple[np.ndarray, dict]:
-    """The dual cells' triangles (see the module docstring): ``numbers``/``points``, per row of ``todo``,
-    its dual vertex's number and position (rows not dual: −1); roots and face crossings are the vertices
-    ``index`` numbers already. Returns (triangles (T, 3), counts of quads, split quads and fans)."""
-    rows = np.flatnonzero(dual)
-    cells, signs = todo.cells[rows], todo.signs[rows]
-    out = []
-    counts = {"quads": 0, "fanned edges": 0, "stitched edges": 0, "cones": 0}
-    # every sign-changing edge of a dual cell, once (its lowest corner and axis)
+    """The triangles of the dual cells at ``rows`` of ``todo`` (see the module docstring; native:
+    ``implc_dual_triangles``): ``edges`` their crossings' vertex numbers (m, 12), their own vertices
+    numbered ``first`` on, at ``points``; the face diagonals' crossings are the vertices ``index`` numbers
+    already. Returns (triangles (T, 3), counts of quads, edges fanned, edges stitched, cones)."""
+    m = len(rows)
+    cells = np.ascontiguousarray(todo.cells[rows], dtype=np.int64)
+    signs = np.ascontiguousarray(todo.signs[rows], dtype=np.uint8)
+    edges = np.ascontiguousarray(edges, dtype=np.int64)
+    vertex = np.arange(first, first + m, dtype=np.int64)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    dual_of_row = np.full(len(todo.cells), -1, np.int64)
+    dual_of_row[rows] = np.arange(m)
+    counts = np.zeros(5, np.int64)
     pieces = []
-    for axis in range(3):
-        for u in range(8):
-            if u >> axis & 1:
-                continue
-            changes = (signs >> u & 1) != (signs >> (u | 1 << axis) & 1)
-            corners = cells[changes] + CORNERS[u]
-            pieces.append(grid.key(corners) * 3 + axis)
-    edge_ids = np.unique(np.concatenate(pieces))
-    lowest, axes = grid.unkey(edge_ids // 3), edge_ids % 3
-    for axis in range(3):
-        on = axes == axis
-        p = lowest[on]
-        if not len(p):
-            continue
-        b, c = (axis + 1) % 3, (axis + 2) % 3
-        ring = np.empty((len(p), 4), np.int64)  # counter-clockwise about +axis
-        for k, (db, dc) in enumerate(((0, 0), (1, 0), (1, 1), (0, 1))):
-            cell = p.copy()
-            cell[:, b] -= db
-            cell[:, c] -= dc
-            ring[:, k] = todo.index.number(grid.cell_key(cell), insert=False)
-        if np.any(ring < 0):
-            raise AssertionError("a dual cell's edge with a cell around it that is not contoured")
-        inside_low = (todo.signs[ring[:, 0]] & 1).astype(bool)  # the edge's lowest corner is corner 0 of ring 0
-        v = numbers[ring]
-        is_dual = v >= 0
-        root = index.number(grid_edge_key(grid.key(p), 1 << axis), insert=False)
-        if np.any(root < 0):
-            raise AssertionError("a sign-changing edge without its root")
-        lean = is_dual.all(1)
-        # quads: Ju and Udeshi's diagonal test on the doubles and on float32
-        q = np.flatnonzero(lean)
-        pos = points[ring[q]]
-        p1, p2 = grid.world(p[q]), grid.world(p[q] + np.eye(3, dtype=np.int64)[axis])
-        first = _splits(pos[:, 0], pos[:, 1], pos[:, 2], pos[:, 3], p1, p2)
-        second = _splits(pos[:, 1], pos[:, 2], pos[:, 3], pos[:, 0], p1, p2)
-        pos32, p1_32, p2_32 = _float32(pos), _float32(p1), _float32(p2)
-        first &= _splits(pos32[:, 0], pos32[:, 1], pos32[:, 2], pos32[:, 3], p1_32, p2_32)
-        second &= _splits(pos32[:, 1], pos32[:, 2], pos32[:, 3], pos32[:, 0], p1_32, p2_32)
-        shorter = (np.einsum("ij,ij->i", pos[:, 0] - pos[:, 2], pos[:, 0] - pos[:, 2])
-                   <= np.einsum("ij,ij->i", pos[:, 1] - pos[:, 3], pos[:, 1] - pos[:, 3]))
-        use_first = first & (shorter | ~second)
-        use_second = second & ~use_first
-        vq = v[q]
-        for sel, (i, j, k, m) in ((use_first, (0, 1, 2, 3)), (use_second, (1, 2, 3, 0))):
-            s = np.flatnonzero(sel)
-            flip = ~inside_low[q[s]]
-            out += [_oriented(np.stack([vq[s, i], vq[s, j], vq[s, k]], 1), flip),
-                    _oriented(np.stack([vq[s, i], vq[s, k], vq[s, m]], 1), flip)]
-        counts["quads"] += int(np.count_nonzero(use_first | use_second))
-        fanned = np.zeros(len(p), bool)
-        fanned[q[~(use_first | use_second)]] = True
-        counts["fanned edges"] += int(np.count_nonzero(fanned))
-        counts["stitched edges"] += int(np.count_nonzero(~lean))
-        # fans about the root: every pair of dual cells across a face of a fanned or stitched edge
-        for k in range(4):
-            pair = np.flatnonzero((fanned | ~lean) & is_dual[:, k] & is_dual[:, (k + 1) % 4])
-            tri = np.stack([root[pair], v[pair, k], v[pair, (k + 1) % 4]], 1)
-            out.append(_oriented(tri, ~inside_low[pair]))
-    # cones over the faces toward the other construction's cells
-    for axis in range(3):
-        b, c = face_axes(axis)
-        for side in (0, 1):
-            local = [(side << axis) | (du << b) | (dv << c) for du, dv in SQUARE]
-            face_signs = np.stack([(signs >> corner) & 1 for corner in local], 1).astype(bool)
-            crossed = face_signs.any(1) & ~face_signs.all(1)
-            neighbour = cells.copy()
-            neighbour[:, axis] += 1 if side else -1
-            across = todo.index.number(grid.cell_key(neighbour), insert=False)
-            sel = np.flatnonzero(crossed & ~((across >= 0) & dual[np.maximum(across, 0)]))
-            if not len(sel):
-                continue
-            if np.any(across[sel] < 0):
-                raise AssertionError("a dual cell's crossed face toward a cell that is not contoured")
-            corner_keys = grid.key(cells[sel])[:, None] + grid.key(CORNERS[local])
-            apex = numbers[rows[sel]]
-            for shape in face_shapes(axis, side, False):  # counter-clockwise seen from outside the cell
-                ks = [k for _, k in shape]
-                inside = face_signs[sel][:, ks]
-                s = np.flatnonzero(inside.any(1) & ~inside.all(1))
-                if not len(s):
-                    continue
-                inside = inside[s]
-                # walking the triangle counter-clockwise, the contour enters the inside across one edge and
-                # leaves across another: the cone is (apex, entry, exit)
-                keys = np.stack([square_edge_key(corner_keys[s], axis, ks[e], ks[(e + 1) % 3]) for e in range(3)], 1)
-                enters = np.stack([~inside[:, e] & inside[:, (e + 1) % 3] for e in range(3)], 1).argmax(1)
-                leaves = np.stack([inside[:, e] & ~inside[:, (e + 1) % 3] for e in range(3)], 1).argmax(1)
-                pick = np.arange(len(s))
-                entry = index.number(keys[pick, enters], insert=False)
-                exit_ = index.number(keys[pick, leaves], insert=False)
-                if np.any(entry < 0) or np.any(exit_ < 0):
-                    raise AssertionError("a face crossing that the other construction did not number")
-                out.append(np.stack([apex[s], entry, exit_], 1))
-                counts["cones"] += len(s)
-    faces = np.concatenate(out) if out else np.zeros((0, 3), np.int64)
-    return faces, counts
-
-
-def _oriented(triangles: np.ndarray, flip: np.ndarray) -> np.ndarray:
-    triangles[flip] = triangles[flip][:, ::-1]
-    return triangles
+    for start in range(0, m, KUHN_CHUNK):
+        count = min(KUHN_CHUNK, m - start)
+        # room for the most a cell can give (12 edges of 4 triangles, 6 faces of 2): pages never written cost nothing
+        faces = np.empty((60 * count, 3), np.int64)
+        written = grid.runtime.dual_triangles(
+            cells[start:].ctypes.data, signs[start:].ctypes.data, edges[start:].ctypes.data, vertex.ctypes.data,
+            points.ctypes.data, start, count, DUAL_PACKED.ctypes.data, grid.geometry.ctypes.data,
+            todo.index.table.ctypes.data, todo.index.bits, dual_of_row.ctypes.data, index.table.ctypes.data,
+            index.bits, faces.ctypes.data, counts.ctypes.data)
+        pieces.append(faces[:written].copy())
+    if counts[4]:
+        raise AssertionError(f"{counts[4]} cells or face crossings beside dual cells were never contoured")
+    names = ("quads", "fanned edges", "stitched edges", "cones")
+    return (np.concatenate(pieces) if pieces else np.zeros((0, 3), np.int64)), dict(zip(names, counts.tolist()))
 
 
 def dual_witnesses(grid: Grid, cells: np.ndarray, signs: np.ndarray) -> np.ndarray:

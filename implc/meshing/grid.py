@@ -9,7 +9,18 @@ import numpy as np
 
 from ..engines.surface import Grouping
 from .contour_native import CONTOURING
-from .tables import CORNERS, FAN_PACKED, GRID, KUHN_CHUNK, KUHN_NEW_KEYS, KUHN_PACKED, SQUARE, face_axes, square_edge
+from .tables import (
+    CELL_EDGE_PACKED,
+    CORNERS,
+    FAN_PACKED,
+    GRID,
+    KUHN_CHUNK,
+    KUHN_NEW_KEYS,
+    KUHN_PACKED,
+    SQUARE,
+    face_axes,
+    square_edge,
+)
 
 GROUP_CELLS = 8
 """F is sampled in groups of this many cells per axis: on the tape engine each group runs the program
@@ -471,6 +482,22 @@ class KeyIndex:
 
         self._over_cells(len(cells), KUHN_CHUNK, call)
         return faces[:written], owners[:written]
+
+    def dual_edges(self, grid, cells: np.ndarray, signs: np.ndarray) -> np.ndarray:
+        """The numbers of the vertices on each cell's 12 edges (:data:`implc.meshing.tables.CELL_EDGES`
+        order), −1 where the edge keeps its sign, numbered here (native): (n, 12)."""
+        lowest = np.ascontiguousarray(grid.key(cells), dtype=np.int64)
+        flags = np.ascontiguousarray(signs, dtype=np.uint8)
+        offsets = np.ascontiguousarray(grid.key(CORNERS), dtype=np.int64)
+        numbers = np.empty((len(cells), 12), np.int64)
+
+        def call(start, count):
+            return self.runtime.dual_edges(lowest[start:].ctypes.data, offsets.ctypes.data, flags[start:].ctypes.data,
+                                           count, CELL_EDGE_PACKED.ctypes.data, *self._index_words(),
+                                           numbers[start:].ctypes.data)
+
+        self._over_cells(len(cells), KUHN_CHUNK, call)
+        return numbers
 
     def fan_triangles(self, grid, cells, signs, cell_in, face_in, split):
         """Marching tetrahedra over the fans of cells (native; see :func:`fan_triangles`), their vertices

@@ -1,5 +1,6 @@
 """The contouring's tables, built once at import: the Kuhn split's tetrahedra and their cases, the fans of
-feature cells over their faces, the caps' polygons (the native cells read them packed)."""
+feature cells over their faces, the caps' polygons, the dual cells' edges, rings and faces (the native
+cells read them packed)."""
 
 from __future__ import annotations
 
@@ -218,3 +219,57 @@ def _fan_face_tables() -> np.ndarray:
 
 FAN_PACKED = _fan_face_tables()
 """The tables as ``implc_fan_triangles`` reads them."""
+
+
+CELL_EDGES = [(u, a) for u in range(8) for a in range(3) if not u >> a & 1]
+"""A cell's 12 edges as (lower corner, axis), in the order dual cells list their crossings."""
+RING = ((0, 0), (1, 0), (1, 1), (0, 1))
+"""The four cells around an edge along axis a, counter-clockwise about +a: the steps back along the axes
+(a + 1, a + 2) from the edge's lower corner to each cell's lowest corner."""
+EDGE_ROW = 15
+"""Words per edge in :data:`DUAL_PACKED`."""
+SHAPE_ROW = 12
+"""Words per face triangle in :data:`DUAL_PACKED`."""
+FACE_ROW = 6 + 2 * SHAPE_ROW
+"""Words per face in :data:`DUAL_PACKED`."""
+FACE_ROW_START = 12 * EDGE_ROW
+"""Where the faces start in :data:`DUAL_PACKED`."""
+
+
+def _dual_tables() -> np.ndarray:
+    """``implc_dual_triangles``' tables: per edge of :data:`CELL_EDGES` (:data:`EDGE_ROW` words) its lower
+    corner, axis, the cell's own place in :data:`RING`, then the four ring cells' steps from the cell; per
+    face (:data:`FACE_ROW` words, from :data:`FACE_ROW_START`) its axis, side and four corners, then its two
+    triangles of the tetrahedral split (counter-clockwise seen from outside the cell), each its three
+    corners and, per side from corner i to i + 1, the cell edge it lies on (−1 for the face's diagonal)
+    with that side's lower corner and code."""
+    words: list[int] = []
+    for u, a in CELL_EDGES:
+        b, c = (a + 1) % 3, (a + 2) % 3
+        mine = (u >> b & 1, u >> c & 1)
+        words += [u, a, RING.index(mine)]
+        for ob, oc in RING:
+            step = [0, 0, 0]
+            step[b], step[c] = mine[0] - ob, mine[1] - oc
+            words += step
+    for axis in range(3):
+        b, c = face_axes(axis)
+        for side in (0, 1):
+            local = [(side << axis) | (du << b) | (dv << c) for du, dv in SQUARE]
+            words += [axis, side, *local]
+            for shape in face_shapes(axis, side, False):
+                ks = [k for _, k in shape]
+                words += [local[k] for k in ks]
+                for i in range(3):
+                    lo, code = square_edge(axis, ks[i], ks[(i + 1) % 3])
+                    single = code & (code - 1) == 0
+                    edge = CELL_EDGES.index((local[lo], code.bit_length() - 1)) if single else -1
+                    words += [edge, local[lo], code]
+    assert len(words) == FACE_ROW_START + 6 * FACE_ROW
+    return np.array(words, dtype=np.int64)
+
+
+DUAL_PACKED = _dual_tables()
+"""The tables as ``implc_dual_triangles`` reads them."""
+CELL_EDGE_PACKED = np.array([u for u, _ in CELL_EDGES] + [1 << a for _, a in CELL_EDGES], dtype=np.int64)
+"""The 12 edges' lower corners, then their codes, as ``implc_dual_edges`` reads them."""

@@ -135,8 +135,13 @@ OCTREE_ENTRIES = (OCTREE_INSERT, OCTREE_TRAVERSE, OCTREE_MARK_INSIDE, OCTREE_SUB
 """... the octree index (:mod:`implc.voxelizer.storage.octree_native`), built with a first voxelization, ..."""
 SPLAT_ENTRIES = (SPLAT,)
 """... splatting (:mod:`implc.view.splat_native`), built on a first render, ..."""
+DUAL_EDGES = _entry("implc_dual_edges", "lowest:i64* offsets:i64* signs:i8* n:i64 tables:i64* table:i64* bits:i64 "
+                                        "uniques:i64* limit:i64 state:i64* numbers:i64*", "i64")
+DUAL_TRIANGLES = _entry("implc_dual_triangles", "cells:i64* signs:i8* edges:i64* vertex:i64* points:f64* start:i64 "
+                                                "m:i64 tables:i64* geometry:f64* cell_table:i64* cell_bits:i64 "
+                                                "dual_of_row:i64* table:i64* bits:i64 faces:i64* counts:i64*", "i64")
 CONTOURING_ENTRIES = (HASH_INDEX, CELL_CORNERS, CORNER_SIGNS, KUHN_TRIANGLES, FAN_TRIANGLES, QEF, BENT_CELLS, EDGE_ENDS,
-                      EDGE_ROOTS, CORNER_POINTS)
+                      EDGE_ROOTS, CORNER_POINTS, DUAL_EDGES, DUAL_TRIANGLES)
 """... and the contouring's (:mod:`implc.meshing.contour_native`), a module of its own built on first use by the
 mesher: a first voxelization does not compile it."""
 FLAT_COLLAPSE = _entry("implc_flat_collapse", "faces:i64* vertices:f64* region:i64* planes:f64* inner:i8* movable:i8* "

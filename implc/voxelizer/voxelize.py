@@ -164,10 +164,11 @@ class Voxels:
         """The boundary of {F < 0} within the bounds as a closed, oriented, intersection-free triangle mesh,
         contoured over these voxels' cells (:func:`implc.meshing.contour.contour`; docs/soundness.md says what holds
         by construction). ``surface``: the surface these voxels came from, needed only for voxels read from
-        a file. ``features``: fan the cells a crease or corner crosses from their QEF points (sharp CSG
-        edges; False: every cell split the same way, creases chamfered). ``witnesses``: keep each vertex's
-        edge ends (``Mesh.witnesses``: two points of its cell where F has opposite signs). ``simplify``: a
-        tolerance (in the bounds' units) to merge the flat parts' triangles within (:meth:`Mesh.simplified`).
+        a file. ``features``: place each cell's vertex at the QEF point of its crossings (sharp CSG edges;
+        False: at their mean, creases chamfered). ``witnesses``: keep for each vertex two points of its cell
+        where F has opposite signs (``Mesh.witnesses``: its edge's ends, or for a dual vertex the ends of an
+        edge of its cell). ``simplify``: a tolerance (in the bounds' units) to merge the flat parts'
+        triangles within (:meth:`Mesh.simplified`).
         ``workers``: the threads that sample F, enclose it and place the vertices (default: one per usable
         core); the mesh is the same for every count.
         """
