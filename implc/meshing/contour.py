@@ -55,7 +55,7 @@ import numpy as np
 
 from .caps import cap_triangles, close_over_reached_faces
 from .dual import CELL_POINT, dual_rows, dual_triangles, dual_vertices, dual_witnesses
-from .features import _qef, fan_triangles, feature_cells, place_points
+from .features import fan_triangles, feature_cells, place_points
 from .grid import CORNERS_PER_CELL, NO_POINTS, Cells, Effort, Grid, KeyIndex, never
 from .proofs import regular
 from .simplify import SimplifyStats
@@ -312,8 +312,7 @@ def _with_dual(grid, todo: Cells, candidates, edges, other, index: KeyIndex, mes
     if not len(rows):
         return 0, {}
     cells = todo.cells[rows]
-    points = dual_vertices(grid, cells, edges, mesh.vertices, mesh.normals,
-                           (lambda p, n, ok: _qef(grid.runtime, p, n, ok)) if sharp else None)
+    points = dual_vertices(grid, cells, edges, mesh.vertices, mesh.normals, sharp)
     first = index.count
     index.number(grid.cell_key(cells) * 8 + CELL_POINT)
     faces, counts = dual_triangles(grid, todo, rows, edges, first, points, index)

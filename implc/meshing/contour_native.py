@@ -358,6 +358,68 @@ def _jacobi_sweep(b: ir.IRBuilder, entry, v):
             v[i, q_].set(b.fadd(b.fmul(s, vip), b.fmul(c, viq)))
 
 
+def _qef_point(b: ir.IRBuilder, k, present, point, normal, cutoff, project=None):
+    """Dual contouring's point over ``k`` candidates (``present(j)``: an i1, ``point(j, i)``, ``normal(j, i)``:
+    doubles; ``project``: an axis whose normal component is dropped, or None): the least-squares meeting
+    point of the tangent planes, solved around their mean (see :func:`emit_qef`). Returns (x, y, z, how
+    many were present, as a double)."""
+    double = ir.DoubleType()
+    zero, one = const(double, 0.0), const(double, 1.0)
+    count = Local(b, double, 0.0, "count")
+    mean = [Local(b, double, 0.0, f"mean{i}") for i in range(3)]
+    with for_range(b, k) as j:
+        with if_(b, present(j)):
+            count.set(b.fadd(count.get(), one))
+            for i in range(3):
+                mean[i].set(b.fadd(mean[i].get(), point(j, i)))
+    n_points = b.select(b.fcmp_ordered(">", count.get(), zero), count.get(), one)
+    centre = [b.fdiv(mean[i].get(), n_points) for i in range(3)]
+    a = {(i, j): Local(b, double, 0.0, f"a{i}{j}") for i in range(3) for j in range(i, 3)}
+    rhs = [Local(b, double, 0.0, f"rhs{i}") for i in range(3)]
+    with for_range(b, k) as j:
+        with if_(b, present(j)):
+            n = [normal(j, i) if project is None
+                 else b.select(b.icmp_signed("==", project, const(I64, i)), zero, normal(j, i)) for i in range(3)]
+            d = zero
+            for i in range(3):
+                d = b.fadd(d, b.fmul(n[i], b.fsub(point(j, i), centre[i])))
+            for (i, jj), cell in a.items():
+                cell.set(b.fadd(cell.get(), b.fmul(n[i], n[jj])))
+            for i in range(3):
+                rhs[i].set(b.fadd(rhs[i].get(), b.fmul(n[i], d)))
+    # Jacobi: A = V diag(e) Vᵀ, A's entries rotated in place, V's columns the eigenvectors
+    v = {(i, j): Local(b, double, 1.0 if i == j else 0.0, f"v{i}{j}") for i in range(3) for j in range(3)}
+
+    def entry(i, j):
+        return a[min(i, j), max(i, j)]
+
+    def squares(pairs):
+        total = zero
+        for i, j in pairs:
+            value = entry(i, j).get()
+            total = b.fadd(total, b.fmul(value, value))
+        return total
+
+    with for_range(b, const(I64, QEF_SWEEPS)):
+        off = squares(((0, 1), (0, 2), (1, 2)))
+        diagonal = squares(((0, 0), (1, 1), (2, 2)))
+        # rotations smaller than rounding change nothing: done (the loop runs on, empty)
+        with if_(b, b.fcmp_ordered(">", off, b.fmul(const(double, QEF_CONVERGED), diagonal))):
+            _jacobi_sweep(b, entry, v)
+    e = [entry(i, i).get() for i in range(3)]
+    largest = b.select(b.fcmp_ordered(">", e[0], e[1]), e[0], e[1])
+    largest = b.select(b.fcmp_ordered(">", largest, e[2]), largest, e[2])
+    step = [centre[i] for i in range(3)]
+    for col in range(3):
+        keep = b.fcmp_ordered(">", e[col], b.fmul(cutoff, largest))
+        along = zero
+        for i in range(3):
+            along = b.fadd(along, b.fmul(v[i, col].get(), rhs[i].get()))
+        scale = b.select(keep, b.fdiv(along, b.select(keep, e[col], one)), zero)
+        step = [b.fadd(step[i], b.fmul(v[i, col].get(), scale)) for i in range(3)]
+    return (*step, count.get())
+
+
 def emit_qef(module: ir.Module):
     """``implc_qef(points, normals, mask, m, k, project, cutoff, out)``: dual contouring's point per row of
     ``m``: the least-squares meeting point of the tangent planes through ``points`` (k points of three
@@ -368,72 +430,63 @@ def emit_qef(module: ir.Module):
     rotations (:data:`QEF_SWEEPS`); three doubles per row into ``out``."""
     fn, b = define(module, abi.QEF)
     points, normals, mask, m, k, project, cutoff, out = fn.args
-    double = ir.DoubleType()
-    zero, one = const(double, 0.0), const(double, 1.0)
     three = const(I64, 3)
-
-    def vec(ptr, row, i):
-        return load_at(b, ptr, b.add(b.mul(row, three), const(I64, i)))
-
     with for_range(b, m) as r:
-        count = Local(b, double, 0.0, "count")
-        mean = [Local(b, double, 0.0, f"mean{i}") for i in range(3)]
-        with for_range(b, k) as j:
-            at_ = b.add(b.mul(r, k), j)
-            on = b.icmp_signed("!=", b.zext(load_at(b, mask, at_), I64), const(I64, 0))
-            with if_(b, on):
-                count.set(b.fadd(count.get(), one))
-                for i in range(3):
-                    mean[i].set(b.fadd(mean[i].get(), vec(points, at_, i)))
-        n_points = b.select(b.fcmp_ordered(">", count.get(), zero), count.get(), one)
-        centre = [b.fdiv(mean[i].get(), n_points) for i in range(3)]
-        a = {(i, j): Local(b, double, 0.0, f"a{i}{j}") for i in range(3) for j in range(i, 3)}
-        rhs = [Local(b, double, 0.0, f"rhs{i}") for i in range(3)]
-        with for_range(b, k) as j:
-            at_ = b.add(b.mul(r, k), j)
-            on = b.icmp_signed("!=", b.zext(load_at(b, mask, at_), I64), const(I64, 0))
-            with if_(b, on):
-                n = [b.select(b.icmp_signed("==", project, const(I64, i)), zero, vec(normals, at_, i))
-                     for i in range(3)]
-                d = zero
-                for i in range(3):
-                    d = b.fadd(d, b.fmul(n[i], b.fsub(vec(points, at_, i), centre[i])))
-                for (i, jj), cell in a.items():
-                    cell.set(b.fadd(cell.get(), b.fmul(n[i], n[jj])))
-                for i in range(3):
-                    rhs[i].set(b.fadd(rhs[i].get(), b.fmul(n[i], d)))
-        # Jacobi: A = V diag(e) Vᵀ, A's entries rotated in place, V's columns the eigenvectors
-        v = {(i, j): Local(b, double, 1.0 if i == j else 0.0, f"v{i}{j}") for i in range(3) for j in range(3)}
+        def at_(j):
+            return b.add(b.mul(r, k), j)
 
-        def entry(i, j):
-            return a[min(i, j), max(i, j)]
-
-        def squares(pairs):
-            total = zero
-            for i, j in pairs:
-                value = entry(i, j).get()
-                total = b.fadd(total, b.fmul(value, value))
-            return total
-
-        with for_range(b, const(I64, QEF_SWEEPS)):
-            off = squares(((0, 1), (0, 2), (1, 2)))
-            diagonal = squares(((0, 0), (1, 1), (2, 2)))
-            # rotations smaller than rounding change nothing: done (the loop runs on, empty)
-            with if_(b, b.fcmp_ordered(">", off, b.fmul(const(double, QEF_CONVERGED), diagonal))):
-                _jacobi_sweep(b, entry, v)
-        e = [entry(i, i).get() for i in range(3)]
-        largest = b.select(b.fcmp_ordered(">", e[0], e[1]), e[0], e[1])
-        largest = b.select(b.fcmp_ordered(">", largest, e[2]), largest, e[2])
-        step = [centre[i] for i in range(3)]
-        for col in range(3):
-            keep = b.fcmp_ordered(">", e[col], b.fmul(cutoff, largest))
-            along = zero
-            for i in range(3):
-                along = b.fadd(along, b.fmul(v[i, col].get(), rhs[i].get()))
-            scale = b.select(keep, b.fdiv(along, b.select(keep, e[col], one)), zero)
-            step = [b.fadd(step[i], b.fmul(v[i, col].get(), scale)) for i in range(3)]
+        point = _qef_point(b, k, lambda j: b.icmp_signed("!=", b.zext(load_at(b, mask, at_(j)), I64), const(I64, 0)),
+                           lambda j, i: load_at(b, points, b.add(b.mul(at_(j), three), const(I64, i))),
+                           lambda j, i: load_at(b, normals, b.add(b.mul(at_(j), three), const(I64, i))),
+                           cutoff, project)
         for i in range(3):
-            store_at(b, step[i], out, b.add(b.mul(r, three), const(I64, i)))
+            store_at(b, point[i], out, b.add(b.mul(r, three), const(I64, i)))
+    b.ret_void()
+
+
+def emit_dual_points(module: ir.Module):
+    """``implc_dual_points(edges, m, positions, normals, cells, geometry, cutoff, margin, sharp, out)``: each
+    of m dual cells' vertex (three doubles into ``out``): the QEF point (:func:`_qef_point`) of the vertices
+    ``edges`` names (12 per cell, −1: none; ``positions``, ``normals``: three doubles per vertex, a normal
+    not a number where it is not usable), or with ``sharp`` 0 their mean; kept ``margin`` of the cell inside
+    each face of the cell (``cells``: three indices each; ``geometry``: see :func:`emit_edge_ends`); the
+    cell's centre where no vertex has a usable normal."""
+    fn, b = define(module, abi.DUAL_POINTS)
+    edges, m, positions, normals, cells, geometry, cutoff, margin, sharp, out = fn.args
+    double = ir.DoubleType()
+    three, twelve = const(I64, 3), const(I64, 12)
+    lo = [load_at(b, geometry, 2 + i) for i in range(3)]
+    step = [load_at(b, geometry, 5 + i) for i in range(3)]
+    sharp_ = b.icmp_signed("!=", sharp, const(I64, 0))
+    with for_range(b, m) as r:
+        def vertex(j):
+            return load_at(b, edges, b.add(b.mul(r, twelve), j))
+
+        def safe(j):
+            number = vertex(j)
+            return b.select(b.icmp_signed(">=", number, const(I64, 0)), number, const(I64, 0))
+
+        def at_vertex(array, j, i):
+            return load_at(b, array, b.add(b.mul(safe(j), three), const(I64, i)))
+
+        def usable(j):  # present, and with a usable normal where the point is the QEF's
+            present = b.icmp_signed(">=", vertex(j), const(I64, 0))
+            normal = at_vertex(normals, j, 0)
+            return b.and_(present, b.or_(b.not_(sharp_), b.fcmp_ordered("ord", normal, normal)))
+
+        x, y, z, count = _qef_point(b, twelve, usable, lambda j, i: at_vertex(positions, j, i),
+                                    lambda j, i: b.select(sharp_, at_vertex(normals, j, i), const(double, 0.0)),
+                                    cutoff)
+        for i, value in enumerate((x, y, z)):
+            corner = b.sitofp(load_at(b, cells, b.add(b.mul(r, three), const(I64, i))), double)
+            low = b.fadd(lo[i], b.fmul(corner, step[i]))
+            high = b.fadd(lo[i], b.fmul(b.fadd(corner, const(double, 1.0)), step[i]))
+            inset = b.fmul(b.fsub(high, low), margin)
+            centre = b.fmul(b.fadd(low, high), const(double, 0.5))
+            value = b.select(b.fcmp_ordered(">", count, const(double, 0.0)), value, centre)
+            value = b.select(b.fcmp_ordered("<", value, b.fadd(low, inset)), b.fadd(low, inset), value)
+            value = b.select(b.fcmp_ordered(">", value, b.fsub(high, inset)), b.fsub(high, inset), value)
+            store_at(b, value, out, b.add(b.mul(r, three), const(I64, i)))
     b.ret_void()
 
 
@@ -936,7 +989,7 @@ def build_contouring() -> ir.Module:
     module = ir.Module(name="implc_contouring")
     for emit in (emit_hash_index, emit_cell_corners, emit_corner_signs, emit_kuhn_triangles, emit_fan_triangles,
                  emit_qef, emit_bent_cells, emit_edge_ends, emit_edge_roots, emit_corner_points, emit_dual_edges,
-                 emit_dual_triangles):
+                 emit_dual_points, emit_dual_triangles):
         emit(module)
     return module
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .features import QEF_CUTOFF
 from .grid import Cells, Grid, KeyIndex
 from .tables import CORNERS, DUAL_PACKED, KUHN_CHUNK
 
@@ -73,23 +74,21 @@ def dual_rows(grid: Grid, todo: Cells, other: np.ndarray) -> np.ndarray:
     return dual
 
 
-def dual_vertices(grid: Grid, cells: np.ndarray, edges: np.ndarray, positions, normals, qef) -> np.ndarray:
-    """Each dual cell's vertex: the QEF point of its edges' crossings (``edges``: their vertex numbers,
-    (m, 12), −1 where the edge keeps its sign; ``positions``, ``normals``: those vertices';
-    ``qef(points, normals, present)``: the solver, None for the mean of the crossings: creases chamfered),
-    :data:`DUAL_MARGIN` inside the cell (its centre where no crossing has a usable normal)."""
-    present: np.ndarray = edges >= 0
-    rows = np.maximum(edges, 0)
-    p, n = np.take(positions, rows, axis=0), np.take(normals, rows, axis=0)
-    ok = present & ~np.isnan(n[..., 0])
-    n[~ok] = 0
-    lo, hi = grid.world(cells), grid.world(cells + 1)
-    margin = (hi - lo) * DUAL_MARGIN
-    if qef is None:
-        mean = np.einsum("ijk,ij->ik", p, present) / np.maximum(present.sum(1), 1)[:, None]
-        return np.clip(mean, lo + margin, hi - margin)
-    point = np.clip(qef(p, n, ok), lo + margin, hi - margin)
-    return np.where(ok.any(1)[:, None], point, (lo + hi) / 2)
+def dual_vertices(grid: Grid, cells: np.ndarray, edges: np.ndarray, positions, normals, sharp: bool) -> np.ndarray:
+    """Each dual cell's vertex (native: ``implc_dual_points``): the QEF point of its edges' crossings
+    (``edges``: their vertex numbers, (m, 12), −1 where the edge keeps its sign; ``positions``,
+    ``normals``: those vertices'), or where not ``sharp`` their mean (creases chamfered),
+    :data:`DUAL_MARGIN` of the cell inside each face of it (its centre where no crossing has a usable
+    normal)."""
+    out = np.empty((len(cells), 3))
+    edges = np.ascontiguousarray(edges, dtype=np.int64)
+    cells = np.ascontiguousarray(cells, dtype=np.int64)
+    positions = np.ascontiguousarray(positions, dtype=np.float64)
+    normals = np.ascontiguousarray(normals, dtype=np.float64)
+    grid.runtime.dual_points(edges.ctypes.data, len(cells), positions.ctypes.data, normals.ctypes.data,
+                             cells.ctypes.data, grid.geometry.ctypes.data, QEF_CUTOFF, DUAL_MARGIN, int(sharp),
+                             out.ctypes.data)
+    return out
 
 
 def dual_triangles(grid: Grid, todo: Cells, rows: np.ndarray, edges: np.ndarray, first: int, points: np.ndarray,
