@@ -376,6 +376,7 @@ def _qef_point(b: ir.IRBuilder, k, present, point, normal, cutoff, project=None)
     centre = [b.fdiv(mean[i].get(), n_points) for i in range(3)]
     a = {(i, j): Local(b, double, 0.0, f"a{i}{j}") for i in range(3) for j in range(i, 3)}
     rhs = [Local(b, double, 0.0, f"rhs{i}") for i in range(3)]
+    along = [Local(b, double, 0.0, f"along{i}") for i in range(3)]  # Σ n, each turned to agree with the first
     with for_range(b, k) as j:
         with if_(b, present(j)):
             n = [normal(j, i) if project is None
@@ -387,6 +388,48 @@ def _qef_point(b: ir.IRBuilder, k, present, point, normal, cutoff, project=None)
                 cell.set(b.fadd(cell.get(), b.fmul(n[i], n[jj])))
             for i in range(3):
                 rhs[i].set(b.fadd(rhs[i].get(), b.fmul(n[i], d)))
+            agree = zero
+            for i in range(3):
+                agree = b.fadd(agree, b.fmul(n[i], along[i].get()))
+            sign = b.select(b.fcmp_ordered("<", agree, zero), const(double, -1.0), one)
+            for i in range(3):
+                along[i].set(b.fadd(along[i].get(), b.fmul(sign, n[i])))
+    result = [Local(b, double, 0.0, f"point{i}") for i in range(3)]
+    # where the normals agree so closely that A's two smaller eigenvalues are surely under the cutoff (for
+    # u = Σ n / |Σ n|: trace − uᵀAu bounds their sum, and uᵀAu the largest from below), the point moves
+    # along u alone: mean + u (u · b) / uᵀAu, without Jacobi's rotations (a smooth surface's cells)
+    u_length = zero
+    for i in range(3):
+        u_length = b.fadd(u_length, b.fmul(along[i].get(), along[i].get()))
+    u_length = b.select(b.fcmp_ordered(">", u_length, zero), u_length, one)
+    entries = {key: cell.get() for key, cell in a.items()}
+    u_a_u = zero
+    for (i, jj), value in entries.items():
+        term = b.fmul(value, b.fmul(along[i].get(), along[jj].get()))
+        u_a_u = b.fadd(u_a_u, term if i == jj else b.fadd(term, term))
+    u_a_u = b.fdiv(u_a_u, u_length)
+    trace = b.fadd(b.fadd(entries[0, 0], entries[1, 1]), entries[2, 2])
+    rest = b.fsub(trace, u_a_u)
+    simple = b.and_(b.fcmp_ordered(">", u_a_u, zero), b.fcmp_ordered("<=", rest, b.fmul(cutoff, u_a_u)))
+    with b.if_else(simple) as (then, otherwise):
+        with then:
+            u_b = zero
+            for i in range(3):
+                u_b = b.fadd(u_b, b.fmul(along[i].get(), rhs[i].get()))
+            scale = b.fdiv(u_b, b.fmul(u_a_u, u_length))
+            for i in range(3):
+                result[i].set(b.fadd(centre[i], b.fmul(along[i].get(), scale)))
+        with otherwise:
+            for i, value in enumerate(_jacobi_point(b, a, rhs, centre, cutoff)):
+                result[i].set(value)
+    return (*[value.get() for value in result], count.get())
+
+
+def _jacobi_point(b: ir.IRBuilder, a, rhs, centre, cutoff):
+    """The QEF's point mean + A⁺b by Jacobi's rotations, A's eigenvalues below ``cutoff`` times the largest
+    dropped (``a``: A's upper triangle as Locals, rotated in place)."""
+    double = ir.DoubleType()
+    zero, one = const(double, 0.0), const(double, 1.0)
     # Jacobi: A = V diag(e) Vᵀ, A's entries rotated in place, V's columns the eigenvectors
     v = {(i, j): Local(b, double, 1.0 if i == j else 0.0, f"v{i}{j}") for i in range(3) for j in range(3)}
 
@@ -417,7 +460,7 @@ def _qef_point(b: ir.IRBuilder, k, present, point, normal, cutoff, project=None)
             along = b.fadd(along, b.fmul(v[i, col].get(), rhs[i].get()))
         scale = b.select(keep, b.fdiv(along, b.select(keep, e[col], one)), zero)
         step = [b.fadd(step[i], b.fmul(v[i, col].get(), scale)) for i in range(3)]
-    return (*step, count.get())
+    return step
 
 
 def emit_qef(module: ir.Module):
@@ -877,21 +920,26 @@ def emit_dual_triangles(module: ir.Module):
         cell = [load_at(b, cells, b.add(b.mul(r, three), const(I64, i))) for i in range(3)]
         signs = b.zext(load_at(b, sign_bytes, r), I64)
         apex = load_at(b, vertex, b.add(start, r))
-        with for_range(b, twelve) as e:
-            row = b.mul(e, const(I64, EDGE_ROW))
-            u, axis, mine = (load_at(b, tables, b.add(row, const(I64, i))) for i in range(3))
-            crosses = b.and_(b.xor(b.lshr(signs, u), b.lshr(signs, b.or_(u, b.shl(one, axis)))), one)
+        own = b.add(start, r)
+        for e in range(12):  # unrolled: each edge's corner, axis and ring are constants
+            at_row = e * EDGE_ROW
+            u, axis, mine = (int(value) for value in DUAL_PACKED[at_row:at_row + 3])
+            steps = DUAL_PACKED[at_row + 3:at_row + EDGE_ROW].reshape(4, 3).tolist()
+            crosses = b.and_(b.xor(b.lshr(signs, const(I64, u)), b.lshr(signs, const(I64, u | 1 << axis))), one)
             with if_(b, b.icmp_signed("!=", crosses, zero)):
-                first = Local(b, I64, 4, "first")
-                for kk in range(4):
-                    delta = [load_at(b, tables, b.add(row, const(I64, 3 + 3 * kk + i))) for i in range(3)]
-                    dual = dual_at([b.add(cell[i], delta[i]) for i in range(3)])
-                    store_at(b, dual, ring, kk)
-                    take = b.and_(b.icmp_signed(">=", dual, zero), b.icmp_signed("==", first.get(), const(I64, 4)))
-                    first.set(b.select(take, const(I64, kk), first.get()))
-                with if_(b, b.icmp_signed("==", first.get(), mine)):
-                    root = load_at(b, edges, b.add(b.mul(r, twelve), e))
-                    flip = b.icmp_signed("==", b.and_(b.lshr(signs, u), one), zero)  # the lower end outside
+                # the first dual cell around the edge makes it: look at those before this one, up to one dual
+                earlier = Local(b, ir.IntType(1), ir.Constant(ir.IntType(1), 0), "earlier")
+                for kk in range(mine):
+                    with if_(b, b.not_(earlier.get())):
+                        dual = dual_at([b.add(cell[i], const(I64, steps[kk][i])) for i in range(3)])
+                        store_at(b, dual, ring, kk)
+                        earlier.set(b.icmp_signed(">=", dual, zero))
+                with if_(b, b.not_(earlier.get())):
+                    store_at(b, own, ring, mine)
+                    for kk in range(mine + 1, 4):
+                        store_at(b, dual_at([b.add(cell[i], const(I64, steps[kk][i])) for i in range(3)]), ring, kk)
+                    root = load_at(b, edges, b.add(b.mul(r, twelve), const(I64, e)))
+                    flip = b.icmp_signed("==", b.and_(b.lshr(signs, const(I64, u)), one), zero)  # lower end outside
                     rows = [load_at(b, ring, kk) for kk in range(4)]
                     lean = ir.Constant(ir.IntType(1), 1)
                     for kk in range(4):
@@ -905,10 +953,9 @@ def emit_dual_triangles(module: ir.Module):
                                 store_at(b, load_at(b, points, b.add(b.mul(safe[kk], three), const(I64, i))), quad,
                                          3 * kk + i)
                         for i in range(3):
-                            corner = b.add(cell[i], b.and_(b.lshr(u, const(I64, i)), one))
-                            low = b.fadd(lo[i], b.fmul(b.sitofp(corner, double), step[i]))
-                            up = b.add(corner, b.zext(b.icmp_signed("==", axis, const(I64, i)), I64))
-                            store_at(b, low, ends, i)
+                            corner = b.add(cell[i], const(I64, u >> i & 1))
+                            up = b.add(corner, const(I64, int(axis == i)))
+                            store_at(b, b.fadd(lo[i], b.fmul(b.sitofp(corner, double), step[i])), ends, i)
                             store_at(b, b.fadd(lo[i], b.fmul(b.sitofp(up, double), step[i])), ends, 3 + i)
                         ok = b.call(split, [quad, ends])
                         diagonals = []
