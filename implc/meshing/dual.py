@@ -34,12 +34,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..common.threads import in_parallel
 from .features import QEF_CUTOFF
 from .grid import Cells, Grid, KeyIndex
-from .tables import CORNERS, DUAL_PACKED, KUHN_CHUNK
+from .tables import CORNERS, DUAL_PACKED
 
 CELL_POINT = 5
 """The kind of a dual vertex's key (see :mod:`implc.meshing.contour`): the cell's key × 8 + 5."""
+DUAL_CHUNK = 1 << 15
+"""Dual cells per native call (the calls run on the workers' threads; Ctrl-C is seen between them)."""
 DUAL_MARGIN = 1.0 / 256
 """A dual vertex stays this fraction of its cell inside every face of it (as a surface vertex stays inside
 its edge): a face of the solid on a grid plane moves that little inward; and a file's float32 rounding
@@ -85,9 +88,13 @@ def dual_vertices(grid: Grid, cells: np.ndarray, edges: np.ndarray, positions, n
     cells = np.ascontiguousarray(cells, dtype=np.int64)
     positions = np.ascontiguousarray(positions, dtype=np.float64)
     normals = np.ascontiguousarray(normals, dtype=np.float64)
-    grid.runtime.dual_points(edges.ctypes.data, len(cells), positions.ctypes.data, normals.ctypes.data,
-                             cells.ctypes.data, grid.geometry.ctypes.data, QEF_CUTOFF, DUAL_MARGIN, int(sharp),
-                             out.ctypes.data)
+
+    def job(start, count):
+        return lambda: grid.runtime.dual_points(
+            edges[start:].ctypes.data, count, positions.ctypes.data, normals.ctypes.data, cells[start:].ctypes.data,
+            grid.geometry.ctypes.data, QEF_CUTOFF, DUAL_MARGIN, int(sharp), out[start:].ctypes.data)
+
+    in_parallel([job(start, min(DUAL_CHUNK, len(cells) - start)) for start in range(0, len(cells), DUAL_CHUNK)])
     return out
 
 
@@ -105,18 +112,26 @@ def dual_triangles(grid: Grid, todo: Cells, rows: np.ndarray, edges: np.ndarray,
     points = np.ascontiguousarray(points, dtype=np.float64)
     dual_of_row = np.full(len(todo.cells), -1, np.int64)
     dual_of_row[rows] = np.arange(m)
-    counts = np.zeros(5, np.int64)
-    pieces = []
-    for start in range(0, m, KUHN_CHUNK):
-        count = min(KUHN_CHUNK, m - start)
-        # room for the most a cell can give (12 edges of 4 triangles, 6 faces of 2): pages never written cost nothing
-        faces = np.empty((60 * count, 3), np.int64)
-        written = grid.runtime.dual_triangles(
-            cells[start:].ctypes.data, signs[start:].ctypes.data, edges[start:].ctypes.data, vertex.ctypes.data,
-            points.ctypes.data, start, count, DUAL_PACKED.ctypes.data, grid.geometry.ctypes.data,
-            todo.index.table.ctypes.data, todo.index.bits, dual_of_row.ctypes.data, index.table.ctypes.data,
-            index.bits, faces.ctypes.data, counts.ctypes.data)
-        pieces.append(faces[:written].copy())
+    starts = list(range(0, m, DUAL_CHUNK))
+    pieces: list[np.ndarray] = [np.zeros((0, 3), np.int64)] * len(starts)
+    tallies = np.zeros((len(starts), 5), np.int64)
+
+    def job(k):
+        def run():
+            start = starts[k]
+            count = min(DUAL_CHUNK, m - start)
+            # room for the most a cell gives (12 edges of 4 triangles, 6 faces of 2): pages never written cost nothing
+            faces = np.empty((60 * count, 3), np.int64)
+            written = grid.runtime.dual_triangles(
+                cells[start:].ctypes.data, signs[start:].ctypes.data, edges[start:].ctypes.data, vertex.ctypes.data,
+                points.ctypes.data, start, count, DUAL_PACKED.ctypes.data, grid.geometry.ctypes.data,
+                todo.index.table.ctypes.data, todo.index.bits, dual_of_row.ctypes.data, index.table.ctypes.data,
+                index.bits, faces.ctypes.data, tallies[k].ctypes.data)
+            pieces[k] = faces[:written].copy()
+        return run
+
+    in_parallel([job(k) for k in range(len(starts))])  # each chunk its own triangles: the same mesh on any count
+    counts = tallies.sum(0)
     if counts[4]:
         raise AssertionError(f"{counts[4]} cells or face crossings beside dual cells were never contoured")
     names = ("quads", "fanned edges", "stitched edges", "cones")
