@@ -821,6 +821,19 @@ def mesh(args, out):
                 simplify_cpu.append(time.process_time() - t0)
             row["simplified"] = {"cpu_s": statistics.median(simplify_cpu), "triangles": len(simplified.faces),
                                  "quality": mesh_quality(simplified.vertices, simplified.faces, surface, cell, quality)}
+            row["libfive"] = None
+            if args.mesh_libfive:  # libfive's Mesh::render side by side (benchmarks/peers/libfive), one thread
+                sys.path.insert(0, str(Path(args.mesh_libfive).resolve()))
+                import run as harness
+                runs, lf = [], None
+                for _ in range(args.repeats):
+                    info, path, keep = harness.run_lfmesh(name, depth, 1, None, -1.0)
+                    lf = lf if lf is not None else harness.read_mesh(path)
+                    keep.cleanup()
+                    runs.append(info)
+                row["libfive"] = {"cpu_s": statistics.median(r["cpu_seconds"] for r in runs),
+                                  "triangles": len(lf[1]),
+                                  "quality": mesh_quality(np.array(lf[0]), lf[1], surface, cell, quality)}
             try:
                 import skimage  # noqa: F401
                 with tempfile.TemporaryDirectory() as tmp:
@@ -858,6 +871,20 @@ def mesh(args, out):
                   f"{q['flipped_edges']}, {q['degenerate']} | {fmt(q['manifold3d'])} | {fmt(q['self_intersecting'])} | "
                   f"{q['max_distance_cells']:.3f} | {q['normal_deviation_median_deg']:.1f}, "
                   f"{q['normal_deviation_p99_deg']:.1f} |{cells}")
+    if any(r["libfive"] for r in rows):
+        md += ["", "#### Side by side with libfive's `Mesh::render` (dual contouring, no merging; one thread, CPU s)",
+               "", "| surface | grid | implc.mesh s | libfive s | libfive / implc | triangles implc, libfive "
+               "| under 5° implc, libfive | 1st pct of min angle ° implc, libfive | self-intersecting implc, "
+               "libfive | open edges libfive |", "|---" * 10 + "|"]
+        for r in rows:
+            lf = r["libfive"]
+            if lf:
+                q, lq = r["implc"], lf["quality"]
+                md.append(f"| {r['surface']} | {1 << r['depth']}³ | {r['implc_mesh_cpu_s']:.3f} | {lf['cpu_s']:.3f} | "
+                          f"{lf['cpu_s'] / r['implc_mesh_cpu_s']:.1f}× | {r['triangles']}, {lf['triangles']} | "
+                          f"{q['under_5_percent']:.2f}%, {lq['under_5_percent']:.2f}% | {q['min_angle_p1_deg']:.1f}, "
+                          f"{lq['min_angle_p1_deg']:.1f} | {fmt(q['self_intersecting'])}, "
+                          f"{fmt(lq['self_intersecting'])} | {lq['open_edges']} |")
     md += ["", "voxelize: the default mode (the figure the issue's bar compares with); implc.mesh voxelizes in the "
            "natural mode (the same mesh, fewer tests) and contours. "
            "Unproven cells: crossed cells where no derivative of F (along an axis, or on the tape engine a "
@@ -1050,6 +1077,8 @@ def parser():
                    help="scenes for the 'mesh' section")
     p.add_argument("--mesh-models", default="bear,colonnade", help="peer models (in --models-dir) for 'mesh'")
     p.add_argument("--mesh-depths", default="8,9", help="grid depths for the 'mesh' section (256³, 512³)")
+    p.add_argument("--mesh-libfive", default=None,
+                   help="the libfive harness (benchmarks/peers/libfive, lfmesh built): adds libfive's columns")
     p.add_argument("--mesh-quality-depth", type=int, default=8,
                    help="deepest grid whose meshes pymeshlab checks for self-intersections (slow above)")
     p.add_argument("--cluster-scene", default="paper_blobs", help="scene for the 'cluster' section")

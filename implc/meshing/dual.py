@@ -122,11 +122,12 @@ def dual_triangles(grid: Grid, todo: Cells, rows: np.ndarray, edges: np.ndarray,
             count = min(DUAL_CHUNK, m - start)
             # room for the most a cell gives (12 edges of 4 triangles, 6 faces of 2): pages never written cost nothing
             faces = np.empty((60 * count, 3), np.int64)
+            tally = tallies[k]  # a row of tallies, held by it for the call
             written = grid.runtime.dual_triangles(
                 cells[start:].ctypes.data, signs[start:].ctypes.data, edges[start:].ctypes.data, vertex.ctypes.data,
                 points.ctypes.data, start, count, DUAL_PACKED.ctypes.data, grid.geometry.ctypes.data,
                 todo.index.table.ctypes.data, todo.index.bits, dual_of_row.ctypes.data, index.table.ctypes.data,
-                index.bits, faces.ctypes.data, tallies[k].ctypes.data)
+                index.bits, faces.ctypes.data, tally.ctypes.data)
             pieces[k] = faces[:written].copy()
         return run
 

@@ -1,7 +1,7 @@
 """The mesh's connected components are the sampled signs' own: no closed bubble around a single cell or face
 point that the fans add (Scene 2 at 256³ had 298 of its 318 components so); with the Kuhn split
-everywhere, the components are the borders of the grid's sampled sign regions, counted by scipy's
-labelling (tests/support/components.py)."""
+everywhere, and in the default mesh, the components are the borders of the grid's sampled sign regions,
+counted by scipy's labelling (tests/support/components.py)."""
 
 import pytest
 
@@ -37,9 +37,13 @@ def test_no_bubble_around_an_added_point(scene2, monkeypatch):
 
 
 def test_kuhn_components_are_the_borders_of_the_sampled_regions(scene2):
-    """With the Kuhn split everywhere (features=False), the mesh has one component per border between the
-    sampled sign regions: their count less one (the bounds are a ball, so the borders form a tree)."""
+    """With the Kuhn split everywhere (the tetrahedral construction, features off), the mesh has one
+    component per border between the sampled sign regions: their count less one (the bounds are a ball, so
+    the borders form a tree); so does the default mesh, whose dual cells hold one sheet each and whose
+    other cells are the Kuhn split's."""
     surface, bounds = scene2
-    count, _ = components(implc.mesh(surface, 6, features=False))
+    voxels = implc.voxelize(surface, 6)
+    count, _ = components(contour(surface, voxels.coords, 6, voxels.bounds, features=False, lean=False))
     inside, outside = sign_regions(surface, bounds, 6)
     assert count == inside + outside - 1 and count > 2
+    assert components(implc.mesh(surface, 6))[0] == count
