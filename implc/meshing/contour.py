@@ -2,8 +2,8 @@
 
 Two constructions share the grid's cells. A crossed cell whose sampled signs leave one sheet, away from
 the bounds, is a *dual cell*: one vertex, dual contouring's quads between such cells, and the stitch to
-the others (:mod:`implc.meshing.dual`, which says why nothing meets). Every other crossed cell (about one
-in a hundred on the paper's scenes: ambiguous sign patterns, the cells on the bounds) keeps the
+the others (:mod:`implc.meshing.dual`, which says why nothing meets). Every other crossed cell (well under
+one in a hundred on the paper's scenes: ambiguous sign patterns, the cells on the bounds) keeps the
 *tetrahedral construction*, the zero set of the piecewise-linear function that takes F's sampled signs at
 the vertices of a tetrahedralization of the grid, cut by the bounds' faces where the solid reaches them.
 ``lean=False`` uses the tetrahedral construction everywhere, as follows:
@@ -59,7 +59,7 @@ from .features import fan_triangles, feature_cells, place_points
 from .grid import CORNERS_PER_CELL, NO_POINTS, Cells, Effort, Grid, KeyIndex, never
 from .proofs import regular
 from .simplify import SimplifyStats
-from .vertices import _unit, fill_normals, surface_vertices
+from .vertices import fill_normals, surface_vertices, unit_vectors
 
 MAX_DEPTH = 14
 """The deepest grid contoured: vertex keys hold (2^depth + 1)³ corners times 64 kinds of edge."""
@@ -95,7 +95,8 @@ class MeshStats:
         simplified = "" if self.simplified is None else (
             f" (simplified from {self.simplified.triangles_before} in {self.simplified.seconds:.3f} s)")
         return (f"{self.triangles} triangles{simplified}, {self.vertices} vertices from {self.crossed_cells} "
-                f"crossed cells of {self.cells} kept ({self.feature_cells} feature cells, {self.added_cells} "
+                f"crossed cells of {self.cells} kept ({self.dual_cells} dual, {self.feature_cells} feature cells, "
+                f"{self.added_cells} "
                 f"added by the signs, {self.cap_triangles} cap triangles; {self.regular_cells} proven regular, "
                 f"{self.unproven_cells} unproven), {total:.3f} s")
 
@@ -133,7 +134,7 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     crossed = np.flatnonzero(todo.crossed())
     stats.crossed_cells = len(crossed)
     # the dual cells' candidates number their edges' crossings; the others are split the Kuhn way
-    candidates = np.flatnonzero(dual_rows(grid, todo, np.zeros(0, bool))) if lean else np.zeros(0, np.int64)
+    candidates = np.flatnonzero(dual_rows(grid, todo)) if lean else np.zeros(0, np.int64)
     tetrahedral = np.setdiff1d(crossed, candidates, assume_unique=True) if len(candidates) else crossed
     # the vertices to come: about four a tetrahedral cell, a crossing and the cell's own a dual one (a
     # table sized for more costs its pages' first touch: a tenth of Scene 2's contouring at 256³)
@@ -156,12 +157,10 @@ def contour(surface, cells: np.ndarray, depth: int, bounds=None, *, features: bo
     stats.feature_cells = len(feature_rows)
     mesh = _Pieces(vertices, normals, ends, kuhn, owner, caps)
     del vertices, normals, ends, kuhn, owner, caps  # the pieces hold them, and let each go once it is joined
-    fanned = np.zeros(len(todo.cells), bool)
-    if len(feature_rows):
-        added, fanned = _with_features(grid, todo, feature_rows, index, mesh)
-        stats.added_cells += added
+    if len(feature_rows):  # only without dual cells
+        stats.added_cells += _with_features(grid, todo, feature_rows, index, mesh)
     if len(candidates):
-        stats.dual_cells, stats.dual_counts = _with_dual(grid, todo, candidates, edges, fanned, index, mesh, features)
+        stats.dual_cells, stats.dual_counts = _with_dual(grid, todo, candidates, edges, index, mesh, features)
     del edges
     del index
     grid.forget_samples()
@@ -252,11 +251,10 @@ class _Pieces:
         return out[0], out[1], faces, (out[2] if with_ends else None)
 
 
-def _with_features(grid, todo: Cells, feature_rows, index: KeyIndex, mesh: _Pieces) -> tuple[int, np.ndarray]:
+def _with_features(grid, todo: Cells, feature_rows, index: KeyIndex, mesh: _Pieces) -> int:
     """Fan the feature cells (rows of ``todo``) and their neighbours from cell and face points in place of
     their Kuhn split: their triangles in ``mesh`` replaced, the caps made again where a feature cell
-    touches the bounds, new vertices numbered on in ``index``. Returns (the cells the signs added, per row of
-    ``todo`` whether it is fanned or was added here: those keep the tetrahedral construction)."""
+    touches the bounds, new vertices numbered on in ``index``. Returns the cells the signs added."""
     feature_cells = todo.cells[feature_rows]
     feature_keys = np.sort(grid.cell_key(feature_cells))
 
@@ -292,7 +290,6 @@ def _with_features(grid, todo: Cells, feature_rows, index: KeyIndex, mesh: _Piec
     fan = fan_triangles(grid, index, todo.cells[rows], todo.signs[rows], is_feature(todo.cells[rows]),
                          cell_points, face_points, is_feature)
     mesh.more = [kuhn, fan]
-    fanned[before:] = True  # the cells the signs added keep the tetrahedral construction too
     # the caps again where a feature cell lies on a face of the bounds (its square fanned from a face point)
     redo = {(axis, side) for axis in range(3) for side in (0, 1)
             if np.any(feature_cells[:, axis] == side * (grid.n - 1))}
@@ -302,24 +299,20 @@ def _with_features(grid, todo: Cells, feature_rows, index: KeyIndex, mesh: _Piec
     keys = index.keys()[first_new:]
     vertices, normals, ends = surface_vertices(grid, keys, cell_points, face_points, mesh.ends is not None)
     mesh.add_vertices(vertices, normals, ends)
-    return added, fanned
+    return added
 
 
-def _with_dual(grid, todo: Cells, candidates, edges, other, index: KeyIndex, mesh: _Pieces, sharp: bool):
-    """One vertex for each dual cell: the ``candidates`` (rows of ``todo``, ``edges`` their crossings'
-    vertex numbers) but those ``other`` marks (fanned: they keep the tetrahedral construction); ``sharp``:
-    QEF vertices (else the crossings' mean). Returns the dual cells and the dual construction's counts."""
-    keep = ~other[candidates]
-    rows, edges = candidates[keep], edges[keep]
-    if not len(rows):
-        return 0, {}
+def _with_dual(grid, todo: Cells, rows, edges, index: KeyIndex, mesh: _Pieces, sharp: bool):
+    """One vertex for each dual cell (``rows`` of ``todo``, ``edges`` their crossings' vertex numbers) in
+    ``mesh``, and their triangles; ``sharp``: QEF vertices (else the crossings' mean). Returns the dual
+    cells and the dual construction's counts."""
     cells = todo.cells[rows]
     points = dual_vertices(grid, cells, edges, mesh.vertices, mesh.normals, sharp)
     first = index.count
     index.number(grid.cell_key(cells) * 8 + CELL_POINT)
     faces, counts = dual_triangles(grid, todo, rows, edges, first, points, index)
     mesh.more.append(faces)
-    normals = _unit(grid.gradients(points))
+    normals = unit_vectors(grid.gradients(points))
     ends = dual_witnesses(grid, cells, todo.signs[rows]) if mesh.ends is not None else None
     mesh.add_vertices(points, normals, ends)
     return len(rows), counts

@@ -1,12 +1,13 @@
 """One vertex per crossed cell where that is safe: dual contouring on the cells whose corner signs leave one
 sheet, stitched to the cells that keep the tetrahedral construction.
 
-A *dual cell* is a crossed cell, not on the bounds' outer layer and not fanned for a feature, whose inside
-corners are edge-connected and whose outside corners are too (:data:`MANIFOLD`: 126 of the 254 crossed
-configurations, OpenVDB's ``sAdaptable`` less the two uncrossed ones): no face of it is ambiguous, each
-face carries at most one segment of the contour, and one vertex serves the cell. The vertex is the QEF
+A *dual cell* is a crossed cell, not on the bounds' outer layer, whose inside corners are edge-connected
+and whose outside corners are too (:data:`MANIFOLD`: 126 of the 254 crossed configurations, OpenVDB's
+``sAdaptable`` less the two uncrossed ones): no face of it is ambiguous, each face carries at most one
+segment of the contour, and one vertex serves the cell. The vertex is the QEF
 point of its edges' crossings (dual contouring's least-squares meeting point of their tangent planes),
-clamped :data:`DUAL_MARGIN` inside the cell, so creases stay sharp where the cell allows.
+clamped :data:`DUAL_MARGIN` inside the cell, so creases stay sharp where the cell allows; its normal is F's
+gradient there.
 
 The triangles, all oriented from F < 0 to F ≥ 0:
 
@@ -67,14 +68,12 @@ MANIFOLD = np.array([_connected([c for c in range(8) if s >> c & 1])
 ones are too."""
 
 
-def dual_rows(grid: Grid, todo: Cells, other: np.ndarray) -> np.ndarray:
+def dual_rows(grid: Grid, todo: Cells) -> np.ndarray:
     """Which rows of ``todo`` are dual cells: crossed, in :data:`MANIFOLD`, not on the bounds' outer layer
-    (their faces there hold caps), not ``other`` (rows that keep the tetrahedral construction)."""
+    (their faces there hold caps)."""
     signs = todo.signs
     inner = np.all((todo.cells > 0) & (todo.cells < grid.n - 1), axis=1)
-    dual = MANIFOLD[signs] & (signs != 0) & (signs != 0xFF) & inner
-    dual[: len(other)] &= ~other
-    return dual
+    return MANIFOLD[signs] & (signs != 0) & (signs != 0xFF) & inner
 
 
 def dual_vertices(grid: Grid, cells: np.ndarray, edges: np.ndarray, positions, normals, sharp: bool) -> np.ndarray:

@@ -167,10 +167,10 @@ def _edge_roots(grid: Grid, keys, a, b, fa, fb, vertices: np.ndarray, normals: n
     if open_:
         run(2, open_, rows.ctypes.data, *ends, None, None, guesses.ctypes.data, vertices.ctypes.data,
             normals.ctypes.data, *tail)
-        normals[rows[:open_]] = _unit(grid.gradients(guesses[:open_], grouping))
+        normals[rows[:open_]] = unit_vectors(grid.gradients(guesses[:open_], grouping))
 
 
-def _unit(normals: np.ndarray) -> np.ndarray:
+def unit_vectors(normals: np.ndarray) -> np.ndarray:
     """Gradients normalised in place (NaN where they are not usable)."""
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         normals /= np.sqrt(np.einsum("ij,ij->i", normals, normals))[:, None]  # np.linalg.norm: several times slower
