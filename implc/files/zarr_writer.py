@@ -19,6 +19,7 @@ import json
 import math
 import os
 import re
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -187,12 +188,30 @@ def _trusted_part(place: StorePlace, task: int) -> bytes | None:
     return None
 
 
+_MEMBER_READS = threading.Lock()
+"""Held while a part's member is read: numpy parses each member's header with ``ast.literal_eval``, and
+CPython 3.11's AST constructor is not safe on two threads at once (a shard written by two task threads
+stopped once with "SystemError: AST constructor recursion depth mismatch")."""
+
+
+class _Members:
+    """An open part's members, each read under :data:`_MEMBER_READS`."""
+
+    def __init__(self, part):
+        self._part = part
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        with _MEMBER_READS:
+            return self._part[name]
+
+
 @contextlib.contextmanager
 def _part(place: StorePlace, task: int) -> Iterator[Any]:
     """A finished task's part, opened (``with _part(place, task) as part: part["coords"]``): its members are
-    read as they are asked for (the caller of the small ones does not read the rows)."""
+    read as they are asked for (the caller of the small ones does not read the rows), one thread at a time
+    (:data:`_MEMBER_READS`)."""
     with place.open(_part_name(task)) as f, np.load(f) as part:
-        yield part
+        yield _Members(part)
 
 
 def _has_parts(place: StorePlace) -> bool:
@@ -300,7 +319,7 @@ def _write_task(recipe: SurfaceRecipe, folder: str, layout: Layout, options: dic
     done = _trusted_part(place_of(folder), task)
     if done is not None:
         with np.load(io.BytesIO(done)) as part:
-            return json.loads(str(part["summary"]))
+            return json.loads(str(_Members(part)["summary"]))
     if full:
         voxels = TaskVoxels(np.empty((0, 3), np.uint32), np.empty((0, 3), np.float32),
                             np.empty((0, abi.INSIDE_WORDS), np.int32), 0, [0] * abi.TIGHTEN_STATS_WORDS, 0.0)
