@@ -721,6 +721,18 @@ def mesh_surface(name, models_dir):
     return s, s.bounds, numpy_evaluator(sc.surface)
 
 
+def min_angles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Each triangle's smallest angle, in degrees (0 for a degenerate one)."""
+    p = vertices[faces]
+    worst = np.full(len(faces), 180.0)
+    for k in range(3):
+        u, v = p[:, (k + 1) % 3] - p[:, k], p[:, (k + 2) % 3] - p[:, k]
+        with np.errstate(all="ignore"):
+            cosine = np.einsum("ij,ij->i", u, v) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1)
+        worst = np.minimum(worst, np.degrees(np.arccos(np.clip(np.nan_to_num(cosine, nan=1.0), -1, 1))))
+    return worst
+
+
 def mesh_quality(vertices, faces, surface, cell, self_intersections: bool) -> dict:
     """The figures the mesh table reports: closed and oriented (edges counted), manifold3d's status,
     pymeshlab's self-intersecting faces, the largest first-order distance |F| / |∇F| of a vertex from
@@ -765,12 +777,7 @@ def mesh_quality(vertices, faces, surface, cell, self_intersections: bool) -> di
     angle = np.degrees(np.arccos(np.clip(cosine[np.isfinite(cosine)], -1, 1)))
     row["normal_deviation_median_deg"] = float(np.median(angle)) if len(angle) else 0.0
     row["normal_deviation_p99_deg"] = float(np.percentile(angle, 99)) if len(angle) else 0.0
-    worst = np.full(len(faces), 180.0)  # each triangle's smallest angle
-    for k in range(3):
-        u, v = p[:, (k + 1) % 3] - p[:, k], p[:, (k + 2) % 3] - p[:, k]
-        with np.errstate(all="ignore"):
-            cosine = np.einsum("ij,ij->i", u, v) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1)
-        worst = np.minimum(worst, np.degrees(np.arccos(np.clip(np.nan_to_num(cosine, nan=1.0), -1, 1))))
+    worst = min_angles(vertices, faces)
     row["under_5_percent"] = float(np.mean(worst < 5) * 100) if len(faces) else 0.0
     row["min_angle_p1_deg"] = float(np.percentile(worst, 1)) if len(faces) else 0.0
     return row

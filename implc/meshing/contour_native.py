@@ -3,8 +3,8 @@ numbered in it and their signs (``implc_cell_corners``, ``implc_corner_signs``),
 the Kuhn split of each cell with its vertices numbered through that index (``implc_kuhn_triangles``) and
 over the fans of feature cells and their neighbours (``implc_fan_triangles``), the cells whose normals
 disagree (``implc_bent_cells``) and their points (``implc_qef``), the corners and sampled values at
-the ends of grid edges (``implc_edge_ends``), and the dual cells' crossings and triangles
-(``implc_dual_edges``, ``implc_dual_triangles``).
+the ends of grid edges (``implc_edge_ends``), and the dual cells' crossings, vertices and triangles
+(``implc_dual_edges``, ``implc_dual_points``, ``implc_dual_triangles``).
 
 The index is open addressing with linear probing over ``2^bits`` slots of two words (key, number); an
 empty slot holds key −1. A key's first slot is the Fibonacci hash of its corner (the key without its low
@@ -470,7 +470,9 @@ def emit_qef(module: ir.Module):
     mean: A = Σ n nᵀ, b = Σ n (n · (p − mean)), the point mean + A⁺b with A's eigenvalues below ``cutoff``
     times the largest dropped (the point stays near the mean along those directions). ``project`` ≥ 0: that
     axis's normal component is set to 0 first (a face's 2D QEF). A's eigenvectors by cyclic Jacobi
-    rotations (:data:`QEF_SWEEPS`); three doubles per row into ``out``."""
+    rotations (:data:`QEF_SWEEPS`), or, where the normals agree so closely that both smaller eigenvalues are
+    surely dropped, the step along their mean direction alone (:func:`_qef_point`); three doubles per row
+    into ``out``."""
     fn, b = define(module, abi.QEF)
     points, normals, mask, m, k, project, cutoff, out = fn.args
     three = const(I64, 3)
@@ -791,7 +793,7 @@ def emit_edge_roots(module: ir.Module):
 
 def _filtered_orientation(b: ir.IRBuilder, a, p, q, r):
     """The sign of ((p − a) × (q − a)) · (r − a) where the doubles certify it (+1 or −1), else 0: |det| must
-    exceed :data:`implc.meshing.dual.ORIENT_ERROR` times its permanent (Shewchuk's bound for rounded
+    exceed :data:`ORIENT_ERROR` times its permanent (Shewchuk's bound for rounded
     differences)."""
     double = ir.DoubleType()
     fabs = intrinsic(b.module, "llvm.fabs.f64", 1)
@@ -865,11 +867,11 @@ def emit_dual_edges(module: ir.Module):
 
 
 def emit_dual_triangles(module: ir.Module):
-    """``implc_dual_triangles(cells, signs, edges, vertex, points, start, m, tables, geometry, cell_table,
+    """``implc_dual_triangles(cells, signs, edges, first, points, start, m, tables, geometry, cell_table,
     cell_bits, dual_of_row, table, bits, faces, counts)``: the triangles of m dual cells
     (:mod:`implc.meshing.dual`): ``cells`` their indices (three each), ``signs`` a byte each (bit c: F < 0
-    at corner c), ``edges`` the vertex numbers of their 12 edges (:func:`emit_dual_edges`); ``vertex`` and
-    ``points``: every dual cell's vertex number and position, by dual row (these m are rows ``start`` on);
+    at corner c), ``edges`` the vertex numbers of their 12 edges (:func:`emit_dual_edges`); the dual cell of
+    dual row d has vertex number ``first`` + d, at ``points``[d] (these m are rows ``start`` on);
     ``cell_table``/``cell_bits``: the contoured cells' index (cell key → row), ``dual_of_row`` each row's
     dual row (−1: not dual); ``table``/``bits``: the vertex index (the face diagonals' crossings looked up
     there, never inserted); ``geometry``: the grid's (see :func:`emit_edge_ends`); ``tables``:
@@ -880,7 +882,7 @@ def emit_dual_triangles(module: ir.Module):
     vertex numbers per triangle into ``faces``; counts[0..4] += quads, edges fanned, edges stitched,
     cones, lookups that found nothing (0 unless the cells are not closed). Returns the triangles written."""
     fn, b = define(module, abi.DUAL_TRIANGLES)
-    (cells, sign_bytes, edges, vertex, points, start, m, tables, geometry, cell_table, cell_bits, dual_of_row, table,
+    (cells, sign_bytes, edges, first, points, start, m, tables, geometry, cell_table, cell_bits, dual_of_row, table,
      bits, faces, counts) = fn.args
     double = ir.DoubleType()
     split = _emit_ju_split(module)
@@ -919,7 +921,7 @@ def emit_dual_triangles(module: ir.Module):
     with for_range(b, m) as r:
         cell = [load_at(b, cells, b.add(b.mul(r, three), const(I64, i))) for i in range(3)]
         signs = b.zext(load_at(b, sign_bytes, r), I64)
-        apex = load_at(b, vertex, b.add(start, r))
+        apex = b.add(first, b.add(start, r))
         own = b.add(start, r)
         for e in range(12):  # unrolled: each edge's corner, axis and ring are constants
             at_row = e * EDGE_ROW
@@ -945,7 +947,7 @@ def emit_dual_triangles(module: ir.Module):
                     for kk in range(4):
                         lean = b.and_(lean, b.icmp_signed(">=", rows[kk], zero))
                     safe = [b.select(b.icmp_signed(">=", rows[kk], zero), rows[kk], zero) for kk in range(4)]
-                    v = [load_at(b, vertex, safe[kk]) for kk in range(4)]
+                    v = [b.add(first, safe[kk]) for kk in range(4)]
                     fan = Local(b, ir.IntType(1), ir.Constant(ir.IntType(1), 1), "fan")
                     with if_(b, lean):
                         for kk in range(4):

@@ -38,7 +38,7 @@ import numpy as np
 from ..common.threads import in_parallel
 from .features import QEF_CUTOFF
 from .grid import Cells, Grid, KeyIndex
-from .tables import CORNERS, DUAL_PACKED
+from .tables import CELL_EDGES, CORNERS, DUAL_PACKED
 
 CELL_POINT = 5
 """The kind of a dual vertex's key (see :mod:`implc.meshing.contour`): the cell's key × 8 + 5."""
@@ -107,7 +107,6 @@ def dual_triangles(grid: Grid, todo: Cells, rows: np.ndarray, edges: np.ndarray,
     cells = np.ascontiguousarray(todo.cells[rows], dtype=np.int64)
     signs = np.ascontiguousarray(todo.signs[rows], dtype=np.uint8)
     edges = np.ascontiguousarray(edges, dtype=np.int64)
-    vertex = np.arange(first, first + m, dtype=np.int64)
     points = np.ascontiguousarray(points, dtype=np.float64)
     dual_of_row = np.full(len(todo.cells), -1, np.int64)
     dual_of_row[rows] = np.arange(m)
@@ -123,7 +122,7 @@ def dual_triangles(grid: Grid, todo: Cells, rows: np.ndarray, edges: np.ndarray,
             faces = np.empty((60 * count, 3), np.int64)
             tally = tallies[k]  # a row of tallies, held by it for the call
             written = grid.runtime.dual_triangles(
-                cells[start:].ctypes.data, signs[start:].ctypes.data, edges[start:].ctypes.data, vertex.ctypes.data,
+                cells[start:].ctypes.data, signs[start:].ctypes.data, edges[start:].ctypes.data, first,
                 points.ctypes.data, start, count, DUAL_PACKED.ctypes.data, grid.geometry.ctypes.data,
                 todo.index.table.ctypes.data, todo.index.bits, dual_of_row.ctypes.data, index.table.ctypes.data,
                 index.bits, faces.ctypes.data, tally.ctypes.data)
@@ -142,17 +141,14 @@ def dual_witnesses(grid: Grid, cells: np.ndarray, signs: np.ndarray) -> np.ndarr
     """(m, 2, 3): for each dual cell, an inside and an outside corner of a sign-changing edge of it."""
     out = np.empty((len(cells), 2, 3))
     found = np.zeros(len(cells), bool)
-    for u in range(8):
-        for axis in range(3):
-            if u >> axis & 1:
-                continue
-            w = u | 1 << axis
-            here = ~found & ((signs >> u & 1) != (signs >> w & 1))
-            inside_u = (signs >> u & 1).astype(bool)
-            s = np.flatnonzero(here)
-            a, b = cells[s] + CORNERS[u], cells[s] + CORNERS[w]
-            first = np.where(inside_u[s][:, None], a, b)
-            second = np.where(inside_u[s][:, None], b, a)
-            out[s, 0], out[s, 1] = grid.world(first), grid.world(second)
-            found |= here
+    for u, axis in CELL_EDGES:
+        w = u | 1 << axis
+        here = ~found & ((signs >> u & 1) != (signs >> w & 1))
+        inside_u = (signs >> u & 1).astype(bool)
+        s = np.flatnonzero(here)
+        a, b = cells[s] + CORNERS[u], cells[s] + CORNERS[w]
+        first = np.where(inside_u[s][:, None], a, b)
+        second = np.where(inside_u[s][:, None], b, a)
+        out[s, 0], out[s, 1] = grid.world(first), grid.world(second)
+        found |= here
     return out

@@ -139,7 +139,7 @@ DUAL_EDGES = _entry("implc_dual_edges", "lowest:i64* offsets:i64* signs:i8* n:i6
                                         "uniques:i64* limit:i64 state:i64* numbers:i64*", "i64")
 DUAL_POINTS = _entry("implc_dual_points", "edges:i64* m:i64 positions:f64* normals:f64* cells:i64* geometry:f64* "
                                           "cutoff:f64 margin:f64 sharp:i64 out:f64*")
-DUAL_TRIANGLES = _entry("implc_dual_triangles", "cells:i64* signs:i8* edges:i64* vertex:i64* points:f64* start:i64 "
+DUAL_TRIANGLES = _entry("implc_dual_triangles", "cells:i64* signs:i8* edges:i64* first:i64 points:f64* start:i64 "
                                                 "m:i64 tables:i64* geometry:f64* cell_table:i64* cell_bits:i64 "
                                                 "dual_of_row:i64* table:i64* bits:i64 faces:i64* counts:i64*", "i64")
 CONTOURING_ENTRIES = (HASH_INDEX, CELL_CORNERS, CORNER_SIGNS, KUHN_TRIANGLES, FAN_TRIANGLES, QEF, BENT_CELLS, EDGE_ENDS,
