@@ -241,34 +241,3 @@ if __name__ == "__main__":
         open(sys.argv[2], "w").write(text)
     else:
         sys.stdout.write(text)
-
-
-def eval_vm(text: str, pts):
-    """Evaluate .vm text at points (N, 3) with NumPy (a check of the conversion; lfmesh's op set)."""
-    import numpy as np
-
-    pts = np.asarray(pts, dtype=float)
-    env: dict = {}
-    un = {"neg": np.negative, "square": np.square, "sqrt": np.sqrt, "exp": np.exp, "ln": np.log, "log": np.log,
-          "sin": np.sin, "cos": np.cos, "tan": np.tan, "asin": np.arcsin, "acos": np.arccos, "atan": np.arctan,
-          "abs": np.abs, "recip": lambda a: 1 / a}
-    bi = {"add": np.add, "sub": np.subtract, "mul": np.multiply, "div": np.divide, "min": np.minimum,
-          "max": np.maximum, "atan2": np.arctan2, "compare": lambda a, b: np.sign(a - b),
-          "pow": np.power, "nth-root": lambda a, n: np.sign(a) * np.abs(a) ** (1 / n)}
-    last = None
-    with np.errstate(all="ignore"):
-        for line in text.splitlines():
-            w = line.partition("#")[0].split()
-            if not w:
-                continue
-            name, op, args = w[0], w[1], w[2:]
-            if op.startswith("var-"):
-                v = pts[:, "xyz".index(op[4])]
-            elif op == "const":
-                v = np.full(len(pts), float(args[0]))
-            elif op in un:
-                v = un[op](env[args[0]])
-            else:
-                v = bi[op](env[args[0]], env[args[1]])
-            env[name] = last = v
-    return last
